@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Create .venv-peers (repo root) with CPU PyTorch + numpy for the peer benchmarks.
+#
+# PyPI only has CUDA builds of torch for linux/x86_64, whose dependencies are
+# several GB of nvidia-*/cuda-* wheels (and download.pytorch.org's CPU wheels
+# are not reachable here).  So: install the pinned torch wheel with --no-deps
+# plus its pure-python deps, then build tiny stub libraries for the CUDA .so
+# files torch links against (cuda_stubs.py; needs cc and readelf).
+# Idempotent: a second run only re-checks the environment.
+set -euo pipefail
+
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+ROOT="$(cd "$HERE/../.." && pwd)"
+VENV="${VENV_PEERS:-$ROOT/.venv-peers}"
+PY="${PYTHON:-python3}"
+REQ="$HERE/requirements.txt"
+TORCH_VERSION="$(sed -n 's/^torch==//p' "$REQ")"
+
+check() {
+    "$VENV/bin/python" - "$TORCH_VERSION" <<'EOF'
+import sys, importlib.metadata as md
+import numpy, torch
+assert torch.__version__.split("+")[0] == sys.argv[1], torch.__version__
+x = torch.randn(3) @ torch.randn(3)
+assert not torch.cuda.is_available()
+gpu = [d.metadata["Name"] for d in md.distributions()
+       if d.metadata["Name"].lower().startswith(("nvidia-", "cuda-", "triton"))]
+assert not gpu, gpu
+print("torch", torch.__version__, "numpy", numpy.__version__, "OK")
+EOF
+}
+
+if [ -x "$VENV/bin/python" ] && check 2>/dev/null; then
+    exit 0
+fi
+
+for tool in cc readelf; do
+    command -v "$tool" >/dev/null || { echo "setup.sh: '$tool' is required (apt-get install gcc binutils)" >&2; exit 1; }
+done
+
+[ -x "$VENV/bin/python" ] || "$PY" -m venv "$VENV"
+"$VENV/bin/python" -m pip install --quiet --no-deps --only-binary=:all: -r "$REQ"
+TORCH_LIB="$("$VENV/bin/python" -c 'import importlib.util, os; print(os.path.join(os.path.dirname(importlib.util.find_spec("torch").origin), "lib"))')"
+"$VENV/bin/python" "$HERE/cuda_stubs.py" "$TORCH_LIB"
+check

@@ -1,0 +1,39 @@
+//! Multilayer perceptrons on faer for the coadapt learner and design optimiser.
+//!
+//! # Layout
+//! - [`mlp`]: the network shape ([`Mlp`]), allocation-free forward and backward passes over
+//!   row-major batches into preallocated [`Activations`].
+//! - [`optim`]: [`Adam`], element-wise gradient clamping and Polyak averaging on flat buffers.
+//! - [`squashed`]: the tanh-squashed Gaussian of the SAC policy (sample, log-probability, backward).
+//! - [`io`]: save and load networks as safetensors, in PyTorch's `nn.Sequential` naming.
+//!
+//! Every network's parameters live in one contiguous `f32` buffer laid out exactly as PyTorch's
+//! `parameters_to_vector(nn.Sequential(Linear, ReLU, ..., Linear))`: per layer the weight
+//! `[out, in]` row-major, then the bias `[out]`. That buffer is what transports broadcast and
+//! what a PyTorch user loads.
+
+pub mod io;
+pub mod mlp;
+pub mod optim;
+pub mod squashed;
+
+pub use io::{NamedNetwork, load_networks, save_networks};
+pub use mlp::{Activations, Layer, Mlp};
+pub use optim::{Adam, AdamConfig, clamp_elementwise, polyak};
+
+/// Errors of network construction and weight files.
+#[derive(Debug, thiserror::Error)]
+pub enum NnError {
+    #[error("invalid network shape {sizes:?}: {why}")]
+    Shape { sizes: Vec<usize>, why: &'static str },
+    #[error("cannot read weights file {path}: {source}")]
+    Read { path: String, source: std::io::Error },
+    #[error("cannot write weights file {path}: {source}")]
+    Write { path: String, source: std::io::Error },
+    #[error("weights file {path} is not a valid safetensors file: {why}")]
+    Corrupt { path: String, why: String },
+    #[error("weights file {path} has no network named `{name}` (it has: {available})")]
+    MissingNetwork { path: String, name: String, available: String },
+    #[error("network `{name}` in {path} has shape {found:?}, expected {expected:?}")]
+    ShapeMismatch { path: String, name: String, found: Vec<usize>, expected: Vec<usize> },
+}

@@ -1,0 +1,244 @@
+//! A ReLU multilayer perceptron over row-major batches.
+//!
+//! A batch is `rows x n_in` row-major (each sample contiguous), so replay buffers and
+//! observations feed the network without transposition. Matrix products go through faer with
+//! `Par::Seq`: the products here are small, and the learner gets its parallelism from running
+//! independent networks on separate cores instead.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
+use rand::Rng;
+
+use crate::NnError;
+
+/// One affine layer: offsets of its weight `[n_out, n_in]` and bias `[n_out]` in the flat buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layer {
+    pub n_in: usize,
+    pub n_out: usize,
+    pub w: usize,
+    pub b: usize,
+}
+
+/// The shape of an MLP `sizes[0] -> sizes[1] -> ... -> sizes[k]` with ReLU between layers and no
+/// activation after the last. Holds no parameters: those live in a flat `&[f32]` of
+/// [`Mlp::n_params`] values, so one shape serves online, target and copied networks alike.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Mlp {
+    sizes: Vec<usize>,
+    layers: Vec<Layer>,
+    n_params: usize,
+}
+
+/// Per-layer outputs kept by [`Mlp::forward`] for [`Mlp::backward`], plus backward scratch.
+/// Grows to the largest batch seen and is reused, so warm passes do not allocate.
+#[derive(Clone, Debug, Default)]
+pub struct Activations {
+    outs: Vec<Vec<f32>>,
+    delta: [Vec<f32>; 2],
+    rows: usize,
+}
+
+impl Activations {
+    /// The output of the last forward pass (`rows x n_out`, row-major).
+    pub fn output(&self) -> &[f32] {
+        self.outs.last().map(|o| o.as_slice()).unwrap_or(&[])
+    }
+
+    /// The output of layer `i` (after its ReLU for hidden layers) in the last forward pass.
+    pub fn layer_output(&self, i: usize) -> &[f32] {
+        &self.outs[i]
+    }
+
+    /// Rows of the last forward pass.
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+}
+
+impl Mlp {
+    /// A network with layer widths `sizes` (input first, output last).
+    pub fn new(sizes: &[usize]) -> Result<Self, NnError> {
+        if sizes.len() < 2 {
+            return Err(NnError::Shape { sizes: sizes.to_vec(), why: "needs at least an input and an output size" });
+        }
+        if sizes.contains(&0) {
+            return Err(NnError::Shape { sizes: sizes.to_vec(), why: "layer sizes must be positive" });
+        }
+        let mut layers = Vec::with_capacity(sizes.len() - 1);
+        let mut off = 0;
+        for pair in sizes.windows(2) {
+            let (n_in, n_out) = (pair[0], pair[1]);
+            layers.push(Layer { n_in, n_out, w: off, b: off + n_in * n_out });
+            off += n_in * n_out + n_out;
+        }
+        Ok(Self { sizes: sizes.to_vec(), layers, n_params: off })
+    }
+
+    /// `[n_in, hidden..., n_out]`.
+    pub fn sizes(&self) -> &[usize] {
+        &self.sizes
+    }
+
+    pub fn layers(&self) -> &[Layer] {
+        &self.layers
+    }
+
+    pub fn n_params(&self) -> usize {
+        self.n_params
+    }
+
+    pub fn n_in(&self) -> usize {
+        self.sizes[0]
+    }
+
+    pub fn n_out(&self) -> usize {
+        self.sizes[self.sizes.len() - 1]
+    }
+
+    /// Multiply-adds per row of a forward pass.
+    pub fn macs_per_row(&self) -> usize {
+        self.layers.iter().map(|l| l.n_in * l.n_out).sum()
+    }
+
+    /// A zeroed parameter buffer of the right length.
+    pub fn zeros(&self) -> Vec<f32> {
+        vec![0.0; self.n_params]
+    }
+
+    /// Initialises `params` as the reference (rlkit) does: hidden layers uniform in
+    /// `+-1/sqrt(fan_in)` (PyTorch's `nn.Linear` default), the last layer's weight and bias
+    /// uniform in `+-final_init` so the initial outputs are near zero.
+    pub fn init<R: Rng + ?Sized>(&self, params: &mut [f32], final_init: f32, rng: &mut R) {
+        assert_eq!(params.len(), self.n_params, "parameter buffer length");
+        let last = self.layers.len() - 1;
+        for (i, l) in self.layers.iter().enumerate() {
+            let bound = if i == last { final_init } else { 1.0 / (l.n_in as f32).sqrt() };
+            for p in &mut params[l.w..l.b + l.n_out] {
+                *p = rng.random_range(-bound..=bound);
+            }
+        }
+    }
+
+    /// A fresh [`Activations`] able to hold `rows` rows without growing.
+    pub fn activations(&self, rows: usize) -> Activations {
+        let mut a = Activations::default();
+        self.reserve(&mut a, rows);
+        a
+    }
+
+    fn reserve(&self, a: &mut Activations, rows: usize) {
+        if a.outs.len() != self.layers.len() {
+            a.outs = self.layers.iter().map(|_| Vec::new()).collect();
+        }
+        for (o, l) in a.outs.iter_mut().zip(&self.layers) {
+            if o.len() < rows * l.n_out {
+                o.resize(rows * l.n_out, 0.0);
+            }
+        }
+        let widest = self.sizes.iter().copied().max().unwrap_or(0);
+        for d in &mut a.delta {
+            if d.len() < rows * widest {
+                d.resize(rows * widest, 0.0);
+            }
+        }
+    }
+
+    /// Forward pass of `rows` rows of `x` (`rows x n_in`, row-major); returns the output
+    /// (`rows x n_out`) and keeps every layer's output in `act` for [`Mlp::backward`].
+    pub fn forward<'a>(&self, params: &[f32], x: &[f32], rows: usize, act: &'a mut Activations) -> &'a [f32] {
+        debug_assert_eq!(params.len(), self.n_params);
+        assert_eq!(x.len(), rows * self.n_in(), "input is not rows x n_in");
+        self.reserve(act, rows);
+        act.rows = rows;
+        let last = self.layers.len() - 1;
+        for (i, l) in self.layers.iter().enumerate() {
+            let (done, rest) = act.outs.split_at_mut(i);
+            let input: &[f32] = if i == 0 { x } else { &done[i - 1][..rows * l.n_in] };
+            let out = &mut rest[0][..rows * l.n_out];
+            affine(params, l, input, rows, out);
+            if i != last {
+                for v in out.iter_mut() {
+                    *v = v.max(0.0);
+                }
+            }
+        }
+        &act.outs[last][..rows * self.n_out()]
+    }
+
+    /// Backward pass after [`Mlp::forward`] on the same `x` and `params`.
+    ///
+    /// `dy` is dL/d(output) (`rows x n_out`). Writes dL/d(params) into `grad` (replacing it) when
+    /// given, and dL/dx (`rows x n_in`) into `dx` when given; either may be skipped, so a critic
+    /// differentiated only with respect to its input pays for no weight gradient.
+    pub fn backward(
+        &self,
+        params: &[f32],
+        x: &[f32],
+        act: &mut Activations,
+        dy: &[f32],
+        mut grad: Option<&mut [f32]>,
+        dx: Option<&mut [f32]>,
+    ) {
+        let rows = act.rows;
+        assert_eq!(dy.len(), rows * self.n_out(), "dy is not rows x n_out");
+        let [da, db] = &mut act.delta;
+        let (mut cur, mut next) = (da, db);
+        cur[..dy.len()].copy_from_slice(dy);
+        for i in (0..self.layers.len()).rev() {
+            let l = self.layers[i];
+            let input: &[f32] = if i == 0 { x } else { &act.outs[i - 1][..rows * l.n_in] };
+            let delta = &cur[..rows * l.n_out];
+            if let Some(g) = grad.as_deref_mut() {
+                let gw = MatMut::from_row_major_slice_mut(&mut g[l.w..l.b], l.n_out, l.n_in);
+                let dm = MatRef::from_row_major_slice(delta, rows, l.n_out).transpose();
+                matmul(gw, Accum::Replace, dm, MatRef::from_row_major_slice(input, rows, l.n_in), 1.0f32, Par::Seq);
+                let gb = &mut g[l.b..l.b + l.n_out];
+                gb.fill(0.0);
+                for r in delta.chunks_exact(l.n_out) {
+                    for (b, d) in gb.iter_mut().zip(r) {
+                        *b += d;
+                    }
+                }
+            }
+            if i == 0 {
+                if let Some(dx) = dx {
+                    input_grad(params, &l, delta, rows, dx);
+                }
+                break;
+            }
+            if grad.is_none() && dx.is_none() {
+                break;
+            }
+            let din = &mut next[..rows * l.n_in];
+            input_grad(params, &l, delta, rows, din);
+            // ReLU: the gradient passes where the layer's output was positive.
+            for (d, &h) in din.iter_mut().zip(input) {
+                if h <= 0.0 {
+                    *d = 0.0;
+                }
+            }
+            std::mem::swap(&mut cur, &mut next);
+        }
+    }
+}
+
+/// `out = input . W^T + b` for one layer.
+fn affine(params: &[f32], l: &Layer, input: &[f32], rows: usize, out: &mut [f32]) {
+    let w = MatRef::from_row_major_slice(&params[l.w..l.b], l.n_out, l.n_in);
+    let om = MatMut::from_row_major_slice_mut(out, rows, l.n_out);
+    matmul(om, Accum::Replace, MatRef::from_row_major_slice(input, rows, l.n_in), w.transpose(), 1.0f32, Par::Seq);
+    let bias = &params[l.b..l.b + l.n_out];
+    for r in out.chunks_exact_mut(l.n_out) {
+        for (v, b) in r.iter_mut().zip(bias) {
+            *v += b;
+        }
+    }
+}
+
+/// `dx = delta . W` for one layer.
+fn input_grad(params: &[f32], l: &Layer, delta: &[f32], rows: usize, dx: &mut [f32]) {
+    let w = MatRef::from_row_major_slice(&params[l.w..l.b], l.n_out, l.n_in);
+    let dm = MatMut::from_row_major_slice_mut(&mut dx[..rows * l.n_in], rows, l.n_in);
+    matmul(dm, Accum::Replace, MatRef::from_row_major_slice(delta, rows, l.n_out), w, 1.0f32, Par::Seq);
+}
