@@ -1,0 +1,27 @@
+//! The robots whose bodies coadapt optimises, behind [`coadapt_core::Env`].
+//!
+//! # Layout
+//! - [`pendulum`]: gymnasium's Pendulum-v1 dynamics with pole length and mass as the design; no
+//!   physics engine, so learning tests run in seconds.
+//! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
+
+pub mod pendulum;
+
+use coadapt_core::{Env, TimeLimit};
+
+pub use pendulum::Pendulum;
+
+/// Names accepted by [`make`].
+pub const ENV_NAMES: &[&str] = &["pendulum"];
+
+#[derive(Debug, thiserror::Error)]
+#[error("unknown environment `{0}` (known: {known})", known = ENV_NAMES.join(", "))]
+pub struct UnknownEnv(pub String);
+
+/// A fresh environment `name`, truncating episodes at its declared length.
+pub fn make(name: &str) -> Result<Box<dyn Env>, UnknownEnv> {
+    match name {
+        "pendulum" => Ok(Box::new(TimeLimit::new(Pendulum::new()))),
+        other => Err(UnknownEnv(other.to_string())),
+    }
+}
