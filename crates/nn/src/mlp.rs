@@ -166,33 +166,38 @@ impl Mlp {
         &act.outs[last][..rows * self.n_out()]
     }
 
-    /// Backward pass after [`Mlp::forward`] on the same `x` and `params`.
+    /// Backward pass after [`Mlp::forward`] on the same `x` and `params`, for the rows `rows`
+    /// of that pass (a sub-range lets one forward over stacked inputs serve two losses).
     ///
-    /// `dy` is dL/d(output) (`rows x n_out`). Writes dL/d(params) into `grad` (replacing it) when
-    /// given, and dL/dx (`rows x n_in`) into `dx` when given; either may be skipped, so a critic
-    /// differentiated only with respect to its input pays for no weight gradient.
+    /// `dy` is dL/d(output) for those rows (`rows.len() x n_out`). Writes dL/d(params) into
+    /// `grad` (replacing it) when given, and dL/dx (`rows.len() x n_in`) into `dx` when given;
+    /// either may be skipped, so a critic differentiated only with respect to its input pays for
+    /// no weight gradient.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &self,
         params: &[f32],
         x: &[f32],
         act: &mut Activations,
+        rows: std::ops::Range<usize>,
         dy: &[f32],
         mut grad: Option<&mut [f32]>,
         dx: Option<&mut [f32]>,
     ) {
-        let rows = act.rows;
-        assert_eq!(dy.len(), rows * self.n_out(), "dy is not rows x n_out");
+        assert!(rows.end <= act.rows, "backward rows beyond the forward pass");
+        let (r0, n) = (rows.start, rows.len());
+        assert_eq!(dy.len(), n * self.n_out(), "dy is not rows x n_out");
         let [da, db] = &mut act.delta;
         let (mut cur, mut next) = (da, db);
         cur[..dy.len()].copy_from_slice(dy);
         for i in (0..self.layers.len()).rev() {
             let l = self.layers[i];
-            let input: &[f32] = if i == 0 { x } else { &act.outs[i - 1][..rows * l.n_in] };
-            let delta = &cur[..rows * l.n_out];
+            let input: &[f32] = if i == 0 { &x[r0 * l.n_in..(r0 + n) * l.n_in] } else { &act.outs[i - 1][r0 * l.n_in..(r0 + n) * l.n_in] };
+            let delta = &cur[..n * l.n_out];
             if let Some(g) = grad.as_deref_mut() {
                 let gw = MatMut::from_row_major_slice_mut(&mut g[l.w..l.b], l.n_out, l.n_in);
-                let dm = MatRef::from_row_major_slice(delta, rows, l.n_out).transpose();
-                matmul(gw, Accum::Replace, dm, MatRef::from_row_major_slice(input, rows, l.n_in), 1.0f32, Par::Seq);
+                let dm = MatRef::from_row_major_slice(delta, n, l.n_out).transpose();
+                matmul(gw, Accum::Replace, dm, MatRef::from_row_major_slice(input, n, l.n_in), 1.0f32, Par::Seq);
                 let gb = &mut g[l.b..l.b + l.n_out];
                 gb.fill(0.0);
                 for r in delta.chunks_exact(l.n_out) {
@@ -203,15 +208,15 @@ impl Mlp {
             }
             if i == 0 {
                 if let Some(dx) = dx {
-                    input_grad(params, &l, delta, rows, dx);
+                    input_grad(params, &l, delta, n, dx);
                 }
                 break;
             }
             if grad.is_none() && dx.is_none() {
                 break;
             }
-            let din = &mut next[..rows * l.n_in];
-            input_grad(params, &l, delta, rows, din);
+            let din = &mut next[..n * l.n_in];
+            input_grad(params, &l, delta, n, din);
             // ReLU: the gradient passes where the layer's output was positive.
             for (d, &h) in din.iter_mut().zip(input) {
                 if h <= 0.0 {

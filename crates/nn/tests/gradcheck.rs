@@ -62,7 +62,7 @@ fn mlp_parameter_and_input_gradients_match_finite_differences() {
     mlp.forward(&p, &x, rows, &mut act);
     let mut grad = mlp.zeros();
     let mut dx = vec![0.0; x.len()];
-    mlp.backward(&p, &x, &mut act, &c, Some(&mut grad), Some(&mut dx));
+    mlp.backward(&p, &x, &mut act, 0..rows, &c, Some(&mut grad), Some(&mut dx));
 
     let mut numeric = vec![0.0; p.len()];
     let mut skipped = vec![false; p.len()];
@@ -105,10 +105,19 @@ fn input_only_backward_equals_full_backward() {
     mlp.forward(&p, &x, 3, &mut act);
     let (mut dx_full, mut dx_only) = (vec![0.0; 12], vec![0.0; 12]);
     let mut g = mlp.zeros();
-    mlp.backward(&p, &x, &mut act, &dy, Some(&mut g), Some(&mut dx_full));
-    mlp.backward(&p, &x, &mut act, &dy, None, Some(&mut dx_only));
+    mlp.backward(&p, &x, &mut act, 0..3, &dy, Some(&mut g), Some(&mut dx_full));
+    mlp.backward(&p, &x, &mut act, 0..3, &dy, None, Some(&mut dx_only));
     assert_eq!(dx_full, dx_only);
     assert!(dx_full.iter().any(|v| *v != 0.0));
+    // A sub-range of a stacked forward gives the same gradients as a forward of those rows alone.
+    let (mut dx_sub, mut g_sub) = (vec![0.0; 8], mlp.zeros());
+    mlp.backward(&p, &x, &mut act, 1..3, &dy[2..], Some(&mut g_sub), Some(&mut dx_sub));
+    let mut act2 = mlp.activations(2);
+    mlp.forward(&p, &x[4..], 2, &mut act2);
+    let (mut dx2, mut g2) = (vec![0.0; 8], mlp.zeros());
+    mlp.backward(&p, &x[4..], &mut act2, 0..2, &dy[2..], Some(&mut g2), Some(&mut dx2));
+    assert_eq!(dx_sub, dx2);
+    assert_eq!(g_sub, g2);
 }
 
 /// L = sum(ca * action) + sum(cl * log_prob) for the squashed Gaussian, as a function of the head.

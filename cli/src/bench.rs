@@ -1,0 +1,100 @@
+//! `coadapt bench`: benchmarks that print one JSON line per figure:
+//! `{"bench": ..., "config": ..., "value": ..., "unit": ...}`.
+
+use std::time::Instant;
+
+use clap::{Args, Subcommand};
+use coadapt_core::{Batch, rng};
+use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
+use coadapt_learner::{Sac, SacConfig};
+use rand::Rng;
+use serde_json::json;
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Networks: SAC updates per second and the design-objective forward throughput.
+    Nn(NnArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct NnArgs {
+    /// Seconds to time each figure for.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Rows per chunk in the forward benchmark.
+    #[arg(long, default_value_t = 256)]
+    pub chunk_rows: usize,
+    /// Also time the 179,200-row (256 start states) forward pass.
+    #[arg(long)]
+    pub large: bool,
+}
+
+pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
+    match cmd {
+        BenchCommand::Nn(a) => nn(&a),
+    }
+}
+
+fn emit(bench: &str, config: &str, value: f64, unit: &str) {
+    println!("{}", json!({"bench": bench, "config": config, "value": (value * 1000.0).round() / 1000.0, "unit": unit, "impl": "coadapt"}));
+}
+
+/// Calls `f` repeatedly for about `seconds` after a short warm-up; returns calls per second.
+fn rate(seconds: f64, mut f: impl FnMut()) -> f64 {
+    for _ in 0..3 {
+        f();
+    }
+    let start = Instant::now();
+    let mut n = 0u64;
+    while start.elapsed().as_secs_f64() < seconds {
+        f();
+        n += 1;
+    }
+    n as f64 / start.elapsed().as_secs_f64()
+}
+
+fn random_batch(rows: usize, obs: usize, act: usize, seed: u64) -> Batch {
+    let mut r = rng(seed, 9);
+    let mut b = Batch::new(rows, obs, act);
+    for v in b.obs.iter_mut().chain(b.next_obs.iter_mut()).chain(b.rew.iter_mut()) {
+        *v = r.random_range(-1.0..1.0);
+    }
+    for v in b.act.iter_mut() {
+        *v = r.random_range(-1.0..1.0);
+    }
+    b
+}
+
+fn nn(a: &NnArgs) -> anyhow::Result<()> {
+    for (config, hidden, obs) in [("3x256-obs17", vec![256; 3], 17), ("3x200-obs23", vec![200; 3], 23), ("2x256-obs17", vec![256; 2], 17)] {
+        let act = 6;
+        let cfg = SacConfig { hidden, auto_alpha: true, ..SacConfig::default() };
+        let mut sac = Sac::new(obs, act, cfg, 1)?;
+        let batch = random_batch(256, obs, act, 2);
+        let r = rate(a.seconds, || {
+            sac.update(&batch);
+        });
+        emit("sac_update", config, r, "updates/s");
+    }
+
+    let states = if a.large { vec![32, 256] } else { vec![32] };
+    for n_states in states {
+        let (obs, act, design) = (23, 6, 6);
+        let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 3)?;
+        let mut r = rng(4, 0);
+        let start: Vec<f32> = (0..n_states * obs).map(|_| r.random_range(-1.0..1.0)).collect();
+        let (q1, _) = sac.critic_params(0);
+        let objective = DesignObjective::new(sac.policy(), sac.policy_params(), sac.critic(), &[q1], &start, obs - design, design)?;
+        let particles = 700;
+        let designs: Vec<f32> = (0..particles * design).map(|_| r.random_range(0.8..2.0)).collect();
+        let mut out = vec![0.0; particles];
+        let mut ws = vec![ObjectiveWorkspace::default(); rayon::current_num_threads()];
+        let passes = rate(a.seconds, || objective.evaluate(&designs, QMode::First, a.chunk_rows, &mut out, &mut ws));
+        let rows = particles * n_states;
+        let config = format!("{rows}rows");
+        emit("forward_actor_critic", &config, 1.0 / passes, "s/pass");
+        emit("forward_actor_critic", &config, rows as f64 * passes, "rows/s");
+        emit("forward_actor_critic", &config, (rows * objective.flops_per_row()) as f64 * passes / 1e9, "GFLOP/s");
+    }
+    Ok(())
+}

@@ -1,0 +1,38 @@
+//! The `coadapt` command line: thin subcommands over the libraries.
+//!
+//! # Layout
+//! - [`Cli`] and [`run`]: the clap command tree and its dispatch.
+//! - [`train`]: `coadapt train`, RL on one environment and one design.
+//! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure.
+//! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
+
+pub mod bench;
+pub mod progress;
+pub mod train;
+
+use clap::{Parser, Subcommand};
+
+/// Co-design a robot's body and its controller with sample-efficient deep RL.
+#[derive(Debug, Parser)]
+#[command(name = "coadapt", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Train a controller with SAC or DDPG on one environment and one fixed design.
+    Train(train::TrainArgs),
+    /// Run benchmarks; each prints one JSON line per figure.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Train(args) => train::run(args),
+        Command::Bench(cmd) => bench::run(cmd),
+    }
+}

@@ -1,0 +1,160 @@
+//! `coadapt train`: RL on one environment and one fixed design.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use coadapt_learner::train::{self, TrainConfig};
+use coadapt_learner::Algo;
+
+use crate::progress::{duration, shutdown_on_ctrl_c};
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum AlgoArg {
+    Sac,
+    Ddpg,
+}
+
+/// Train a controller with SAC or DDPG on one environment and one fixed design.
+///
+/// Writes a run directory with the resolved `config.toml`, `episodes.csv` (one row per episode,
+/// flushed as it goes) and `checkpoint.safetensors`; prints progress to stderr and one JSON
+/// summary line to stdout. Settings come from the defaults, then `--config`, then the flags.
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// TOML file with a [`TrainConfig`]: top-level keys plus `[sac]` / `[ddpg]` tables.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Environment to train on (known: pendulum).
+    #[arg(long)]
+    pub env: Option<String>,
+    #[arg(long, value_enum)]
+    pub algo: Option<AlgoArg>,
+    /// Environment steps to run.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Design vector, comma-separated (default: the environment's original design).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub design: Option<Vec<f32>>,
+    /// Hidden layer widths of every network, comma-separated (e.g. 256,256).
+    #[arg(long, value_delimiter = ',')]
+    pub hidden: Option<Vec<usize>>,
+    /// SAC entropy coefficient: a positive number, or `auto` for automatic tuning.
+    #[arg(long)]
+    pub alpha: Option<String>,
+    /// Steps of uniform random actions before learning starts.
+    #[arg(long)]
+    pub learning_starts: Option<u64>,
+    /// Report the first step at which the mean return of the last 10 episodes exceeds this.
+    #[arg(long, allow_negative_numbers = true)]
+    pub target_return: Option<f32>,
+    /// Stop once `--target-return` is reached.
+    #[arg(long)]
+    pub stop_at_target: bool,
+    /// Run directory (default: runs/<env>-<algo>-seed<seed>-<unix time>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print no per-episode progress.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Defaults, then the config file, then the flags.
+pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
+    let mut cfg = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading config {}", path.display()))?;
+            toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?
+        }
+        None => TrainConfig::default(),
+    };
+    if let Some(env) = &args.env {
+        cfg.env = env.clone();
+    }
+    if let Some(a) = args.algo {
+        cfg.algo = match a {
+            AlgoArg::Sac => Algo::Sac,
+            AlgoArg::Ddpg => Algo::Ddpg,
+        };
+    }
+    if let Some(s) = args.steps {
+        cfg.steps = s;
+    }
+    if let Some(s) = args.seed {
+        cfg.seed = s;
+    }
+    if let Some(d) = &args.design {
+        cfg.design = Some(d.clone());
+    }
+    if let Some(h) = &args.hidden {
+        cfg.sac.hidden = h.clone();
+        cfg.ddpg.hidden = h.clone();
+    }
+    if let Some(a) = &args.alpha {
+        if a == "auto" {
+            cfg.sac.auto_alpha = true;
+        } else {
+            let v: f32 = a.parse().map_err(|_| anyhow::anyhow!("--alpha: `{a}` is neither a number nor `auto`"))?;
+            if !(v.is_finite() && v > 0.0) {
+                bail!("--alpha: {v} must be positive");
+            }
+            cfg.sac.alpha = v;
+            cfg.sac.auto_alpha = false;
+        }
+    }
+    if let Some(l) = args.learning_starts {
+        cfg.learning_starts = l;
+    }
+    if let Some(t) = args.target_return {
+        cfg.target_return = Some(t);
+    }
+    if args.stop_at_target {
+        if cfg.target_return.is_none() {
+            bail!("--stop-at-target needs --target-return");
+        }
+        cfg.stop_at_target = true;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    let cfg = resolve(&args)?;
+    let mut env = coadapt_robots::make(&cfg.env)?;
+    let dir = match &args.out {
+        Some(d) => d.clone(),
+        None => {
+            let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
+            PathBuf::from("runs").join(format!("{}-{}-seed{}-{t}", cfg.env, cfg.algo, cfg.seed))
+        }
+    };
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating run directory {}", dir.display()))?;
+    let resolved = toml::to_string_pretty(&cfg).context("serialising the resolved config")?;
+    std::fs::write(dir.join("config.toml"), resolved).with_context(|| format!("writing {}/config.toml", dir.display()))?;
+    if !args.quiet {
+        eprintln!("training {} on {} for {} steps (seed {}) into {}", cfg.algo, cfg.env, cfg.steps, cfg.seed, dir.display());
+    }
+    let shutdown = shutdown_on_ctrl_c();
+    let quiet = args.quiet;
+    let total = cfg.steps;
+    let summary = train::run(&cfg, env.as_mut(), &dir, &shutdown, &mut |r| {
+        if quiet {
+            return;
+        }
+        let rate = r.step as f64 / r.wall_s.max(1e-9);
+        eprintln!(
+            "episode {:>4} | step {:>7}/{total} | return {:>9.1} | mean10 {:>9.1} | {:>6.0} steps/s | ETA {}",
+            r.episode,
+            r.step,
+            r.episode_return,
+            r.mean_return_last_10,
+            rate,
+            duration((total - r.step.min(total)) as f64 / rate.max(1e-9)),
+        );
+    })
+    .with_context(|| format!("training {} on {}", cfg.algo, cfg.env))?;
+    println!("{}", serde_json::to_string(&summary).context("serialising the summary")?);
+    Ok(())
+}

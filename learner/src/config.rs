@@ -1,0 +1,111 @@
+//! Learner hyper-parameters. Defaults are the reference settings (DESIGN.md section 2).
+
+use serde::{Deserialize, Serialize};
+
+/// Soft Actor-Critic settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct SacConfig {
+    /// Hidden layer widths of the policy and of each critic.
+    pub hidden: Vec<usize>,
+    /// Discount factor gamma.
+    pub gamma: f32,
+    /// Polyak rate of the target critics, applied at every update.
+    pub tau: f32,
+    /// Adam learning rate of the policy.
+    pub policy_lr: f32,
+    /// Adam learning rate of each critic.
+    pub critic_lr: f32,
+    /// Transitions per gradient step.
+    pub batch_size: usize,
+    /// Rewards are multiplied by this before the Bellman target.
+    pub reward_scale: f32,
+    /// Entropy coefficient alpha (the initial value when `auto-alpha` is on).
+    pub alpha: f32,
+    /// Tune alpha so the policy's entropy tracks `target-entropy`.
+    pub auto_alpha: bool,
+    /// Target entropy for `auto-alpha`; default minus the action dimension.
+    pub target_entropy: Option<f32>,
+    /// Adam learning rate of log(alpha).
+    pub alpha_lr: f32,
+    /// Element-wise gradient clamp; 0 disables it.
+    pub grad_clamp: f32,
+    /// Uniform init range of the policy's last layer.
+    pub policy_final_init: f32,
+    /// Uniform init range of the critics' last layer.
+    pub critic_final_init: f32,
+}
+
+impl Default for SacConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![200, 200, 200],
+            gamma: 0.99,
+            tau: 0.005,
+            policy_lr: 3e-4,
+            critic_lr: 3e-4,
+            batch_size: 256,
+            reward_scale: 1.0,
+            alpha: 0.01,
+            auto_alpha: false,
+            target_entropy: None,
+            alpha_lr: 3e-4,
+            grad_clamp: 1.0,
+            policy_final_init: 1e-3,
+            critic_final_init: 3e-3,
+        }
+    }
+}
+
+/// Which exploration noise DDPG adds to its deterministic action.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Exploration {
+    /// Ornstein-Uhlenbeck process, reset at each episode.
+    OrnsteinUhlenbeck,
+    /// Independent Gaussian noise of standard deviation `sigma`.
+    Gaussian,
+}
+
+/// DDPG settings (thesis chapter 4; step sizes as Stable-Baselines3's DDPG).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct DdpgConfig {
+    /// Hidden layer widths of the actor and the critic.
+    pub hidden: Vec<usize>,
+    pub gamma: f32,
+    /// Polyak rate of both targets, applied at every update.
+    pub tau: f32,
+    pub actor_lr: f32,
+    pub critic_lr: f32,
+    pub batch_size: usize,
+    pub reward_scale: f32,
+    /// Element-wise gradient clamp; 0 disables it.
+    pub grad_clamp: f32,
+    pub exploration: Exploration,
+    /// Noise scale: the OU sigma, or the Gaussian standard deviation.
+    pub sigma: f32,
+    /// OU mean-reversion rate theta.
+    pub theta: f32,
+    /// Uniform init range of both networks' last layers.
+    pub final_init: f32,
+}
+
+impl Default for DdpgConfig {
+    fn default() -> Self {
+        Self {
+            hidden: vec![400, 300],
+            gamma: 0.99,
+            tau: 0.005,
+            actor_lr: 1e-3,
+            critic_lr: 1e-3,
+            batch_size: 256,
+            reward_scale: 1.0,
+            grad_clamp: 1.0,
+            exploration: Exploration::OrnsteinUhlenbeck,
+            sigma: 0.5,
+            theta: 0.15,
+            final_init: 3e-3,
+        }
+    }
+}

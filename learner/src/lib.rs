@@ -1,0 +1,22 @@
+//! The coadapt learner: reinforcement learning on faer networks.
+//!
+//! # Layout
+//! - [`config`]: [`SacConfig`] and [`DdpgConfig`], the reference hyper-parameters as defaults.
+//! - [`networks`]: network shapes (critic `[obs, action] -> 1`, Gaussian and deterministic
+//!   policies).
+//! - [`sac`]: Soft Actor-Critic, the update in the paper's notation.
+//! - [`ddpg`]: DDPG with Ornstein-Uhlenbeck or Gaussian exploration.
+//! - [`agent`]: [`Agent`], what a training loop needs of either algorithm.
+//! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
+
+pub mod agent;
+pub mod config;
+pub mod ddpg;
+pub mod networks;
+pub mod sac;
+pub mod train;
+
+pub use agent::{Agent, Algo};
+pub use config::{DdpgConfig, Exploration, SacConfig};
+pub use ddpg::{Ddpg, DdpgLosses};
+pub use sac::{Sac, SacLosses};

@@ -1,0 +1,372 @@
+//! Soft Actor-Critic (Haarnoja et al., 2018) with twin critics, as rlkit's `SACTrainer`, which the
+//! reference implementation uses: every loss is computed at the same parameters, then every
+//! network steps. That makes the critics and the policy independent within an update, so they
+//! run on separate cores.
+//!
+//! Notation: policy pi_phi, critics Q_theta_i with targets Q_theta_bar_i, entropy weight alpha,
+//! a batch `(s, a, r, s', d)` of size B, and reparameterised actions
+//! `a~ = tanh(mu_phi(s) + sigma_phi(s) eps)`, `eps ~ N(0, I)`.
+
+use std::path::Path;
+
+use coadapt_core::{Batch, Rng64};
+use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NamedNetwork, NnError, clamp_elementwise, polyak, squashed};
+use rand::Rng;
+use rand_distr::StandardNormal;
+
+use crate::config::SacConfig;
+use crate::networks::{concat_rows, critic, gaussian_policy};
+
+/// Losses of one update, for logging.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SacLosses {
+    pub q1: f32,
+    pub q2: f32,
+    pub policy: f32,
+    pub alpha: f32,
+    /// Mean log pi(a~|s) of the batch (minus the policy's entropy).
+    pub log_pi: f32,
+}
+
+/// One critic with its target, optimiser and scratch: what one core owns during an update.
+#[derive(Clone, Debug)]
+struct Critic {
+    theta: Vec<f32>,
+    theta_bar: Vec<f32>,
+    adam: Adam,
+    grad: Vec<f32>,
+    act: Activations,
+    act_bar: Activations,
+    /// Rows `[s, a]` then rows `[s, a~]`.
+    x: Vec<f32>,
+    x_next: Vec<f32>,
+    /// Q(s, a) then Q(s, a~).
+    q: Vec<f32>,
+    q_next: Vec<f32>,
+    dx: Vec<f32>,
+    dq_da: Vec<f32>,
+    dy: Vec<f32>,
+}
+
+/// The policy's scratch for one update.
+#[derive(Clone, Debug, Default)]
+struct PolicyWork {
+    act_s: Activations,
+    act_s_next: Activations,
+    eps: Vec<f32>,
+    eps_next: Vec<f32>,
+    a_new: Vec<f32>,
+    log_pi: Vec<f32>,
+    a_next: Vec<f32>,
+    log_pi_next: Vec<f32>,
+    y: Vec<f32>,
+    d_a: Vec<f32>,
+    d_log_pi: Vec<f32>,
+    d_head: Vec<f32>,
+    grad: Vec<f32>,
+}
+
+/// A SAC agent: policy, twin critics with targets, their optimisers and entropy weight.
+#[derive(Clone, Debug)]
+pub struct Sac {
+    pub cfg: SacConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    policy: Mlp,
+    critic: Mlp,
+    phi: Vec<f32>,
+    phi_adam: Adam,
+    critics: [Critic; 2],
+    log_alpha: f32,
+    alpha_adam: Adam,
+    target_entropy: f32,
+    work: PolicyWork,
+    act_ws: Activations,
+    rng: Rng64,
+    updates: u64,
+}
+
+fn resize(v: &mut Vec<f32>, n: usize) {
+    if v.len() != n {
+        v.resize(n, 0.0);
+    }
+}
+
+impl Critic {
+    fn new(critic: &Mlp, lr: f32, final_init: f32, rng: &mut Rng64) -> Self {
+        let mut theta = critic.zeros();
+        critic.init(&mut theta, final_init, rng);
+        Self {
+            theta_bar: theta.clone(),
+            adam: Adam::new(critic.n_params(), AdamConfig { lr, ..AdamConfig::default() }),
+            grad: critic.zeros(),
+            theta,
+            act: Activations::default(),
+            act_bar: Activations::default(),
+            x: vec![],
+            x_next: vec![],
+            q: vec![],
+            q_next: vec![],
+            dx: vec![],
+            dq_da: vec![],
+            dy: vec![],
+        }
+    }
+
+    /// Q_bar(s', a~'), Q(s, a), Q(s, a~) and dQ(s, a~)/da~.
+    #[allow(clippy::too_many_arguments)]
+    fn evaluate(&mut self, critic: &Mlp, b: &Batch, a_new: &[f32], a_next: &[f32], obs_dim: usize, act_dim: usize) {
+        let n = b.rows;
+        let w = obs_dim + act_dim;
+        resize(&mut self.x_next, n * w);
+        resize(&mut self.x, 2 * n * w);
+        resize(&mut self.dx, n * w);
+        resize(&mut self.dq_da, n * act_dim);
+        resize(&mut self.dy, n);
+        concat_rows(&b.next_obs, obs_dim, a_next, act_dim, &mut self.x_next);
+        let q_next = critic.forward(&self.theta_bar, &self.x_next, n, &mut self.act_bar);
+        self.q_next.clear();
+        self.q_next.extend_from_slice(q_next);
+
+        let (x_data, x_new) = self.x.split_at_mut(n * w);
+        concat_rows(&b.obs, obs_dim, &b.act, act_dim, x_data);
+        concat_rows(&b.obs, obs_dim, a_new, act_dim, x_new);
+        let q = critic.forward(&self.theta, &self.x, 2 * n, &mut self.act);
+        self.q.clear();
+        self.q.extend_from_slice(q);
+
+        self.dy.fill(1.0);
+        critic.backward(&self.theta, &self.x, &mut self.act, n..2 * n, &self.dy, None, Some(&mut self.dx));
+        for (g, row) in self.dq_da.chunks_exact_mut(act_dim).zip(self.dx.chunks_exact(w)) {
+            g.copy_from_slice(&row[obs_dim..]);
+        }
+    }
+
+    /// J_Q(theta) = mean_b (Q(s_b, a_b) - y_b)^2: gradient, clamp, Adam, then the Polyak target.
+    fn step(&mut self, critic: &Mlp, y: &[f32], cfg: &SacConfig) -> f32 {
+        let n = y.len();
+        let mut loss = 0.0;
+        for ((d, q), y) in self.dy.iter_mut().zip(&self.q[..n]).zip(y) {
+            loss += (q - y) * (q - y);
+            *d = 2.0 * (q - y) / n as f32;
+        }
+        critic.backward(&self.theta, &self.x, &mut self.act, 0..n, &self.dy, Some(&mut self.grad), None);
+        if cfg.grad_clamp > 0.0 {
+            clamp_elementwise(&mut self.grad, cfg.grad_clamp);
+        }
+        self.adam.step(&mut self.theta, &self.grad);
+        polyak(&mut self.theta_bar, &self.theta, cfg.tau);
+        loss / n as f32
+    }
+}
+
+impl Sac {
+    /// A freshly initialised agent for observations of `obs_dim` and actions of `act_dim`.
+    pub fn new(obs_dim: usize, act_dim: usize, cfg: SacConfig, seed: u64) -> Result<Self, NnError> {
+        let policy = gaussian_policy(obs_dim, act_dim, &cfg.hidden)?;
+        let critic = critic(obs_dim, act_dim, &cfg.hidden)?;
+        let mut rng = coadapt_core::rng(seed, 1);
+        let mut phi = policy.zeros();
+        policy.init(&mut phi, cfg.policy_final_init, &mut rng);
+        let c1 = Critic::new(&critic, cfg.critic_lr, cfg.critic_final_init, &mut rng);
+        let c2 = Critic::new(&critic, cfg.critic_lr, cfg.critic_final_init, &mut rng);
+        Ok(Self {
+            obs_dim,
+            act_dim,
+            phi_adam: Adam::new(policy.n_params(), AdamConfig { lr: cfg.policy_lr, ..AdamConfig::default() }),
+            log_alpha: cfg.alpha.ln(),
+            alpha_adam: Adam::new(1, AdamConfig { lr: cfg.alpha_lr, ..AdamConfig::default() }),
+            target_entropy: cfg.target_entropy.unwrap_or(-(act_dim as f32)),
+            policy,
+            critic,
+            phi,
+            critics: [c1, c2],
+            work: PolicyWork::default(),
+            act_ws: Activations::default(),
+            rng,
+            updates: 0,
+            cfg,
+        })
+    }
+
+    pub fn alpha(&self) -> f32 {
+        self.log_alpha.exp()
+    }
+
+    pub fn updates(&self) -> u64 {
+        self.updates
+    }
+
+    pub fn policy(&self) -> &Mlp {
+        &self.policy
+    }
+
+    pub fn critic(&self) -> &Mlp {
+        &self.critic
+    }
+
+    /// The policy's flat parameters phi (what actors need).
+    pub fn policy_params(&self) -> &[f32] {
+        &self.phi
+    }
+
+    /// Critic `i`'s parameters theta_i and target theta_bar_i.
+    pub fn critic_params(&self, i: usize) -> (&[f32], &[f32]) {
+        (&self.critics[i].theta, &self.critics[i].theta_bar)
+    }
+
+    /// Overwrites every network's parameters (e.g. with reference weights in tests).
+    pub fn set_params(&mut self, phi: &[f32], theta: [&[f32]; 2], theta_bar: [&[f32]; 2]) {
+        self.phi.copy_from_slice(phi);
+        for i in 0..2 {
+            self.critics[i].theta.copy_from_slice(theta[i]);
+            self.critics[i].theta_bar.copy_from_slice(theta_bar[i]);
+        }
+    }
+
+    /// Draws an action for one observation: `tanh(mu + sigma eps)`, or `tanh(mu)` when
+    /// `deterministic`.
+    pub fn act(&mut self, obs: &[f32], deterministic: bool, action: &mut [f32]) {
+        let head = self.policy.forward(&self.phi, obs, 1, &mut self.act_ws);
+        if deterministic {
+            squashed::mean_action(head, self.act_dim, action);
+        } else {
+            let mut eps = [0.0f32; 64];
+            let eps = &mut eps[..self.act_dim];
+            for e in eps.iter_mut() {
+                *e = self.rng.sample(StandardNormal);
+            }
+            let mut lp = [0.0];
+            squashed::sample(head, eps, self.act_dim, action, &mut lp);
+        }
+    }
+
+    /// One gradient step on every network from `b`, with fresh noise from the agent's generator.
+    pub fn update(&mut self, b: &Batch) -> SacLosses {
+        let n = b.rows * self.act_dim;
+        let w = &mut self.work;
+        resize(&mut w.eps, n);
+        resize(&mut w.eps_next, n);
+        for e in w.eps.iter_mut().chain(w.eps_next.iter_mut()) {
+            *e = self.rng.sample(StandardNormal);
+        }
+        self.update_with_noise(b)
+    }
+
+    /// The update with the noise already in `work.eps` (at s) and `work.eps_next` (at s'), so a
+    /// test can reproduce it exactly against a reference.
+    fn update_with_noise(&mut self, b: &Batch) -> SacLosses {
+        let (n, act, obs) = (b.rows, self.act_dim, self.obs_dim);
+        let Self { cfg, policy, critic, phi, phi_adam, critics, log_alpha, alpha_adam, target_entropy, work: w, .. } = self;
+        for v in [&mut w.a_new, &mut w.a_next, &mut w.d_a] {
+            resize(v, n * act);
+        }
+        for v in [&mut w.log_pi, &mut w.log_pi_next, &mut w.y, &mut w.d_log_pi] {
+            resize(v, n);
+        }
+        resize(&mut w.d_head, n * 2 * act);
+        resize(&mut w.grad, policy.n_params());
+
+        // a~ ~ pi_phi(.|s) and a~' ~ pi_phi(.|s'), one core each.
+        let PolicyWork { act_s, act_s_next, eps, eps_next, a_new, log_pi, a_next, log_pi_next, .. } = w;
+        rayon::join(
+            || squashed::sample(policy.forward(phi, &b.obs, n, act_s), eps, act, a_new, log_pi),
+            || squashed::sample(policy.forward(phi, &b.next_obs, n, act_s_next), eps_next, act, a_next, log_pi_next),
+        );
+
+        // J(alpha) = -E[log alpha (log pi(a~|s) + H_bar)], stepped first as rlkit does.
+        let mean_log_pi = w.log_pi.iter().sum::<f32>() / n as f32;
+        let alpha_loss = -*log_alpha * (mean_log_pi + *target_entropy);
+        if cfg.auto_alpha {
+            let mut la = [*log_alpha];
+            alpha_adam.step(&mut la, &[-(mean_log_pi + *target_entropy)]);
+            *log_alpha = la[0];
+        }
+        let alpha = log_alpha.exp();
+
+        // Q_theta_i(s, a), Q_theta_i(s, a~), dQ_theta_i/da~ and Q_theta_bar_i(s', a~'), one core per critic.
+        let [c1, c2] = critics;
+        rayon::join(
+            || c1.evaluate(critic, b, &w.a_new, &w.a_next, obs, act),
+            || c2.evaluate(critic, b, &w.a_new, &w.a_next, obs, act),
+        );
+
+        // y = scale r + gamma (1 - d) (min_i Q_theta_bar_i(s', a~') - alpha log pi(a~'|s')).
+        for i in 0..n {
+            let v_next = c1.q_next[i].min(c2.q_next[i]) - alpha * w.log_pi_next[i];
+            w.y[i] = cfg.reward_scale * b.rew[i] + cfg.gamma * (1.0 - b.done[i]) * v_next;
+        }
+
+        // J_pi(phi) = mean_b [alpha log pi(a~_b|s_b) - min_i Q_theta_i(s_b, a~_b)]; the gradient
+        // reaches a~ through whichever critic is the smaller for that sample.
+        let mut policy_loss = 0.0;
+        for i in 0..n {
+            let (q1, q2) = (c1.q[n + i], c2.q[n + i]);
+            let (q_min, dq) = if q1 <= q2 { (q1, &c1.dq_da) } else { (q2, &c2.dq_da) };
+            policy_loss += alpha * w.log_pi[i] - q_min;
+            for j in 0..act {
+                w.d_a[i * act + j] = -dq[i * act + j] / n as f32;
+            }
+            w.d_log_pi[i] = alpha / n as f32;
+        }
+
+        // Step both critics and the policy, one task each.
+        let PolicyWork { act_s, eps, a_new, d_a, d_log_pi, d_head, grad, .. } = w;
+        let ((q1_loss, q2_loss), ()) = rayon::join(
+            || rayon::join(|| c1.step(critic, &w.y, cfg), || c2.step(critic, &w.y, cfg)),
+            || {
+                squashed::backward(act_s.output(), eps, a_new, d_a, d_log_pi, act, d_head);
+                policy.backward(phi, &b.obs, act_s, 0..n, d_head, Some(grad), None);
+                if cfg.grad_clamp > 0.0 {
+                    clamp_elementwise(grad, cfg.grad_clamp);
+                }
+                phi_adam.step(phi, grad);
+            },
+        );
+        self.updates += 1;
+        SacLosses { q1: q1_loss, q2: q2_loss, policy: policy_loss / n as f32, alpha: alpha_loss, log_pi: mean_log_pi }
+    }
+
+    /// Saves the policy, critics and targets as one safetensors file (`policy`, `q1`, `q2`,
+    /// `q1_target`, `q2_target`).
+    pub fn save(&self, path: &Path) -> Result<(), NnError> {
+        let [c1, c2] = &self.critics;
+        coadapt_nn::save_networks(
+            path,
+            &[
+                ("policy", &self.policy, &self.phi),
+                ("q1", &self.critic, &c1.theta),
+                ("q2", &self.critic, &c2.theta),
+                ("q1_target", &self.critic, &c1.theta_bar),
+                ("q2_target", &self.critic, &c2.theta_bar),
+            ],
+        )
+    }
+
+    /// Loads networks saved by [`Sac::save`]; the shapes must match this agent's.
+    pub fn load(&mut self, path: &Path) -> Result<(), NnError> {
+        let nets = coadapt_nn::load_networks(path)?;
+        let get = |name: &str, mlp: &Mlp| NamedNetwork::find(&nets, path, name, mlp.sizes()).map(|n| n.params.clone());
+        let phi = get("policy", &self.policy)?;
+        let q = [get("q1", &self.critic)?, get("q2", &self.critic)?];
+        let q_bar = [get("q1_target", &self.critic)?, get("q2_target", &self.critic)?];
+        self.set_params(&phi, [&q[0], &q[1]], [&q_bar[0], &q_bar[1]]);
+        Ok(())
+    }
+
+    #[doc(hidden)]
+    /// Test hook: the update with given noise `eps` (at s) and `eps_next` (at s').
+    pub fn update_with_given_noise(&mut self, b: &Batch, eps: &[f32], eps_next: &[f32]) -> SacLosses {
+        self.work.eps.clear();
+        self.work.eps.extend_from_slice(eps);
+        self.work.eps_next.clear();
+        self.work.eps_next.extend_from_slice(eps_next);
+        self.update_with_noise(b)
+    }
+
+    #[doc(hidden)]
+    /// Test hook: the last update's gradients of the policy and of critic 1 (clamped).
+    pub fn last_gradients(&self) -> (&[f32], &[f32]) {
+        (&self.work.grad, &self.critics[0].grad)
+    }
+}

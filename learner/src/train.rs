@@ -1,0 +1,253 @@
+//! Reinforcement learning on one environment and one fixed design: `coadapt train`.
+//!
+//! The schedule is Stable-Baselines3's off-policy loop: uniform random actions for the first
+//! `learning-starts` steps, then one environment step and `updates-per-step` gradient steps.
+//! Every finished episode is appended (and flushed) to `episodes.csv` in the run directory, and
+//! the agent is checkpointed at the end and every `checkpoint-every` episodes, so a crash loses
+//! at most the episodes since the last checkpoint.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use coadapt_core::{Batch, Env, EnvError, ReplayBuffer, ReplayError, Transition, rng};
+use coadapt_nn::NnError;
+use serde::{Deserialize, Serialize};
+
+use crate::{Agent, Algo, Ddpg, DdpgConfig, Sac, SacConfig};
+
+/// Settings of one training run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Environment registry name.
+    pub env: String,
+    pub algo: Algo,
+    /// Environment steps to run.
+    pub steps: u64,
+    pub seed: u64,
+    /// The body to train on; the environment's original design when absent.
+    pub design: Option<Vec<f32>>,
+    /// Steps of uniform random actions before learning starts.
+    pub learning_starts: u64,
+    /// Gradient steps per environment step once learning has started.
+    pub updates_per_step: u32,
+    pub replay_capacity: usize,
+    /// Save a checkpoint every this many episodes (0: only at the end).
+    pub checkpoint_every: u64,
+    /// Report the first step at which the mean return of the last 10 episodes exceeds this.
+    pub target_return: Option<f32>,
+    /// Stop as soon as `target-return` is reached.
+    pub stop_at_target: bool,
+    pub sac: SacConfig,
+    pub ddpg: DdpgConfig,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            env: "pendulum".into(),
+            algo: Algo::Sac,
+            steps: 20_000,
+            seed: 1,
+            design: None,
+            learning_starts: 100,
+            updates_per_step: 1,
+            replay_capacity: 1_000_000,
+            checkpoint_every: 50,
+            target_return: None,
+            stop_at_target: false,
+            sac: SacConfig::default(),
+            ddpg: DdpgConfig::default(),
+        }
+    }
+}
+
+impl TrainConfig {
+    /// Rejects impossible values, naming the field.
+    pub fn validate(&self) -> Result<(), TrainError> {
+        let bad = |field: &'static str, why: String| Err(TrainError::Config { field, why });
+        if self.steps == 0 {
+            return bad("steps", "must be at least 1".into());
+        }
+        if self.replay_capacity == 0 {
+            return bad("replay-capacity", "must be at least 1".into());
+        }
+        if self.updates_per_step == 0 {
+            return bad("updates-per-step", "must be at least 1".into());
+        }
+        let (hidden, batch, gamma, tau, lrs) = match self.algo {
+            Algo::Sac => (&self.sac.hidden, self.sac.batch_size, self.sac.gamma, self.sac.tau, [self.sac.policy_lr, self.sac.critic_lr]),
+            Algo::Ddpg => (&self.ddpg.hidden, self.ddpg.batch_size, self.ddpg.gamma, self.ddpg.tau, [self.ddpg.actor_lr, self.ddpg.critic_lr]),
+        };
+        if hidden.is_empty() || hidden.contains(&0) {
+            return bad("hidden", format!("{hidden:?}: needs at least one layer, all widths positive"));
+        }
+        if batch == 0 {
+            return bad("batch-size", "must be at least 1".into());
+        }
+        if !(0.0..=1.0).contains(&gamma) {
+            return bad("gamma", format!("{gamma} is outside [0, 1]"));
+        }
+        if !(0.0..=1.0).contains(&tau) {
+            return bad("tau", format!("{tau} is outside [0, 1]"));
+        }
+        if lrs.iter().any(|lr| !(lr.is_finite() && *lr > 0.0)) {
+            return bad("learning rate", format!("{lrs:?}: learning rates must be positive"));
+        }
+        if self.algo == Algo::Sac && !(self.sac.alpha.is_finite() && self.sac.alpha > 0.0) {
+            return bad("alpha", format!("{} must be positive", self.sac.alpha));
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("invalid config `{field}`: {why}")]
+    Config { field: &'static str, why: String },
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    #[error("environment produced an invalid transition: {0}")]
+    Replay(#[from] ReplayError),
+    #[error(transparent)]
+    Nn(#[from] NnError),
+    #[error("cannot write {path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+}
+
+/// One finished episode.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct EpisodeRecord {
+    pub episode: u64,
+    /// Environment steps taken so far, this episode included.
+    pub step: u64,
+    pub episode_return: f32,
+    pub length: u64,
+    /// Mean return of the last (up to) 10 episodes.
+    pub mean_return_last_10: f32,
+    pub wall_s: f64,
+}
+
+/// The outcome of a run, printed by `coadapt train` as one JSON line.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TrainSummary {
+    pub env: String,
+    pub algo: Algo,
+    pub seed: u64,
+    pub steps: u64,
+    pub episodes: u64,
+    pub mean_return_last_10: f32,
+    /// First step at which the mean of the last 10 returns exceeded `target-return`.
+    pub first_step_reaching_target: Option<u64>,
+    pub updates: u64,
+    pub wall_s: f64,
+    pub run_dir: PathBuf,
+}
+
+/// Builds the agent `cfg.algo` for the environment's dimensions.
+pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize) -> Result<Box<dyn Agent>, TrainError> {
+    Ok(match cfg.algo {
+        Algo::Sac => Box::new(Sac::new(obs_dim, act_dim, cfg.sac.clone(), cfg.seed)?),
+        Algo::Ddpg => Box::new(Ddpg::new(obs_dim, act_dim, cfg.ddpg.clone(), cfg.seed)?),
+    })
+}
+
+/// Trains on `env` until `cfg.steps` steps, the target, or `shutdown`; writes `episodes.csv` and
+/// `checkpoint.safetensors` into `run_dir` and calls `on_episode` after every episode.
+pub fn run(
+    cfg: &TrainConfig,
+    env: &mut dyn Env,
+    run_dir: &Path,
+    shutdown: &AtomicBool,
+    on_episode: &mut dyn FnMut(&EpisodeRecord),
+) -> Result<TrainSummary, TrainError> {
+    cfg.validate()?;
+    let spec = env.spec().clone();
+    let design = cfg.design.clone().unwrap_or_else(|| spec.default_design.clone());
+    spec.design.check("design", &design).map_err(EnvError::Design)?;
+    let (obs_dim, act_dim) = (spec.obs_dim(), spec.act_dim());
+    let mut agent = make_agent(cfg, obs_dim, act_dim)?;
+    let mut replay = ReplayBuffer::new(obs_dim, act_dim, cfg.replay_capacity);
+    let mut batch = Batch::new(agent.batch_size(), obs_dim, act_dim);
+    let mut rng = rng(cfg.seed, 2);
+
+    let csv_path = run_dir.join("episodes.csv");
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| TrainError::Io { path: path.clone(), source }
+    };
+    let mut csv = BufWriter::new(File::create(&csv_path).map_err(io(&csv_path))?);
+    writeln!(csv, "episode,step,return,length,mean_return_last_10,wall_s").map_err(io(&csv_path))?;
+    let ckpt = run_dir.join("checkpoint.safetensors");
+
+    let start = Instant::now();
+    let mut obs = vec![0.0; obs_dim];
+    let mut action = vec![0.0; act_dim];
+    let mut returns: Vec<f32> = Vec::new();
+    let (mut step, mut updates, mut episode) = (0u64, 0u64, 0u64);
+    let mut reached = None;
+    while step < cfg.steps && !shutdown.load(Ordering::Relaxed) {
+        obs.copy_from_slice(env.reset(cfg.seed.wrapping_mul(1_000_003).wrapping_add(episode), &design)?);
+        agent.begin_episode();
+        let (mut ret, mut len) = (0.0f32, 0u64);
+        loop {
+            if step < cfg.learning_starts {
+                spec.action.sample(&mut rng, &mut action);
+            } else {
+                agent.act(&obs, true, &mut action);
+            }
+            let s = env.step(&action)?;
+            replay.push(&Transition { obs: &obs, action: &action, reward: s.reward, next_obs: s.observation, terminated: s.terminated })?;
+            obs.copy_from_slice(s.observation);
+            let done = s.terminated || s.truncated;
+            ret += s.reward;
+            len += 1;
+            step += 1;
+            if step >= cfg.learning_starts && replay.len() >= 1 {
+                for _ in 0..cfg.updates_per_step {
+                    replay.sample(&mut rng, &mut batch)?;
+                    agent.update(&batch);
+                    updates += 1;
+                }
+            }
+            if done || step >= cfg.steps {
+                break;
+            }
+        }
+        episode += 1;
+        returns.push(ret);
+        let last = &returns[returns.len().saturating_sub(10)..];
+        let mean10 = last.iter().sum::<f32>() / last.len() as f32;
+        let rec = EpisodeRecord { episode, step, episode_return: ret, length: len, mean_return_last_10: mean10, wall_s: start.elapsed().as_secs_f64() };
+        writeln!(csv, "{},{},{},{},{},{:.3}", rec.episode, rec.step, rec.episode_return, rec.length, rec.mean_return_last_10, rec.wall_s)
+            .and_then(|_| csv.flush())
+            .map_err(io(&csv_path))?;
+        on_episode(&rec);
+        if reached.is_none() && returns.len() >= 10 && cfg.target_return.is_some_and(|t| mean10 > t) {
+            reached = Some(step);
+            if cfg.stop_at_target {
+                break;
+            }
+        }
+        if cfg.checkpoint_every > 0 && episode % cfg.checkpoint_every == 0 {
+            agent.save(&ckpt)?;
+        }
+    }
+    agent.save(&ckpt)?;
+    let last = &returns[returns.len().saturating_sub(10)..];
+    Ok(TrainSummary {
+        env: spec.name.clone(),
+        algo: cfg.algo,
+        seed: cfg.seed,
+        steps: step,
+        episodes: episode,
+        mean_return_last_10: if last.is_empty() { f32::NAN } else { last.iter().sum::<f32>() / last.len() as f32 },
+        first_step_reaching_target: reached,
+        updates,
+        wall_s: start.elapsed().as_secs_f64(),
+        run_dir: run_dir.to_path_buf(),
+    })
+}
