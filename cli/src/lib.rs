@@ -22,7 +22,6 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Train a controller with SAC or DDPG on one environment and one fixed design.
     Train(train::TrainArgs),
     /// Run benchmarks; each prints one JSON line per figure.
     #[command(subcommand)]

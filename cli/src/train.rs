@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
-use coadapt_learner::train::{self, TrainConfig};
 use coadapt_learner::Algo;
+use coadapt_learner::train::{self, TrainConfig};
 
 use crate::progress::{duration, shutdown_on_ctrl_c};
 
@@ -22,17 +22,20 @@ pub enum AlgoArg {
 /// summary line to stdout. Settings come from the defaults, then `--config`, then the flags.
 #[derive(Debug, Args)]
 pub struct TrainArgs {
-    /// TOML file with a [`TrainConfig`]: top-level keys plus `[sac]` / `[ddpg]` tables.
+    /// TOML settings file: top-level keys (steps, seed, learning-starts, ...) plus [sac] and
+    /// [ddpg] tables; the resolved config.toml of a run directory is a valid example.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Environment to train on (known: pendulum).
     #[arg(long)]
     pub env: Option<String>,
+    /// Learning algorithm.
     #[arg(long, value_enum)]
     pub algo: Option<AlgoArg>,
     /// Environment steps to run.
     #[arg(long)]
     pub steps: Option<u64>,
+    /// Seed of every random stream (same seed, same run).
     #[arg(long)]
     pub seed: Option<u64>,
     /// Design vector, comma-separated (default: the environment's original design).
@@ -42,7 +45,7 @@ pub struct TrainArgs {
     #[arg(long, value_delimiter = ',')]
     pub hidden: Option<Vec<usize>>,
     /// SAC entropy coefficient: a positive number, or `auto` for automatic tuning.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub alpha: Option<String>,
     /// Steps of uniform random actions before learning starts.
     #[arg(long)]

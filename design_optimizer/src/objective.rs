@@ -64,7 +64,7 @@ impl DesignObjective {
     ) -> Result<Self, ObjectiveError> {
         let shape = |what, why: String| Err(ObjectiveError::Shape { what, why });
         let obs_dim = policy.n_in();
-        if policy.n_out() % 2 != 0 {
+        if !policy.n_out().is_multiple_of(2) {
             return shape("policy", format!("output width {} is not [mean, log_std]", policy.n_out()));
         }
         let act_dim = policy.n_out() / 2;
@@ -77,7 +77,7 @@ impl DesignObjective {
         if phi.len() != policy.n_params() {
             return shape("policy parameters", format!("{} values, expected {}", phi.len(), policy.n_params()));
         }
-        if start_states.is_empty() || start_states.len() % obs_dim != 0 {
+        if start_states.is_empty() || !start_states.len().is_multiple_of(obs_dim) {
             return shape("start states", format!("{} values is not a positive multiple of obs {obs_dim}", start_states.len()));
         }
         if design_at + design_dim > obs_dim {
@@ -130,7 +130,8 @@ impl DesignObjective {
         let per_core = p.div_ceil(workspaces.len()).max(1);
         let per_chunk = (chunk_rows / self.n_states).max(1);
         rayon::scope(|s| {
-            for ((out, designs), ws) in out.chunks_mut(per_core).zip(designs.chunks(per_core * self.design_dim)).zip(workspaces.iter_mut()) {
+            for ((out, designs), ws) in out.chunks_mut(per_core).zip(designs.chunks(per_core * self.design_dim)).zip(workspaces.iter_mut())
+            {
                 s.spawn(move |_| {
                     for (o, d) in out.chunks_mut(per_chunk).zip(designs.chunks(per_chunk * self.design_dim)) {
                         self.evaluate_chunk(d, mode, o, ws);

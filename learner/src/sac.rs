@@ -286,10 +286,7 @@ impl Sac {
 
         // Q_theta_i(s, a), Q_theta_i(s, a~), dQ_theta_i/da~ and Q_theta_bar_i(s', a~'), one core per critic.
         let [c1, c2] = critics;
-        rayon::join(
-            || c1.evaluate(critic, b, &w.a_new, &w.a_next, obs, act),
-            || c2.evaluate(critic, b, &w.a_new, &w.a_next, obs, act),
-        );
+        rayon::join(|| c1.evaluate(critic, b, &w.a_new, &w.a_next, obs, act), || c2.evaluate(critic, b, &w.a_new, &w.a_next, obs, act));
 
         // y = scale r + gamma (1 - d) (min_i Q_theta_bar_i(s', a~') - alpha log pi(a~'|s')).
         for i in 0..n {

@@ -80,7 +80,9 @@ impl TrainConfig {
         }
         let (hidden, batch, gamma, tau, lrs) = match self.algo {
             Algo::Sac => (&self.sac.hidden, self.sac.batch_size, self.sac.gamma, self.sac.tau, [self.sac.policy_lr, self.sac.critic_lr]),
-            Algo::Ddpg => (&self.ddpg.hidden, self.ddpg.batch_size, self.ddpg.gamma, self.ddpg.tau, [self.ddpg.actor_lr, self.ddpg.critic_lr]),
+            Algo::Ddpg => {
+                (&self.ddpg.hidden, self.ddpg.batch_size, self.ddpg.gamma, self.ddpg.tau, [self.ddpg.actor_lr, self.ddpg.critic_lr])
+            }
         };
         if hidden.is_empty() || hidden.contains(&0) {
             return bad("hidden", format!("{hidden:?}: needs at least one layer, all widths positive"));
@@ -206,7 +208,7 @@ pub fn run(
             ret += s.reward;
             len += 1;
             step += 1;
-            if step >= cfg.learning_starts && replay.len() >= 1 {
+            if step >= cfg.learning_starts {
                 for _ in 0..cfg.updates_per_step {
                     replay.sample(&mut rng, &mut batch)?;
                     agent.update(&batch);
@@ -221,7 +223,14 @@ pub fn run(
         returns.push(ret);
         let last = &returns[returns.len().saturating_sub(10)..];
         let mean10 = last.iter().sum::<f32>() / last.len() as f32;
-        let rec = EpisodeRecord { episode, step, episode_return: ret, length: len, mean_return_last_10: mean10, wall_s: start.elapsed().as_secs_f64() };
+        let rec = EpisodeRecord {
+            episode,
+            step,
+            episode_return: ret,
+            length: len,
+            mean_return_last_10: mean10,
+            wall_s: start.elapsed().as_secs_f64(),
+        };
         writeln!(csv, "{},{},{},{},{},{:.3}", rec.episode, rec.step, rec.episode_return, rec.length, rec.mean_return_last_10, rec.wall_s)
             .and_then(|_| csv.flush())
             .map_err(io(&csv_path))?;
@@ -232,7 +241,7 @@ pub fn run(
                 break;
             }
         }
-        if cfg.checkpoint_every > 0 && episode % cfg.checkpoint_every == 0 {
+        if cfg.checkpoint_every > 0 && episode.is_multiple_of(cfg.checkpoint_every) {
             agent.save(&ckpt)?;
         }
     }

@@ -10,6 +10,8 @@
 //! coordinate whose +-h perturbation straddles one can miss, so at most 2 % of the coordinates
 //! may disagree. (The exact check of every coordinate is `reference.rs`, against PyTorch.)
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
 use coadapt_core::{Batch, rng};
 use coadapt_learner::{Ddpg, DdpgConfig, Sac, SacConfig};
 use rand::Rng;
@@ -31,14 +33,30 @@ fn batch(rows: usize, obs: usize, act: usize) -> Batch {
 }
 
 fn check(name: &str, analytic: &[f32], numeric: &[f64]) {
-    let bad: Vec<usize> = (0..analytic.len()).filter(|&i| (analytic[i] as f64 - numeric[i]).abs() > 2e-3 * numeric[i].abs().max(1.0)).collect();
-    assert!(bad.len() * 50 <= analytic.len(), "{name}: {} of {} coordinates disagree, e.g. [{}] analytic {} numeric {}", bad.len(), analytic.len(), bad[0], analytic[bad[0]], numeric[bad[0]]);
+    let bad: Vec<usize> =
+        (0..analytic.len()).filter(|&i| (analytic[i] as f64 - numeric[i]).abs() > 2e-3 * numeric[i].abs().max(1.0)).collect();
+    assert!(
+        bad.len() * 50 <= analytic.len(),
+        "{name}: {} of {} coordinates disagree, e.g. [{}] analytic {} numeric {}",
+        bad.len(),
+        analytic.len(),
+        bad[0],
+        analytic[bad[0]],
+        numeric[bad[0]]
+    );
     assert!(analytic.iter().any(|g| g.abs() > 1e-3), "{name}: gradient is trivially small");
 }
 
 fn sac() -> (Sac, Batch, Vec<f32>, Vec<f32>) {
     let (obs, act, rows) = (4, 2, 8);
-    let cfg = SacConfig { hidden: vec![16, 16], grad_clamp: 0.0, policy_final_init: 0.5, critic_final_init: 0.5, alpha: 0.2, ..SacConfig::default() };
+    let cfg = SacConfig {
+        hidden: vec![16, 16],
+        grad_clamp: 0.0,
+        policy_final_init: 0.5,
+        critic_final_init: 0.5,
+        alpha: 0.2,
+        ..SacConfig::default()
+    };
     let sac = Sac::new(obs, act, cfg, 3).unwrap();
     let mut r = rng(6, 0);
     let eps: Vec<f32> = (0..rows * act).map(|_| r.sample(StandardNormal)).collect();

@@ -25,7 +25,7 @@ impl BoxSpace {
         if low.len() != high.len() {
             return Err(SpaceError::Invalid(format!("{} lower bounds but {} upper bounds", low.len(), high.len())));
         }
-        if let Some(i) = (0..low.len()).find(|&i| !(low[i] <= high[i]) || low[i].is_nan()) {
+        if let Some(i) = (0..low.len()).find(|&i| low[i].is_nan() || high[i].is_nan() || low[i] > high[i]) {
             return Err(SpaceError::Invalid(format!("bound {i}: low {} > high {}", low[i], high[i])));
         }
         Ok(Self { low, high })

@@ -1,3 +1,5 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
 use coadapt_core::{Batch, ReplayBuffer, ReplayError, Transition, rng};
 
 fn t(v: f32) -> ([f32; 2], [f32; 1], [f32; 2]) {

@@ -92,10 +92,7 @@ pub fn load_networks(path: &Path) -> Result<Vec<NamedNetwork>, NnError> {
         let mlp = Mlp::new(&sizes).map_err(|e| corrupt(e.to_string()))?;
         let mut params = mlp.zeros();
         for (i, l) in mlp.layers().iter().enumerate() {
-            for (suffix, shape, range) in [
-                ("weight", vec![l.n_out, l.n_in], l.w..l.b),
-                ("bias", vec![l.n_out], l.b..l.b + l.n_out),
-            ] {
+            for (suffix, shape, range) in [("weight", vec![l.n_out, l.n_in], l.w..l.b), ("bias", vec![l.n_out], l.b..l.b + l.n_out)] {
                 let tname = format!("{name}.{}.{suffix}", 2 * i);
                 let t = st.tensor(&tname).map_err(|e| corrupt(format!("tensor `{tname}`: {e}")))?;
                 if t.dtype() != Dtype::F32 {

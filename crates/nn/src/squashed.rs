@@ -72,11 +72,7 @@ pub fn backward(head: &[f32], eps: &[f32], action: &[f32], d_action: &[f32], d_l
             let du = d_action[r * act + j] * (1.0 - a * a) + dlp * 2.0 * a;
             dmean[j] = du;
             let raw = log_std[j];
-            dls[j] = if (LOG_STD_MIN..=LOG_STD_MAX).contains(&raw) {
-                du * raw.exp() * eps[r * act + j] - dlp
-            } else {
-                0.0
-            };
+            dls[j] = if (LOG_STD_MIN..=LOG_STD_MAX).contains(&raw) { du * raw.exp() * eps[r * act + j] - dlp } else { 0.0 };
         }
     }
 }

@@ -9,6 +9,8 @@
 //! parameter whose perturbation flips a ReLU (a kink between p-h and p+h) is skipped, and the
 //! test asserts that only a few are.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
 use coadapt_nn::{Activations, Mlp, squashed};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;

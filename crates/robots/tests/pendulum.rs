@@ -1,3 +1,5 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
 use coadapt_core::{Env, EnvError};
 use coadapt_robots::make;
 

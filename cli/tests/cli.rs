@@ -1,0 +1,116 @@
+//! The `coadapt` binary as a user runs it.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn coadapt(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_coadapt")).args(args).output().expect("coadapt runs")
+}
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coadapt-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+#[test]
+fn train_writes_a_run_directory_and_prints_one_json_summary() {
+    let out = tmpdir("train");
+    let o = coadapt(&[
+        "train",
+        "--env",
+        "pendulum",
+        "--algo",
+        "sac",
+        "--steps",
+        "600",
+        "--seed",
+        "3",
+        "--hidden",
+        "32,32",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "stderr: {}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8(o.stdout).unwrap();
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 1, "stdout is exactly the JSON summary: {stdout}");
+    let v: serde_json::Value = serde_json::from_str(lines[0]).unwrap();
+    assert_eq!(v["env"], "pendulum");
+    assert_eq!(v["algo"], "sac");
+    assert_eq!(v["steps"], 600);
+    assert_eq!(v["episodes"], 3);
+    assert!(v["mean_return_last_10"].as_f64().unwrap() < 0.0);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("episode    3"), "progress is shown");
+
+    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows[0], "episode,step,return,length,mean_return_last_10,wall_s");
+    assert_eq!(rows.len(), 4);
+    assert!(rows[3].starts_with("3,600,"));
+    let nets = coadapt_nn::load_networks(&out.join("checkpoint.safetensors")).unwrap();
+    let names: Vec<&str> = nets.iter().map(|n| n.name.as_str()).collect();
+    assert_eq!(names, ["policy", "q1", "q1_target", "q2", "q2_target"]);
+    let cfg = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(cfg.contains("steps = 600") && cfg.contains("hidden = [\n    32,\n    32,\n]"), "{cfg}");
+}
+
+#[test]
+fn bad_input_gets_a_clear_error_naming_what_is_wrong() {
+    let cases: &[(&[&str], &str)] = &[
+        (&["train", "--steps", "0"], "steps"),
+        (&["train", "--env", "cartpole"], "unknown environment `cartpole`"),
+        (&["train", "--alpha", "-1"], "--alpha"),
+        (&["train", "--alpha", "lots"], "--alpha"),
+        (&["train", "--design", "5,5"], "design[0] = 5"),
+        (&["train", "--design", "1"], "design has 1 values, expected 2"),
+        (&["train", "--hidden", "0,4"], "hidden"),
+        (&["train", "--stop-at-target"], "--target-return"),
+        (&["train", "--config", "/nonexistent/coadapt.toml"], "reading config"),
+        (&["train", "--algo", "ppo"], "invalid value 'ppo'"),
+    ];
+    for (args, needle) in cases {
+        let o = coadapt(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} should fail");
+        assert!(err.contains(needle), "{args:?}: stderr `{err}` does not mention `{needle}`");
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    }
+}
+
+#[test]
+fn config_files_are_validated_by_field() {
+    let dir = tmpdir("cfg");
+    std::fs::create_dir_all(&dir).unwrap();
+    let unknown = dir.join("unknown.toml");
+    std::fs::write(&unknown, "steps = 100\n[sac]\nlearning-rate = 0.1\n").unwrap();
+    let o = coadapt(&["train", "--config", unknown.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("learning-rate"), "{err}");
+
+    let bad_gamma = dir.join("gamma.toml");
+    std::fs::write(&bad_gamma, "[sac]\ngamma = 1.5\n").unwrap();
+    let o = coadapt(&["train", "--config", bad_gamma.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("gamma"));
+
+    let good = dir.join("good.toml");
+    std::fs::write(&good, "steps = 250\nlearning-starts = 50\n[sac]\nhidden = [16]\nauto-alpha = true\n").unwrap();
+    let out = dir.join("run");
+    let o = coadapt(&["train", "--config", good.to_str().unwrap(), "--quiet", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["steps"], 250);
+}
+
+#[test]
+fn help_explains_the_commands() {
+    let o = coadapt(&["--help"]);
+    let s = String::from_utf8_lossy(&o.stdout);
+    assert!(s.contains("train") && s.contains("bench"));
+    let o = coadapt(&["train", "--help"]);
+    let s = String::from_utf8_lossy(&o.stdout);
+    assert!(s.contains("episodes.csv") && s.contains("--target-return"));
+}

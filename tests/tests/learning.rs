@@ -1,0 +1,32 @@
+//! SAC and DDPG learn Pendulum: the bar of DESIGN.md section 5 (mean return of the last 10
+//! episodes above -200 within 20,000 steps), checked for one seed each. The five-seed study is
+//! `scripts/pendulum_seeds.sh`, recorded in docs/EXPERIMENTS.md.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::sync::atomic::AtomicBool;
+
+use coadapt_learner::Algo;
+use coadapt_learner::train::{self, TrainConfig};
+
+fn learns(algo: Algo, seed: u64) {
+    let dir = std::env::temp_dir().join(format!("coadapt-learning-{algo}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = TrainConfig { algo, seed, steps: 20_000, target_return: Some(-200.0), stop_at_target: true, ..TrainConfig::default() };
+    let mut env = coadapt_robots::make("pendulum").unwrap();
+    let s = train::run(&cfg, env.as_mut(), &dir, &AtomicBool::new(false), &mut |_| {}).unwrap();
+    eprintln!("{algo} seed {seed}: {s:?}");
+    let step = s.first_step_reaching_target.unwrap_or_else(|| panic!("{algo} did not reach -200 in 20k steps: {s:?}"));
+    assert!(step <= 20_000);
+    assert!(s.mean_return_last_10 > -200.0);
+}
+
+#[test]
+fn sac_learns_pendulum() {
+    learns(Algo::Sac, 1);
+}
+
+#[test]
+fn ddpg_learns_pendulum() {
+    learns(Algo::Ddpg, 1);
+}
