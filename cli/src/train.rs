@@ -4,10 +4,16 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
-use coadapt_learner::Algo;
 use coadapt_learner::train::{self, TrainConfig};
+use coadapt_learner::{Algo, Exploration};
 
 use crate::progress::{duration, shutdown_on_ctrl_c};
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ExplorationArg {
+    Ou,
+    Gaussian,
+}
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum AlgoArg {
@@ -47,6 +53,12 @@ pub struct TrainArgs {
     /// SAC entropy coefficient: a positive number, or `auto` for automatic tuning.
     #[arg(long, allow_hyphen_values = true)]
     pub alpha: Option<String>,
+    /// DDPG exploration noise: Ornstein-Uhlenbeck (the thesis) or Gaussian.
+    #[arg(long, value_enum)]
+    pub exploration: Option<ExplorationArg>,
+    /// DDPG noise scale (OU sigma or Gaussian standard deviation).
+    #[arg(long)]
+    pub sigma: Option<f32>,
     /// Steps of uniform random actions before learning starts.
     #[arg(long)]
     pub learning_starts: Option<u64>,
@@ -106,6 +118,18 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             cfg.sac.alpha = v;
             cfg.sac.auto_alpha = false;
         }
+    }
+    if let Some(e) = args.exploration {
+        cfg.ddpg.exploration = match e {
+            ExplorationArg::Ou => Exploration::OrnsteinUhlenbeck,
+            ExplorationArg::Gaussian => Exploration::Gaussian,
+        };
+    }
+    if let Some(s) = args.sigma {
+        if !(s.is_finite() && s >= 0.0) {
+            bail!("--sigma: {s} must be a non-negative number");
+        }
+        cfg.ddpg.sigma = s;
     }
     if let Some(l) = args.learning_starts {
         cfg.learning_starts = l;

@@ -55,8 +55,7 @@ fn reference_sac(grad_clamp: f32) -> Sac {
     let cfg = SacConfig { hidden: vec![8, 8], alpha: 0.01, grad_clamp, ..SacConfig::default() };
     let mut sac = Sac::new(4, 2, cfg, 0).unwrap();
     let (np, nq) = (sac.policy().n_params(), sac.critic().n_params());
-    let (phi, q1, q2, q1b, q2b) =
-        (ref_params(np, 0.2), ref_params(nq, 0.4), ref_params(nq, 0.5), ref_params(nq, 0.6), ref_params(nq, 0.7));
+    let (phi, q1, q2, q1b, q2b) = (ref_params(np, 0.2), ref_params(nq, 0.4), ref_params(nq, 0.5), ref_params(nq, 0.6), ref_params(nq, 0.7));
     sac.set_params(&phi, [&q1, &q2], [&q1b, &q2b]);
     sac
 }

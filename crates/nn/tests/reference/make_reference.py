@@ -67,10 +67,11 @@ def flat(net):
 
 
 def emit(name, value):
-    value = torch.as_tensor(value).detach().flatten().tolist()
-    if len(value) == 1 and not name.endswith("]"):
-        print("const %s: f64 = %.16e;" % (name, value[0]))
+    value = torch.as_tensor(value).detach()
+    if value.dim() == 0:
+        print("const %s: f64 = %.16e;" % (name, value.item()))
         return
+    value = value.flatten().tolist()
     print("const %s: [f64; %d] = [" % (name, len(value)))
     for i in range(0, len(value), 4):
         print("    " + " ".join("%.16e," % v for v in value[i:i + 4]))
