@@ -1,0 +1,69 @@
+//! The batched, two-core design objective equals Eq. 5.6 computed one particle and one start
+//! state at a time.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
+use coadapt_nn::{Mlp, squashed};
+use rand::Rng;
+
+#[test]
+fn batched_objective_equals_the_per_particle_definition() {
+    let (obs, act, design_at, design_dim, n_states, particles) = (7, 2, 4, 3, 5, 13);
+    let mut rng = coadapt_core::rng(1, 0);
+    let policy = Mlp::new(&[obs, 16, 16, 2 * act]).unwrap();
+    let critic = Mlp::new(&[obs + act, 16, 16, 1]).unwrap();
+    let mut phi = policy.zeros();
+    policy.init(&mut phi, 0.5, &mut rng);
+    let mut q1 = critic.zeros();
+    critic.init(&mut q1, 0.5, &mut rng);
+    let mut q2 = critic.zeros();
+    critic.init(&mut q2, 0.5, &mut rng);
+    let start: Vec<f32> = (0..n_states * obs).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let designs: Vec<f32> = (0..particles * design_dim).map(|_| rng.random_range(0.5..1.5)).collect();
+    let f = DesignObjective::new(&policy, &phi, &critic, &[&q1, &q2], &start, design_at, design_dim).unwrap();
+
+    let naive = |xi: &[f32], mode: QMode| -> f32 {
+        let mut total = 0.0;
+        for s in start.chunks_exact(obs) {
+            let mut o = s.to_vec();
+            o[design_at..design_at + design_dim].copy_from_slice(xi);
+            let mut a_pi = policy.activations(1);
+            let mut a = vec![0.0; act];
+            squashed::mean_action(policy.forward(&phi, &o, 1, &mut a_pi), act, &mut a);
+            let x: Vec<f32> = o.iter().chain(&a).copied().collect();
+            let mut aq = critic.activations(1);
+            let v1 = critic.forward(&q1, &x, 1, &mut aq)[0];
+            let v2 = critic.forward(&q2, &x, 1, &mut aq)[0];
+            total += if mode == QMode::First { v1 } else { v1.min(v2) };
+        }
+        total / n_states as f32
+    };
+
+    for (mode, chunk_rows, cores) in [(QMode::First, 1, 1), (QMode::First, 12, 2), (QMode::MinOfTwin, 64, 2), (QMode::MinOfTwin, 1000, 3)] {
+        let mut out = vec![0.0; particles];
+        let mut ws = vec![ObjectiveWorkspace::default(); cores];
+        f.evaluate(&designs, mode, chunk_rows, &mut out, &mut ws);
+        for (k, xi) in designs.chunks_exact(design_dim).enumerate() {
+            let expect = naive(xi, mode);
+            assert!((out[k] - expect).abs() <= 1e-5 * expect.abs().max(1.0), "{mode:?} chunk {chunk_rows} particle {k}: {} vs {expect}", out[k]);
+        }
+    }
+    // The design columns matter: a different design gives a different score.
+    let mut out = vec![0.0; 2];
+    f.evaluate(&[0.5, 0.5, 0.5, 1.5, 1.5, 1.5], QMode::First, 64, &mut out, &mut [ObjectiveWorkspace::default()]);
+    assert!(out[0] != out[1]);
+}
+
+#[test]
+fn mismatched_shapes_are_refused() {
+    let policy = Mlp::new(&[5, 8, 4]).unwrap();
+    let critic = Mlp::new(&[7, 8, 1]).unwrap();
+    let (phi, q) = (policy.zeros(), critic.zeros());
+    assert!(DesignObjective::new(&policy, &phi, &critic, &[&q], &[0.0; 10], 3, 2).is_ok());
+    assert!(DesignObjective::new(&policy, &phi, &critic, &[&q], &[0.0; 9], 3, 2).is_err());
+    assert!(DesignObjective::new(&policy, &phi, &critic, &[&q], &[0.0; 10], 4, 2).is_err());
+    assert!(DesignObjective::new(&policy, &phi[1..], &critic, &[&q], &[0.0; 10], 3, 2).is_err());
+    let wrong_critic = Mlp::new(&[6, 8, 1]).unwrap();
+    assert!(DesignObjective::new(&policy, &phi, &wrong_critic, &[&wrong_critic.zeros()], &[0.0; 10], 3, 2).is_err());
+}
