@@ -68,6 +68,9 @@ pub struct TrainArgs {
     /// Stop once `--target-return` is reached.
     #[arg(long)]
     pub stop_at_target: bool,
+    /// Start from the networks of this checkpoint (e.g. runs/.../checkpoint.safetensors).
+    #[arg(long)]
+    pub init_weights: Option<PathBuf>,
     /// Run directory (default: runs/<env>-<algo>-seed<seed>-<unix time>).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -136,6 +139,9 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if let Some(t) = args.target_return {
         cfg.target_return = Some(t);
+    }
+    if let Some(w) = &args.init_weights {
+        cfg.init_weights = Some(w.clone());
     }
     if args.stop_at_target {
         if cfg.target_return.is_none() {

@@ -106,6 +106,70 @@ fn config_files_are_validated_by_field() {
 }
 
 #[test]
+fn init_weights_resume_from_a_checkpoint_and_bad_files_are_clear_errors() {
+    let dir = tmpdir("weights");
+    let first = dir.join("first");
+    let o = coadapt(&["train", "--steps", "200", "--hidden", "16", "--quiet", "--out", first.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let ckpt = first.join("checkpoint.safetensors");
+    let second = dir.join("second");
+    let o = coadapt(&[
+        "train",
+        "--steps",
+        "200",
+        "--hidden",
+        "16",
+        "--quiet",
+        "--init-weights",
+        ckpt.to_str().unwrap(),
+        "--out",
+        second.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let cases = [
+        (dir.join("missing.safetensors"), None, "cannot read weights file"),
+        (dir.join("corrupt.safetensors"), Some(b"garbage bytes, not safetensors".to_vec()), "not a valid safetensors file"),
+    ];
+    for (path, content, needle) in cases {
+        if let Some(c) = content {
+            std::fs::write(&path, c).unwrap();
+        }
+        let o = coadapt(&[
+            "train",
+            "--steps",
+            "200",
+            "--hidden",
+            "16",
+            "--quiet",
+            "--init-weights",
+            path.to_str().unwrap(),
+            "--out",
+            dir.join("x").to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success());
+        assert!(err.contains(needle) && err.contains(path.file_name().unwrap().to_str().unwrap()), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    // A checkpoint of other shapes names the network and both shapes.
+    let o = coadapt(&[
+        "train",
+        "--steps",
+        "200",
+        "--hidden",
+        "32",
+        "--quiet",
+        "--init-weights",
+        ckpt.to_str().unwrap(),
+        "--out",
+        dir.join("y").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("network `policy`") && err.contains("[5, 16, 2]") && err.contains("[5, 32, 2]"), "{err}");
+}
+
+#[test]
 fn help_explains_the_commands() {
     let o = coadapt(&["--help"]);
     let s = String::from_utf8_lossy(&o.stdout);

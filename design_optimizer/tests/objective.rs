@@ -46,7 +46,11 @@ fn batched_objective_equals_the_per_particle_definition() {
         f.evaluate(&designs, mode, chunk_rows, &mut out, &mut ws);
         for (k, xi) in designs.chunks_exact(design_dim).enumerate() {
             let expect = naive(xi, mode);
-            assert!((out[k] - expect).abs() <= 1e-5 * expect.abs().max(1.0), "{mode:?} chunk {chunk_rows} particle {k}: {} vs {expect}", out[k]);
+            assert!(
+                (out[k] - expect).abs() <= 1e-5 * expect.abs().max(1.0),
+                "{mode:?} chunk {chunk_rows} particle {k}: {} vs {expect}",
+                out[k]
+            );
         }
     }
     // The design columns matter: a different design gives a different score.

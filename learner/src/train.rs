@@ -41,6 +41,9 @@ pub struct TrainConfig {
     pub target_return: Option<f32>,
     /// Stop as soon as `target-return` is reached.
     pub stop_at_target: bool,
+    /// Start from the networks in this checkpoint (a `checkpoint.safetensors` of an earlier run
+    /// with the same algorithm and shapes) instead of a fresh initialisation.
+    pub init_weights: Option<PathBuf>,
     pub sac: SacConfig,
     pub ddpg: DdpgConfig,
 }
@@ -59,6 +62,7 @@ impl Default for TrainConfig {
             checkpoint_every: 50,
             target_return: None,
             stop_at_target: false,
+            init_weights: None,
             sac: SacConfig::default(),
             ddpg: DdpgConfig::default(),
         }
@@ -172,6 +176,9 @@ pub fn run(
     spec.design.check("design", &design).map_err(EnvError::Design)?;
     let (obs_dim, act_dim) = (spec.obs_dim(), spec.act_dim());
     let mut agent = make_agent(cfg, obs_dim, act_dim)?;
+    if let Some(path) = &cfg.init_weights {
+        agent.load(path)?;
+    }
     let mut replay = ReplayBuffer::new(obs_dim, act_dim, cfg.replay_capacity);
     let mut batch = Batch::new(agent.batch_size(), obs_dim, act_dim);
     let mut rng = rng(cfg.seed, 2);
