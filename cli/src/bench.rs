@@ -27,6 +27,9 @@ pub struct NnArgs {
     /// Also time the 179,200-row (256 start states) forward pass.
     #[arg(long)]
     pub large: bool,
+    /// Run only the figures whose bench name contains this (e.g. `sac`, `forward`).
+    #[arg(long)]
+    pub only: Option<String>,
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
@@ -66,6 +69,17 @@ fn random_batch(rows: usize, obs: usize, act: usize, seed: u64) -> Batch {
 }
 
 fn nn(a: &NnArgs) -> anyhow::Result<()> {
+    let wanted = |bench: &str| a.only.as_deref().is_none_or(|o| bench.contains(o));
+    if wanted("sac_update") {
+        sac_updates(a)?;
+    }
+    if wanted("forward_actor_critic") {
+        forward(a)?;
+    }
+    Ok(())
+}
+
+fn sac_updates(a: &NnArgs) -> anyhow::Result<()> {
     for (config, hidden, obs) in [("3x256-obs17", vec![256; 3], 17), ("3x200-obs23", vec![200; 3], 23), ("2x256-obs17", vec![256; 2], 17)] {
         let act = 6;
         let cfg = SacConfig { hidden, auto_alpha: true, ..SacConfig::default() };
@@ -76,7 +90,10 @@ fn nn(a: &NnArgs) -> anyhow::Result<()> {
         });
         emit("sac_update", config, r, "updates/s");
     }
+    Ok(())
+}
 
+fn forward(a: &NnArgs) -> anyhow::Result<()> {
     let states = if a.large { vec![32, 256] } else { vec![32] };
     for n_states in states {
         let (obs, act, design) = (23, 6, 6);

@@ -7,6 +7,8 @@
 //! cores beats threading inside each product.
 
 use coadapt_nn::{Activations, Mlp};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
 
 /// Which critic value scores a design.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -24,26 +26,97 @@ pub enum ObjectiveError {
 }
 
 /// Eq. 5.6 for a fixed policy, critic(s) and start-state batch.
+///
+/// The first layer of both networks is affine in its input, and a row's input is
+/// `[state s, design xi]` (plus the action for the critic), so its pre-activation splits into a
+/// part per start state, a part per design and (for the critic) a part per action:
+/// `W [s, xi, a] + b = (W_s s + b) + W_xi xi + W_a a`. The first two are computed once per state
+/// and once per particle instead of once per row; only the deeper layers and `W_a a` run per
+/// row. The result is the same function, for about 9 % less work.
 #[derive(Clone, Debug)]
 pub struct DesignObjective {
-    /// The policy restricted to its mean head: `obs -> hidden -> act`.
-    mean_policy: Mlp,
-    mean_phi: Vec<f32>,
-    critic: Mlp,
-    thetas: Vec<Vec<f32>>,
-    start_states: Vec<f32>,
+    actor: Split,
+    /// The policy after its first layer, restricted to the mean head: `hidden -> act`.
+    actor_tail: Mlp,
+    actor_tail_params: Vec<f32>,
+    critics: Vec<Split>,
+    critic_tail: Mlp,
+    critic_tail_params: Vec<Vec<f32>>,
     n_states: usize,
-    obs_dim: usize,
     act_dim: usize,
-    design_at: usize,
     design_dim: usize,
+    model_flops_per_row: usize,
+}
+
+/// A first layer split into its per-state, per-design and per-action parts.
+#[derive(Clone, Debug)]
+struct Split {
+    width: usize,
+    /// `W_s s + b` for every start state (`n_states x width`).
+    per_state: Vec<f32>,
+    /// `W_xi` (`width x design_dim`, row-major).
+    w_design: Vec<f32>,
+    /// `W_a^T` (`act_dim x width`, row-major; empty for the actor).
+    w_action_t: Vec<f32>,
+}
+
+impl Split {
+    /// Splits layer 0 of `mlp` (parameters `p`), whose input is `[obs, extra]` with the design
+    /// at `design_at..design_at + design_dim` of `obs`, and `extra` the action (critic) or
+    /// nothing (actor).
+    fn new(mlp: &Mlp, p: &[f32], start_states: &[f32], obs_dim: usize, design_at: usize, design_dim: usize) -> Self {
+        let l = mlp.layers()[0];
+        let w = &p[l.w..l.b];
+        let design = design_at..design_at + design_dim;
+        let mut per_state = Vec::with_capacity(start_states.len() / obs_dim * l.n_out);
+        for s in start_states.chunks_exact(obs_dim) {
+            for (o, row) in w.chunks_exact(l.n_in).enumerate() {
+                let mut v = p[l.b + o];
+                for (j, (wj, sj)) in row[..obs_dim].iter().zip(s).enumerate() {
+                    if !design.contains(&j) {
+                        v += wj * sj;
+                    }
+                }
+                per_state.push(v);
+            }
+        }
+        let w_design = w.chunks_exact(l.n_in).flat_map(|row| row[design.clone()].to_vec()).collect();
+        let extra = l.n_in - obs_dim;
+        let w_action_t = (0..extra).flat_map(|j| w.chunks_exact(l.n_in).map(move |row| row[obs_dim + j])).collect();
+        Self { width: l.n_out, per_state, w_design, w_action_t }
+    }
+
+    /// `W_xi xi` for one design into `out` (`width`).
+    fn design_part(&self, xi: &[f32], out: &mut [f32]) {
+        for (o, row) in out.iter_mut().zip(self.w_design.chunks_exact(xi.len())) {
+            *o = row.iter().zip(xi).map(|(a, b)| a * b).sum();
+        }
+    }
+}
+
+fn tail(mlp: &Mlp, p: &[f32], out_rows: Option<usize>) -> Result<(Mlp, Vec<f32>), ObjectiveError> {
+    let mut sizes = mlp.sizes()[1..].to_vec();
+    if let Some(n) = out_rows {
+        *sizes.last_mut().expect("a tail has layers") = n;
+    }
+    let t = Mlp::new(&sizes).map_err(|e| ObjectiveError::Shape { what: "network", why: e.to_string() })?;
+    let last = mlp.layers().len() - 1;
+    let mut params = Vec::with_capacity(t.n_params());
+    for (i, l) in mlp.layers().iter().enumerate().skip(1) {
+        let out = if i == last { out_rows.unwrap_or(l.n_out) } else { l.n_out };
+        params.extend_from_slice(&p[l.w..l.w + out * l.n_in]);
+        params.extend_from_slice(&p[l.b..l.b + out]);
+    }
+    Ok((t, params))
 }
 
 /// One core's scratch.
 #[derive(Clone, Debug, Default)]
 pub struct ObjectiveWorkspace {
-    x_actor: Vec<f32>,
-    x_critic: Vec<f32>,
+    h_actor: Vec<f32>,
+    h_critic: Vec<f32>,
+    actions: Vec<f32>,
+    design_part: Vec<f32>,
     q: Vec<f32>,
     act_pi: Activations,
     act_q: Activations,
@@ -52,7 +125,7 @@ pub struct ObjectiveWorkspace {
 impl DesignObjective {
     /// `policy` outputs `[mean, log_std]` (the SAC head); `thetas` holds one critic (Q1) or two
     /// (Q1, Q2). `start_states` is `n_states x obs_dim`; the design occupies the observation
-    /// columns `design_at..design_at + design_dim`.
+    /// columns `design_at..design_at + design_dim`. Both networks need a hidden layer.
     pub fn new(
         policy: &Mlp,
         phi: &[f32],
@@ -71,6 +144,9 @@ impl DesignObjective {
         if critic.n_in() != obs_dim + act_dim || critic.n_out() != 1 {
             return shape("critic", format!("sizes {:?} do not take [obs {obs_dim}, act {act_dim}] to 1", critic.sizes()));
         }
+        if policy.layers().len() < 2 || critic.layers().len() < 2 {
+            return shape("networks", "policy and critic need at least one hidden layer".into());
+        }
         if thetas.is_empty() || thetas.len() > 2 || thetas.iter().any(|t| t.len() != critic.n_params()) {
             return shape("critic parameters", "need one or two parameter vectors of the critic's size".into());
         }
@@ -83,28 +159,22 @@ impl DesignObjective {
         if design_at + design_dim > obs_dim {
             return shape("design columns", format!("{design_at}..{} beyond obs {obs_dim}", design_at + design_dim));
         }
-        // Keep only the mean rows of the last layer: the log-std head does not enter Eq. 5.6.
-        let mut sizes = policy.sizes().to_vec();
-        *sizes.last_mut().expect("an MLP has layers") = act_dim;
-        let mean_policy = Mlp::new(&sizes).map_err(|e| ObjectiveError::Shape { what: "policy", why: e.to_string() })?;
-        let mut mean_phi = Vec::with_capacity(mean_policy.n_params());
-        let last = policy.layers().len() - 1;
-        for (i, l) in policy.layers().iter().enumerate() {
-            let out = if i == last { act_dim } else { l.n_out };
-            mean_phi.extend_from_slice(&phi[l.w..l.w + out * l.n_in]);
-            mean_phi.extend_from_slice(&phi[l.b..l.b + out]);
-        }
+        // The log-std head does not enter Eq. 5.6: keep only the mean rows of the last layer.
+        let (actor_tail, actor_tail_params) = tail(policy, phi, Some(act_dim))?;
+        let (critic_tail, _) = tail(critic, thetas[0], None)?;
+        let critic_tail_params = thetas.iter().map(|t| tail(critic, t, None).map(|t| t.1)).collect::<Result<_, _>>()?;
+        let mean_macs = policy.macs_per_row() - policy.layers().last().map_or(0, |l| act_dim * l.n_in);
         Ok(Self {
-            mean_policy,
-            mean_phi,
-            critic: critic.clone(),
-            thetas: thetas.iter().map(|t| t.to_vec()).collect(),
+            actor: Split::new(policy, phi, start_states, obs_dim, design_at, design_dim),
+            critics: thetas.iter().map(|t| Split::new(critic, t, start_states, obs_dim, design_at, design_dim)).collect(),
+            actor_tail,
+            actor_tail_params,
+            critic_tail,
+            critic_tail_params,
             n_states: start_states.len() / obs_dim,
-            start_states: start_states.to_vec(),
-            obs_dim,
             act_dim,
-            design_at,
             design_dim,
+            model_flops_per_row: 2 * (mean_macs + critic.macs_per_row()),
         })
     }
 
@@ -116,9 +186,10 @@ impl DesignObjective {
         self.design_dim
     }
 
-    /// Floating-point operations of one row through actor and critic(s).
+    /// Floating-point operations of one row through the actor's mean head and one critic, as a
+    /// plain forward pass computes them (the split first layers do less).
     pub fn flops_per_row(&self) -> usize {
-        2 * (self.mean_policy.macs_per_row() + self.thetas.len() * self.critic.macs_per_row())
+        self.model_flops_per_row
     }
 
     /// Scores `designs` (`particles x design_dim`) into `out` (`particles`), splitting the
@@ -141,36 +212,57 @@ impl DesignObjective {
         });
     }
 
+    /// `h = relu(per_state[s] + W_xi xi_k (+ extra row))` for every (particle k, state s) row.
+    fn first_layer(&self, split: &Split, designs: &[f32], h: &mut [f32], design_part: &mut Vec<f32>, add_existing: bool) {
+        let width = split.width;
+        design_part.resize(width, 0.0);
+        let rows_per = self.n_states * width;
+        for (xi, block) in designs.chunks_exact(self.design_dim).zip(h.chunks_exact_mut(rows_per)) {
+            split.design_part(xi, design_part);
+            for (row, st) in block.chunks_exact_mut(width).zip(split.per_state.chunks_exact(width)) {
+                for ((v, a), b) in row.iter_mut().zip(st).zip(design_part.iter()) {
+                    let pre = a + b + if add_existing { *v } else { 0.0 };
+                    *v = pre.max(0.0);
+                }
+            }
+        }
+    }
+
     fn evaluate_chunk(&self, designs: &[f32], mode: QMode, out: &mut [f32], ws: &mut ObjectiveWorkspace) {
-        let (n, obs, act) = (self.n_states, self.obs_dim, self.act_dim);
+        let (n, act) = (self.n_states, self.act_dim);
         let rows = out.len() * n;
-        let w = obs + act;
-        ws.x_actor.resize(rows * obs, 0.0);
-        ws.x_critic.resize(rows * w, 0.0);
-        for (k, xi) in designs.chunks_exact(self.design_dim).enumerate() {
-            for (s, state) in self.start_states.chunks_exact(obs).enumerate() {
-                let row = &mut ws.x_actor[(k * n + s) * obs..(k * n + s + 1) * obs];
-                row.copy_from_slice(state);
-                row[self.design_at..self.design_at + self.design_dim].copy_from_slice(xi);
+        let ObjectiveWorkspace { h_actor, h_critic, actions, design_part, q, act_pi, act_q } = ws;
+        h_actor.resize(rows * self.actor.width, 0.0);
+        self.first_layer(&self.actor, designs, h_actor, design_part, false);
+        let mean = self.actor_tail.forward(&self.actor_tail_params, h_actor, rows, act_pi);
+        actions.resize(rows * act, 0.0);
+        for (a, m) in actions.iter_mut().zip(mean) {
+            *a = m.tanh();
+        }
+        q.resize(rows, 0.0);
+        let n_critics = if mode == QMode::MinOfTwin { self.critics.len() } else { 1 };
+        for (i, split) in self.critics.iter().take(n_critics).enumerate() {
+            h_critic.resize(rows * split.width, 0.0);
+            // W_a a for every row, then the per-state and per-design parts on top.
+            matmul(
+                MatMut::from_row_major_slice_mut(h_critic, rows, split.width),
+                Accum::Replace,
+                MatRef::from_row_major_slice(actions, rows, act),
+                MatRef::from_row_major_slice(&split.w_action_t, act, split.width),
+                1.0f32,
+                Par::Seq,
+            );
+            self.first_layer(split, designs, h_critic, design_part, true);
+            let qi = self.critic_tail.forward(&self.critic_tail_params[i], h_critic, rows, act_q);
+            if i == 0 {
+                q.copy_from_slice(qi);
+            } else {
+                for (a, b) in q.iter_mut().zip(qi) {
+                    *a = a.min(*b);
+                }
             }
         }
-        let mean = self.mean_policy.forward(&self.mean_phi, &ws.x_actor, rows, &mut ws.act_pi);
-        for ((xc, o), m) in ws.x_critic.chunks_exact_mut(w).zip(ws.x_actor.chunks_exact(obs)).zip(mean.chunks_exact(act)) {
-            xc[..obs].copy_from_slice(o);
-            for (a, m) in xc[obs..].iter_mut().zip(m) {
-                *a = m.tanh();
-            }
-        }
-        ws.q.resize(rows, 0.0);
-        let q1 = self.critic.forward(&self.thetas[0], &ws.x_critic, rows, &mut ws.act_q);
-        ws.q.copy_from_slice(q1);
-        if mode == QMode::MinOfTwin && self.thetas.len() == 2 {
-            let q2 = self.critic.forward(&self.thetas[1], &ws.x_critic, rows, &mut ws.act_q);
-            for (q, q2) in ws.q.iter_mut().zip(q2) {
-                *q = q.min(*q2);
-            }
-        }
-        for (o, qs) in out.iter_mut().zip(ws.q.chunks_exact(n)) {
+        for (o, qs) in out.iter_mut().zip(q.chunks_exact(n)) {
             *o = qs.iter().sum::<f32>() / n as f32;
         }
     }
