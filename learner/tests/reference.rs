@@ -7,7 +7,7 @@
 //! the policy gradient here is tiny, ~1e-5, so its relative accuracy is what counts); updated
 //! parameters to 2e-7 absolute, under 0.1 % of an Adam step of lr 3e-4.
 
-#![allow(clippy::unwrap_used, clippy::expect_used, dead_code)] // tests: a panic is the failure report
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::excessive_precision, dead_code)] // tests: a panic is the failure report
 
 use coadapt_core::Batch;
 use coadapt_learner::{Ddpg, DdpgConfig, Sac, SacConfig};

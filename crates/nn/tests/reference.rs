@@ -5,7 +5,7 @@
 //! relative to the largest magnitude (f32 carries ~7 digits; a few dozen multiply-adds per
 //! output lose at most one or two of them).
 
-#![allow(clippy::unwrap_used, clippy::expect_used, dead_code)] // tests: a panic is the failure report
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::excessive_precision, dead_code)] // tests: a panic is the failure report
 
 use coadapt_nn::{Mlp, squashed};
 
