@@ -53,7 +53,9 @@ pub struct TrainArgs {
     /// SAC entropy coefficient: a positive number, or `auto` for automatic tuning.
     #[arg(long, allow_hyphen_values = true)]
     pub alpha: Option<String>,
-    /// DDPG exploration noise: Ornstein-Uhlenbeck (the thesis) or Gaussian.
+    /// DDPG exploration noise: Ornstein-Uhlenbeck (the thesis's default, sigma 0.5, theta 0.15)
+    /// or Gaussian. OU at sigma 0.5 is nearly random on Pendulum: there use
+    /// `--exploration gaussian --sigma 0.1`.
     #[arg(long, value_enum)]
     pub exploration: Option<ExplorationArg>,
     /// DDPG noise scale (OU sigma or Gaussian standard deviation).

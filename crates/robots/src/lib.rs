@@ -3,16 +3,22 @@
 //! # Layout
 //! - [`pendulum`]: gymnasium's Pendulum-v1 dynamics with pole length and mass as the design; no
 //!   physics engine, so learning tests run in seconds.
+//! - [`half_cheetah`]: the reference's HalfCheetah (PyBullet) in rapier2d, six leg lengths as the
+//!   design.
+//! - [`bench`]: env steps per second under random actions.
 //! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
 
+pub mod bench;
+pub mod half_cheetah;
 pub mod pendulum;
 
 use coadapt_core::{Env, TimeLimit};
 
+pub use half_cheetah::HalfCheetah;
 pub use pendulum::Pendulum;
 
 /// Names accepted by [`make`].
-pub const ENV_NAMES: &[&str] = &["pendulum"];
+pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah"];
 
 #[derive(Debug, thiserror::Error)]
 #[error("unknown environment `{0}` (known: {known})", known = ENV_NAMES.join(", "))]
@@ -22,6 +28,7 @@ pub struct UnknownEnv(pub String);
 pub fn make(name: &str) -> Result<Box<dyn Env>, UnknownEnv> {
     match name {
         "pendulum" => Ok(Box::new(TimeLimit::new(Pendulum::new()))),
+        "half-cheetah" => Ok(Box::new(TimeLimit::new(HalfCheetah::new()))),
         other => Err(UnknownEnv(other.to_string())),
     }
 }
