@@ -17,12 +17,13 @@ fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
     args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
-/// Steps/s and worst limit violation of `steps` held random full-torque steps on `design`.
-fn stress(cfg: SimConfig, design: &[f32], steps: usize) -> Result<(f64, f32), coadapt_core::EnvError> {
+/// Steps/s, worst limit violation and deepest ground penetration of `steps` held random
+/// full-torque steps on `design`.
+fn stress(cfg: SimConfig, design: &[f32], steps: usize) -> Result<(f64, f32, f32), coadapt_core::EnvError> {
     let mut env = HalfCheetah::with_config(cfg);
     let mut r = rng(7, 3);
     let mut action = [0.0f32; 6];
-    let (mut worst, mut hold) = (0.0f32, 0);
+    let (mut worst, mut hold, mut lowest) = (0.0f32, 0, 0.0f32);
     let start = Instant::now();
     for t in 0..steps {
         if t % 1000 == 0 {
@@ -35,8 +36,9 @@ fn stress(cfg: SimConfig, design: &[f32], steps: usize) -> Result<(f64, f32), co
         hold -= 1;
         env.step(&action)?;
         worst = worst.max(env.limit_violation());
+        lowest = lowest.min(env.lowest_point().unwrap_or(0.0));
     }
-    Ok((steps as f64 / start.elapsed().as_secs_f64(), worst))
+    Ok((steps as f64 / start.elapsed().as_secs_f64(), worst, -lowest))
 }
 
 fn sweep(steps: usize) {
@@ -66,9 +68,9 @@ fn sweep(steps: usize) {
         (Impulse, 8, 2, false, false),
     ];
     println!(
-        "| joints | physics steps per control step | solver iterations | armature + damping | warm-started joints | env steps/s | worst violation (rad) [0.8]*6 / [1]*6 / [2]*6 |"
+        "| joints | physics steps per control step | solver iterations | armature + damping | warm-started joints | env steps/s | worst violation (rad) [0.8]*6 / [1]*6 / [2]*6 | deepest in ground (m) |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|");
     for (joints, substeps, solver_iterations, mujoco_joints, warmstart_joints) in settings {
         let armature = if mujoco_joints { 0.1 } else { 0.0 };
         let cfg = SimConfig {
@@ -82,18 +84,20 @@ fn sweep(steps: usize) {
         };
         let mut rates = Vec::new();
         let mut worst = Vec::new();
+        let mut depth = 0.0f32;
         for d in [0.8f32, 1.0, 2.0] {
             match stress(cfg, &[d; 6], steps) {
-                Ok((rate, w)) => {
+                Ok((rate, w, pen)) => {
                     rates.push(rate);
                     worst.push(format!("{w:.3}"));
+                    depth = depth.max(pen);
                 }
                 Err(e) => worst.push(format!("failed: {e}")),
             }
         }
         let original = rates.get(1).copied().unwrap_or(f64::NAN);
         println!(
-            "| {joints:?} | {substeps} | {solver_iterations} | {mujoco_joints} | {warmstart_joints} | {original:.0} | {} |",
+            "| {joints:?} | {substeps} | {solver_iterations} | {mujoco_joints} | {warmstart_joints} | {original:.0} | {} | {depth:.3} |",
             worst.join(" / ")
         );
     }

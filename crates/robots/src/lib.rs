@@ -5,7 +5,7 @@
 //!   physics engine, so learning tests run in seconds.
 //! - [`half_cheetah`]: the reference's HalfCheetah (PyBullet) in rapier2d, six leg lengths as the
 //!   design.
-//! - [`bench`]: env steps per second under random actions.
+//! - [`bench`](mod@bench): env steps per second under random actions.
 //! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
 
 pub mod bench;

@@ -49,7 +49,11 @@ fn longer_legs_start_the_torso_higher() {
     let mut env = no_settling();
     let mut heights = Vec::new();
     for d in [0.8f32, 1.0, 1.5, 2.0] {
-        env.reset(0, &[d; 6]).unwrap();
+        for seed in 0..20 {
+            env.reset(seed, &[d; 6]).unwrap();
+            let low = env.lowest_point().unwrap();
+            assert!(low > 0.0, "design {d}, seed {seed}: starts {low} m deep in the ground");
+        }
         heights.push(env.torso_height().unwrap());
     }
     assert!(heights.windows(2).all(|w| w[1] > w[0] + 0.1), "{heights:?}");

@@ -69,6 +69,7 @@ pub struct Body {
     world: PhysicsWorld,
     torso: RigidBodyHandle,
     limbs: [RigidBodyHandle; 6],
+    lengths: [f32; 6],
 }
 
 impl std::fmt::Debug for Body {
@@ -98,11 +99,8 @@ impl Body {
 
         // A half-space never runs out however far the cheetah runs.
         let ground = world.insert_body(RigidBodyBuilder::fixed());
-        let floor = ColliderBuilder::new(SharedShape::halfspace(Vector::Y)).friction(FRICTION).collision_groups(InteractionGroups::new(
-            GROUND,
-            ROBOT,
-            InteractionTestMode::And,
-        ));
+        let floor_groups = InteractionGroups::new(GROUND, ROBOT, InteractionTestMode::And);
+        let floor = ColliderBuilder::new(SharedShape::halfspace(Vector::Y)).friction(FRICTION).collision_groups(floor_groups);
         world.insert_collider(floor, Some(ground));
 
         let groups = InteractionGroups::new(ROBOT, GROUND, InteractionTestMode::And);
@@ -154,7 +152,7 @@ impl Body {
         if cfg.joints == JointKind::Multibody {
             set_multibody_coordinates(&mut world, &handles, limbs, angles, cfg);
         }
-        Self { world, torso, limbs }
+        Self { world, torso, limbs, lengths: *lengths }
     }
 
     /// Advances the world by one physics step.
@@ -198,6 +196,27 @@ impl Body {
             qd[i] = -(w_c - w_p);
         }
         (q, qd)
+    }
+
+    /// Height of the lowest point of any capsule surface: below zero, that part is in the ground.
+    pub fn lowest_point(&self) -> f32 {
+        let lowest = |h: RigidBodyHandle, a: Vector, b: Vector| {
+            self.world.bodies.get(h).map_or(f32::NAN, |rb| {
+                let p = rb.position();
+                (*p * a).y.min((*p * b).y) - RADIUS
+            })
+        };
+        let head_dir = Vector::new(HEAD_TILT.sin(), HEAD_TILT.cos()) * HEAD_HALF_LENGTH;
+        let head_c = Vector::from(HEAD_CENTRE);
+        let mut low = lowest(self.torso, Vector::new(-TORSO_HALF_LENGTH, 0.0), Vector::new(TORSO_HALF_LENGTH, 0.0)).min(lowest(
+            self.torso,
+            head_c - head_dir,
+            head_c + head_dir,
+        ));
+        for i in 0..6 {
+            low = low.min(lowest(self.limbs[i], Vector::ZERO, Vector::from(DIRECTIONS[i]) * self.lengths[i]));
+        }
+        low
     }
 
     /// Torso centre `[x, z]`, the velocity of that point `[vx, vz]`, pitch and pitch rate
