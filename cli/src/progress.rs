@@ -27,3 +27,17 @@ pub fn duration(secs: f64) -> String {
         (h, m, _) => format!("{h}h{m:02}m"),
     }
 }
+
+/// Prints one line to stdout; when the reader has gone away (`coadapt bench nn | head -1`),
+/// exits quietly instead of panicking as `println!` does.
+pub fn print_stdout_line(line: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = writeln!(out, "{line}").and_then(|_| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: writing to stdout: {e}");
+        std::process::exit(1);
+    }
+}

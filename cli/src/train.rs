@@ -190,6 +190,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         );
     })
     .with_context(|| format!("training {} on {}", cfg.algo, cfg.env))?;
-    println!("{}", serde_json::to_string(&summary).context("serialising the summary")?);
+    crate::progress::print_stdout_line(&serde_json::to_string(&summary).context("serialising the summary")?);
     Ok(())
 }
