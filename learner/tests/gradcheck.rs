@@ -155,3 +155,32 @@ fn ddpg_actor_and_critic_gradients_match_finite_differences() {
     assert_eq!(g_mu.len(), g_mu2.len());
     assert_eq!(g_q.len(), g_q2.len());
 }
+
+#[test]
+fn automatic_entropy_tuning_moves_alpha_towards_the_target_entropy() {
+    let (obs, act, rows) = (4, 2, 8);
+    let b = batch(rows, obs, act);
+    // A target entropy far above the policy's (entropy -log pi ~ 1.3 here) must raise alpha to
+    // push entropy up; far below must lower it. Adam's first step moves log(alpha) by lr
+    // against the sign of the gradient -(log pi + target).
+    for (target, raises) in [(50.0, true), (-50.0, false)] {
+        let cfg = SacConfig {
+            hidden: vec![16],
+            auto_alpha: true,
+            target_entropy: Some(target),
+            alpha: 0.1,
+            alpha_lr: 0.01,
+            ..SacConfig::default()
+        };
+        let mut sac = Sac::new(obs, act, cfg, 2).unwrap();
+        let before = sac.alpha();
+        let l = sac.update(&b);
+        let after = sac.alpha();
+        assert!((after.ln() - before.ln()).abs() > 0.009, "log alpha moved by about lr: {before} -> {after}");
+        assert_eq!(after > before, raises, "target {target}, mean log pi {}: alpha {before} -> {after}", l.log_pi);
+    }
+    // Fixed alpha never moves.
+    let mut sac = Sac::new(obs, act, SacConfig { hidden: vec![16], ..SacConfig::default() }, 2).unwrap();
+    sac.update(&b);
+    assert_eq!(sac.alpha(), SacConfig::default().alpha);
+}
