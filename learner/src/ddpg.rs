@@ -12,7 +12,7 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 
 use crate::config::{DdpgConfig, Exploration};
-use crate::networks::{concat_rows, critic, deterministic_policy};
+use crate::networks::{concat_rows, critic, deterministic_policy, resize};
 
 /// Losses of one update, for logging.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -64,12 +64,6 @@ pub struct Ddpg {
     act_ws: Activations,
     ou_state: Vec<f32>,
     rng: Rng64,
-}
-
-fn resize(v: &mut Vec<f32>, n: usize) {
-    if v.len() != n {
-        v.resize(n, 0.0);
-    }
 }
 
 impl Ddpg {

@@ -33,3 +33,10 @@ pub fn concat_rows(obs: &[f32], obs_dim: usize, act: &[f32], act_dim: usize, x: 
         row[obs_dim..].copy_from_slice(a);
     }
 }
+
+/// Sizes a scratch buffer for this batch; a no-op (no allocation) once warm.
+pub(crate) fn resize(v: &mut Vec<f32>, n: usize) {
+    if v.len() != n {
+        v.resize(n, 0.0);
+    }
+}

@@ -15,7 +15,7 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 
 use crate::config::SacConfig;
-use crate::networks::{concat_rows, critic, gaussian_policy};
+use crate::networks::{concat_rows, critic, gaussian_policy, resize};
 
 /// Losses of one update, for logging.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -84,12 +84,6 @@ pub struct Sac {
     act_ws: Activations,
     rng: Rng64,
     updates: u64,
-}
-
-fn resize(v: &mut Vec<f32>, n: usize) {
-    if v.len() != n {
-        v.resize(n, 0.0);
-    }
 }
 
 impl Critic {
