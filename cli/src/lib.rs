@@ -4,10 +4,12 @@
 //! - [`Cli`] and [`run`]: the clap command tree and its dispatch.
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
 //! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure.
+//! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
 pub mod progress;
+pub mod render;
 pub mod train;
 
 use clap::{Parser, Subcommand};
@@ -23,6 +25,7 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     Train(train::TrainArgs),
+    Render(render::RenderArgs),
     /// Run benchmarks; each prints one JSON line per figure.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -32,6 +35,7 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Train(args) => train::run(args),
+        Command::Render(args) => render::run(args),
         Command::Bench(cmd) => bench::run(cmd),
     }
 }

@@ -55,6 +55,14 @@ pub enum EnvError {
     Backend(String),
 }
 
+/// A primitive of a robot's body in the world frame (metres; x forward, z up; planar robots live
+/// in the y = 0 plane), for pictures of episodes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    Capsule { a: [f32; 3], b: [f32; 3], radius: f32 },
+    Sphere { centre: [f32; 3], radius: f32 },
+}
+
 /// A (possibly real) robot whose body is set by a design vector at each reset.
 pub trait Env: Send {
     fn spec(&self) -> &EnvSpec;
@@ -65,6 +73,10 @@ pub trait Env: Send {
 
     /// Applies `action` (in the action box; values outside are clipped, non-finite rejected).
     fn step(&mut self, action: &[f32]) -> Result<Step<'_>, EnvError>;
+
+    /// Appends the body's current shapes to `out` (nothing for environments that cannot be
+    /// drawn, such as a remote robot).
+    fn draw(&self, _out: &mut Vec<Shape>) {}
 }
 
 impl<E: Env + ?Sized> Env for Box<E> {
@@ -76,6 +88,9 @@ impl<E: Env + ?Sized> Env for Box<E> {
     }
     fn step(&mut self, action: &[f32]) -> Result<Step<'_>, EnvError> {
         (**self).step(action)
+    }
+    fn draw(&self, out: &mut Vec<Shape>) {
+        (**self).draw(out)
     }
 }
 
@@ -127,5 +142,9 @@ impl<E: Env> Env for TimeLimit<E> {
         step.truncated |= t >= limit;
         self.running = !(step.terminated || step.truncated);
         Ok(step)
+    }
+
+    fn draw(&self, out: &mut Vec<Shape>) {
+        self.inner.draw(out)
     }
 }

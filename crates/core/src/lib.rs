@@ -3,7 +3,8 @@
 //! # Layout
 //! - [`space`]: [`BoxSpace`], the bounded boxes of actions, observations and designs.
 //! - [`env`]: the [`Env`] trait (gymnasium-like, with a design vector at reset), its [`EnvSpec`],
-//!   errors, and the [`TimeLimit`] wrapper that truncates episodes.
+//!   errors, the [`Shape`]s a body is drawn with, and the [`TimeLimit`] wrapper that truncates
+//!   episodes.
 //! - [`replay`]: [`ReplayBuffer`] of flat transitions and [`Batch`], including batches drawn from
 //!   several buffers in fixed proportions (FEAR's 26 population + 230 species samples).
 //!
@@ -14,7 +15,7 @@ pub mod env;
 pub mod replay;
 pub mod space;
 
-pub use env::{Env, EnvError, EnvSpec, Step, TimeLimit};
+pub use env::{Env, EnvError, EnvSpec, Shape, Step, TimeLimit};
 pub use replay::{Batch, ReplayBuffer, ReplayError, Transition};
 pub use space::{BoxSpace, SpaceError};
 

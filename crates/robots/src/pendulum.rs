@@ -7,7 +7,7 @@
 //! the unit length and mass, in `[0.5, 2]`; `[1, 1]` is Pendulum-v1 exactly. The observation is
 //! `[cos th, sin th, thdot, l, m]`.
 
-use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step, rng};
+use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Shape, Step, rng};
 use rand::Rng;
 
 const G: f32 = 10.0;
@@ -85,5 +85,13 @@ impl Env for Pendulum {
         self.thdot = thdot;
         self.observe();
         Ok(Step { observation: &self.obs, reward: -cost, terminated: false, truncated: false })
+    }
+
+    /// The pole from a pivot 2.2 m above the ground (so it clears it); theta = 0 is upright.
+    fn draw(&self, out: &mut Vec<Shape>) {
+        let pivot = [0.0, 0.0, 2.2];
+        let tip = [self.len * self.th.sin(), 0.0, pivot[2] + self.len * self.th.cos()];
+        out.push(Shape::Capsule { a: pivot, b: tip, radius: 0.04 * self.mass.sqrt() });
+        out.push(Shape::Sphere { centre: pivot, radius: 0.05 });
     }
 }

@@ -1,0 +1,255 @@
+//! `coadapt render`: one episode of a robot as an animated GIF.
+//!
+//! The picture is a cabinet projection of the world (x forward, z up): planar robots, which live
+//! in the y = 0 plane, appear exactly side-on; the hexapod's depth axis y is drawn receding up and
+//! to the right. The camera follows the body horizontally at a fixed scale; the ground carries a
+//! tick every 0.5 m so forward motion is visible.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args;
+use coadapt_core::{Env, Shape};
+use coadapt_nn::{Activations, Mlp, NamedNetwork, squashed};
+use rand::Rng;
+
+/// Render an episode of a robot as an animated GIF.
+///
+/// With `--weights` (a checkpoint.safetensors written by `coadapt train`) the robot acts with the
+/// trained policy's deterministic action; without, it takes zero actions (or random ones with
+/// `--random`).
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// Environment to render (see `coadapt train --help` for the names).
+    #[arg(long)]
+    pub env: String,
+    /// Design vector, comma-separated (default: the environment's original design).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub design: Option<Vec<f32>>,
+    /// Checkpoint with a SAC `policy` or a DDPG `actor` network.
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Uniform random actions instead of zeros when no weights are given.
+    #[arg(long)]
+    pub random: bool,
+    /// Control steps to render.
+    #[arg(long, default_value_t = 300)]
+    pub steps: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Draw a frame every this many control steps.
+    #[arg(long, default_value_t = 2)]
+    pub every: usize,
+    /// Picture width and height in pixels.
+    #[arg(long, default_value_t = 480)]
+    pub width: u16,
+    #[arg(long, default_value_t = 270)]
+    pub height: u16,
+    /// Output file (.gif).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// The acting policy of a checkpoint: the SAC head's mean, or the DDPG actor, squashed by tanh.
+struct Policy {
+    mlp: Mlp,
+    params: Vec<f32>,
+    gaussian: bool,
+    act: Activations,
+}
+
+impl Policy {
+    fn load(path: &Path, obs_dim: usize, act_dim: usize) -> anyhow::Result<Self> {
+        let nets = coadapt_nn::load_networks(path)?;
+        let (net, gaussian) = match (nets.iter().find(|n| n.name == "policy"), nets.iter().find(|n| n.name == "actor")) {
+            (Some(p), _) => (p, true),
+            (None, Some(a)) => (a, false),
+            _ => bail!("{} has neither a SAC `policy` nor a DDPG `actor` network", path.display()),
+        };
+        let out = if gaussian { 2 * act_dim } else { act_dim };
+        let mut expected = net.mlp.sizes().to_vec();
+        expected[0] = obs_dim;
+        *expected.last_mut().unwrap_or(&mut 0) = out;
+        let net: &NamedNetwork = NamedNetwork::find(&nets, path, &net.name, &expected)?;
+        Ok(Self { mlp: net.mlp.clone(), params: net.params.clone(), gaussian, act: Activations::default() })
+    }
+
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        let out = self.mlp.forward(&self.params, obs, 1, &mut self.act);
+        if self.gaussian {
+            squashed::mean_action(out, action.len(), action);
+        } else {
+            for (a, o) in action.iter_mut().zip(out) {
+                *a = o.tanh();
+            }
+        }
+    }
+}
+
+const PALETTE: [[u8; 3]; 10] = [
+    [236, 240, 245], // sky
+    [90, 90, 96],    // ground
+    [40, 40, 44],    // ticks
+    [200, 80, 50],   // body colours from here on
+    [50, 110, 190],
+    [60, 160, 90],
+    [220, 160, 40],
+    [140, 80, 170],
+    [40, 150, 160],
+    [180, 60, 110],
+];
+
+/// Cabinet projection: world (x, y, z) to picture-plane metres (u, v).
+fn project(p: [f32; 3]) -> (f32, f32) {
+    (p[0] + 0.5 * p[1], p[2] + 0.3 * p[1])
+}
+
+struct Camera {
+    scale: f32,
+    u0: f32,
+    v0: f32,
+    w: usize,
+    h: usize,
+}
+
+impl Camera {
+    fn px(&self, u: f32, v: f32) -> (f32, f32) {
+        (self.w as f32 / 2.0 + (u - self.u0) * self.scale, self.h as f32 * 0.85 - (v - self.v0) * self.scale)
+    }
+}
+
+fn draw_capsule(frame: &mut [u8], cam: &Camera, a: (f32, f32), b: (f32, f32), r: f32, colour: u8) {
+    let (ax, ay) = cam.px(a.0, a.1);
+    let (bx, by) = cam.px(b.0, b.1);
+    let r = (r * cam.scale).max(1.0);
+    let (x0, x1) = ((ax.min(bx) - r).floor().max(0.0) as usize, ((ax.max(bx) + r).ceil() as usize).min(cam.w));
+    let (y0, y1) = ((ay.min(by) - r).floor().max(0.0) as usize, ((ay.max(by) + r).ceil() as usize).min(cam.h));
+    let (dx, dy) = (bx - ax, by - ay);
+    let len2 = (dx * dx + dy * dy).max(1e-9);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let (px, py) = (x as f32 + 0.5 - ax, y as f32 + 0.5 - ay);
+            let t = ((px * dx + py * dy) / len2).clamp(0.0, 1.0);
+            let (ex, ey) = (px - t * dx, py - t * dy);
+            if ex * ex + ey * ey <= r * r {
+                frame[y * cam.w + x] = colour;
+            }
+        }
+    }
+}
+
+fn draw_frame(frame: &mut [u8], cam: &Camera, shapes: &[Shape]) {
+    frame.fill(0);
+    let (_, ground) = cam.px(0.0, 0.0);
+    let ground = ground.max(0.0) as usize;
+    for row in frame.chunks_exact_mut(cam.w).skip(ground) {
+        row.fill(1);
+    }
+    // Ticks every 0.5 m along x at the ground line.
+    let first = ((cam.u0 - cam.w as f32 / cam.scale) / 0.5).floor() as i64;
+    for k in first..first + (2.0 * cam.w as f32 / cam.scale / 0.5) as i64 + 2 {
+        let (x, _) = cam.px(k as f32 * 0.5, 0.0);
+        if (0.0..cam.w as f32).contains(&x) {
+            for y in ground..(ground + 6).min(cam.h) {
+                frame[y * cam.w + x as usize] = 2;
+            }
+        }
+    }
+    // Far (large y) first, so nearer parts are drawn over them.
+    let mut order: Vec<usize> = (0..shapes.len()).collect();
+    let depth = |s: &Shape| match s {
+        Shape::Capsule { a, b, .. } => a[1] + b[1],
+        Shape::Sphere { centre, .. } => 2.0 * centre[1],
+    };
+    order.sort_by(|&i, &j| depth(&shapes[j]).total_cmp(&depth(&shapes[i])));
+    for i in order {
+        let colour = 3 + (i % (PALETTE.len() - 3)) as u8;
+        match shapes[i] {
+            Shape::Capsule { a, b, radius } => draw_capsule(frame, cam, project(a), project(b), radius, colour),
+            Shape::Sphere { centre, radius } => {
+                let c = project(centre);
+                draw_capsule(frame, cam, c, c, radius, colour)
+            }
+        }
+    }
+}
+
+fn extent(shapes: &[Shape]) -> (f32, f32, f32, f32) {
+    let mut e = (f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY);
+    let mut add = |p: [f32; 3], r: f32| {
+        let (u, v) = project(p);
+        e = (e.0.min(u - r), e.1.max(u + r), e.2.min(v - r), e.3.max(v + r));
+    };
+    for s in shapes {
+        match *s {
+            Shape::Capsule { a, b, radius } => {
+                add(a, radius);
+                add(b, radius);
+            }
+            Shape::Sphere { centre, radius } => add(centre, radius),
+        }
+    }
+    e
+}
+
+pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    if args.every == 0 || args.steps == 0 || args.width < 16 || args.height < 16 {
+        bail!("--steps and --every must be positive and the picture at least 16 x 16 pixels");
+    }
+    let mut env = coadapt_robots::make(&args.env)?;
+    let spec = env.spec().clone();
+    let design = args.design.clone().unwrap_or_else(|| spec.default_design.clone());
+    let mut policy = match &args.weights {
+        Some(p) => Some(Policy::load(p, spec.obs_dim(), spec.act_dim()).with_context(|| format!("loading policy from {}", p.display()))?),
+        None => None,
+    };
+    let mut obs = env.reset(args.seed, &design).with_context(|| format!("resetting {}", args.env))?.to_vec();
+    let mut shapes = Vec::new();
+    env.draw(&mut shapes);
+    if shapes.is_empty() {
+        bail!("environment `{}` cannot be drawn", args.env);
+    }
+    let (u_lo, u_hi, v_lo, v_hi) = extent(&shapes);
+    let (w, h) = (args.width as usize, args.height as usize);
+    // Fit the starting body in about half the picture, ground included.
+    let span = (u_hi - u_lo).max(v_hi.max(0.0) - v_lo.min(0.0)).max(0.5);
+    let scale = 0.5 * (w.min(h) as f32) / span;
+    let mut cam = Camera { scale, u0: 0.5 * (u_lo + u_hi), v0: 0.0, w, h };
+
+    let file = File::create(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let palette: Vec<u8> = PALETTE.iter().flatten().copied().collect();
+    let mut enc = gif::Encoder::new(BufWriter::new(file), args.width, args.height, &palette).context("starting the GIF")?;
+    enc.set_repeat(gif::Repeat::Infinite).context("writing the GIF header")?;
+    let mut frame = vec![0u8; w * h];
+    let mut action = vec![0.0; spec.act_dim()];
+    let mut rng = coadapt_core::rng(args.seed, 7);
+    let (mut ret, mut frames) = (0.0f32, 0usize);
+    for t in 0..args.steps {
+        if t % args.every == 0 {
+            shapes.clear();
+            env.draw(&mut shapes);
+            let (lo, hi, _, _) = extent(&shapes);
+            cam.u0 = 0.5 * (lo + hi);
+            draw_frame(&mut frame, &cam, &shapes);
+            let mut f = gif::Frame::from_indexed_pixels(args.width, args.height, frame.clone(), None);
+            f.delay = (args.every as f32 * 1.65).round().max(2.0) as u16;
+            enc.write_frame(&f).context("writing a GIF frame")?;
+            frames += 1;
+        }
+        match (&mut policy, args.random) {
+            (Some(p), _) => p.act(&obs, &mut action),
+            (None, true) => action.iter_mut().for_each(|a| *a = rng.random_range(-1.0..1.0)),
+            (None, false) => action.fill(0.0),
+        }
+        let s = env.step(&action).with_context(|| format!("stepping {}", args.env))?;
+        ret += s.reward;
+        obs.copy_from_slice(s.observation);
+        if s.terminated || s.truncated {
+            break;
+        }
+    }
+    eprintln!("wrote {} ({frames} frames, return {ret:.2})", args.out.display());
+    Ok(())
+}
