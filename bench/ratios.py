@@ -13,25 +13,28 @@ PAIRS = [
     ("forward_actor_critic", "22400rows", "22400rows-chunk1024", "s/pass", False),
     ("forward_actor_critic", "22400rows", "22400rows-batched", "s/pass", False),
     ("forward_actor_critic", "179200rows", "179200rows-chunk1024", "s/pass", False),
+    ("env_steps", "half-cheetah", "half-cheetah", "steps/s", True),
 ]
 
 
 def main(path):
-    figures = {}
+    # A figure measured twice (before and after the peer) counts as the mean of both runs.
+    runs = {}
     with open(path) as f:
         for line in f:
             line = line.strip()
             if line.startswith("{"):
                 r = json.loads(line)
-                figures[(r.get("impl"), r["bench"], r["config"], r["unit"])] = r["value"]
+                runs.setdefault((r.get("impl"), r["bench"], r["config"], r["unit"]), []).append(r["value"])
+    figures = {k: sum(v) / len(v) for k, v in runs.items()}
     for bench, ours_cfg, peer_cfg, unit, higher in PAIRS:
         ours = figures.get(("coadapt", bench, ours_cfg, unit))
-        peer = figures.get(("pytorch", bench, peer_cfg, unit))
+        peer = figures.get(("pytorch", bench, peer_cfg, unit)) or figures.get(("mujoco", bench, peer_cfg, unit))
         if ours is None or peer is None:
             continue
         ratio = ours / peer if higher else peer / ours
         print(json.dumps({"bench": f"{bench}_ratio", "config": f"{ours_cfg} vs pytorch {peer_cfg}",
-                          "value": round(ratio, 3), "unit": "x faster", "coadapt": ours, "pytorch": peer}))
+                          "value": round(ratio, 3), "unit": "x faster", "coadapt": ours, "peer": peer}))
 
 
 if __name__ == "__main__":

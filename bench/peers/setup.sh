@@ -30,7 +30,14 @@ print("torch", torch.__version__, "numpy", numpy.__version__, "OK")
 EOF
 }
 
+sim_peer() {
+    # MuJoCo + gymnasium for bench/peers/sim_mujoco.py; ordinary wheels with their dependencies.
+    "$VENV/bin/python" -c 'import gymnasium, mujoco' 2>/dev/null \
+        || "$VENV/bin/python" -m pip install --quiet --only-binary=:all: -r "$HERE/requirements-sim.txt"
+}
+
 if [ -x "$VENV/bin/python" ] && check 2>/dev/null; then
+    sim_peer
     exit 0
 fi
 
@@ -43,3 +50,4 @@ done
 TORCH_LIB="$("$VENV/bin/python" -c 'import importlib.util, os; print(os.path.join(os.path.dirname(importlib.util.find_spec("torch").origin), "lib"))')"
 "$VENV/bin/python" "$HERE/cuda_stubs.py" "$TORCH_LIB"
 check
+sim_peer

@@ -14,6 +14,19 @@ use serde_json::json;
 pub enum BenchCommand {
     /// Networks: SAC updates per second and the design-objective forward throughput.
     Nn(NnArgs),
+    /// Simulation: env steps per second of each robot on one core, random actions, resets
+    /// included.
+    Sim(SimArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct SimArgs {
+    /// Seconds to time each robot for.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Robots to time (default: all), comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    pub env: Option<Vec<String>>,
 }
 
 #[derive(Debug, Args)]
@@ -35,7 +48,20 @@ pub struct NnArgs {
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
         BenchCommand::Nn(a) => nn(&a),
+        BenchCommand::Sim(a) => sim(&a),
     }
+}
+
+fn sim(a: &SimArgs) -> anyhow::Result<()> {
+    let names: Vec<String> = match &a.env {
+        Some(n) => n.clone(),
+        None => coadapt_robots::ENV_NAMES.iter().map(|s| s.to_string()).collect(),
+    };
+    for name in names {
+        let rate = coadapt_robots::bench::env_steps_per_second(&name, a.seconds)?;
+        emit("env_steps", &name, rate, "steps/s");
+    }
+    Ok(())
 }
 
 fn emit(bench: &str, config: &str, value: f64, unit: &str) {
