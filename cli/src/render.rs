@@ -213,9 +213,9 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     }
     let (u_lo, u_hi, v_lo, v_hi) = extent(&shapes);
     let (w, h) = (args.width as usize, args.height as usize);
-    // Fit the starting body in about half the picture, ground included.
+    // Fit the starting body in about two thirds of the picture, ground included.
     let span = (u_hi - u_lo).max(v_hi.max(0.0) - v_lo.min(0.0)).max(0.5);
-    let scale = 0.5 * (w.min(h) as f32) / span;
+    let scale = 0.7 * (w.min(h) as f32) / span;
     let mut cam = Camera { scale, u0: 0.5 * (u_lo + u_hi), v0: 0.0, w, h };
 
     let file = File::create(&args.out).with_context(|| format!("creating {}", args.out.display()))?;

@@ -9,6 +9,7 @@
 //! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
 
 pub mod bench;
+mod draw;
 pub mod half_cheetah;
 pub mod pendulum;
 

@@ -198,6 +198,11 @@ impl Body {
         (q, qd)
     }
 
+    /// The body's capsules, for pictures.
+    pub fn draw(&self, out: &mut Vec<coadapt_core::Shape>) {
+        crate::draw::planar(&self.world.colliders, out)
+    }
+
     /// Height of the lowest point of any capsule surface: below zero, that part is in the ground.
     pub fn lowest_point(&self) -> f32 {
         let lowest = |h: RigidBodyHandle, a: Vector, b: Vector| {

@@ -263,4 +263,10 @@ impl Env for HalfCheetah {
         let reward = (self.obs[12] / 10.0).max(0.0);
         Ok(Step { observation: &self.obs, reward, terminated: false, truncated: false })
     }
+
+    fn draw(&self, out: &mut Vec<coadapt_core::Shape>) {
+        if let Some(b) = &self.body {
+            b.draw(out);
+        }
+    }
 }
