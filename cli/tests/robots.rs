@@ -1,0 +1,55 @@
+//! Every robot trains for a few episodes and renders, through the `coadapt` binary.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::process::Command;
+
+fn coadapt(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_coadapt")).args(args).output().expect("coadapt runs")
+}
+
+#[test]
+fn every_robot_trains_a_few_episodes_and_renders() {
+    let dir = std::env::temp_dir().join(format!("coadapt-robots-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for name in coadapt_robots::ENV_NAMES {
+        let env = coadapt_robots::make(name).unwrap();
+        let len = env.spec().max_episode_steps;
+        let steps = (2 * len).to_string();
+        let out = dir.join(name);
+        let o = coadapt(&["train", "--env", name, "--steps", &steps, "--hidden", "32,32", "--learning-starts", "200", "--quiet", "--out", out.to_str().unwrap()]);
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["episodes"], 2, "{name}");
+        assert!(v["mean_return_last_10"].as_f64().unwrap().is_finite(), "{name}");
+
+        let gif = dir.join(format!("{name}.gif"));
+        let ckpt = out.join("checkpoint.safetensors");
+        let o = coadapt(&["render", "--env", name, "--weights", ckpt.to_str().unwrap(), "--steps", "40", "--out", gif.to_str().unwrap()]);
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let bytes = std::fs::read(&gif).unwrap();
+        assert!(bytes.starts_with(b"GIF89a"), "{name}: not a GIF");
+        // 20 frames of the body: the file holds more than a header and a palette.
+        assert!(bytes.len() > 2000, "{name}: {} bytes", bytes.len());
+    }
+}
+
+#[test]
+fn render_refuses_bad_input_clearly() {
+    let dir = std::env::temp_dir().join(format!("coadapt-render-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let gif = dir.join("x.gif");
+    let cases: &[(&[&str], &str)] = &[
+        (&["render", "--env", "nope", "--out", gif.to_str().unwrap()], "unknown environment"),
+        (&["render", "--env", "half-cheetah", "--design", "3,3,3,3,3,3", "--out", gif.to_str().unwrap()], "design[0] = 3"),
+        (&["render", "--env", "pendulum", "--weights", "/nonexistent.safetensors", "--out", gif.to_str().unwrap()], "cannot read weights file"),
+        (&["render", "--env", "pendulum", "--every", "0", "--out", gif.to_str().unwrap()], "--every"),
+    ];
+    for (args, needle) in cases {
+        let o = coadapt(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
