@@ -7,11 +7,14 @@
 //! - [`sac`]: Soft Actor-Critic, the update in the paper's notation.
 //! - [`ddpg`]: DDPG with Ornstein-Uhlenbeck or Gaussian exploration.
 //! - [`agent`]: [`Agent`], what a training loop needs of either algorithm.
+//! - [`fear`]: the FEAR learner: population and individual SAC pairs, their buffers and the
+//!   per-episode training schedule.
 //! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
 
 pub mod agent;
 pub mod config;
 pub mod ddpg;
+pub mod fear;
 pub mod networks;
 pub mod sac;
 pub mod train;

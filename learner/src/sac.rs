@@ -218,6 +218,21 @@ impl Sac {
         }
     }
 
+    /// Copies every network of `other` (policy, critics, targets and alpha) and restarts all
+    /// optimisers' moment estimates: FEAR's "pi_indvd = pi_pop, Q_indvd = Q_pop" at a new design.
+    pub fn copy_networks_from(&mut self, other: &Sac) {
+        assert_eq!(self.policy, other.policy, "copying between agents of different shapes");
+        self.phi.copy_from_slice(&other.phi);
+        for (c, o) in self.critics.iter_mut().zip(&other.critics) {
+            c.theta.copy_from_slice(&o.theta);
+            c.theta_bar.copy_from_slice(&o.theta_bar);
+            c.adam.reset();
+        }
+        self.phi_adam.reset();
+        self.log_alpha = other.log_alpha;
+        self.alpha_adam.reset();
+    }
+
     /// Draws an action for one observation: `tanh(mu + sigma eps)`, or `tanh(mu)` when
     /// `deterministic`.
     pub fn act(&mut self, obs: &[f32], deterministic: bool, action: &mut [f32]) {

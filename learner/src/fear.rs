@@ -1,0 +1,218 @@
+//! The FEAR learner (thesis Algorithm 4): population and individual SAC networks, their replay
+//! buffers and the per-episode training schedule.
+//!
+//! - The *population* pair (pi_pop, Q_pop) trains on all experience (`Replay_pop`) and is what
+//!   the design optimiser scores designs with.
+//! - The *individual* pair trains mostly on the current design (`Replay_indvd`, emptied at each
+//!   new design), with a batch mixing `population-batch` population samples into
+//!   `species-batch` species samples (26 + 230 = 256 by default).
+//! - At each new design the individual networks are copied from the population ones with fresh
+//!   Adam state. The first `warmup-episodes` episodes of a design act with the population policy
+//!   and train nothing; after every later episode the individual pair takes
+//!   `individual-updates` steps and, from design `population-updates-from-design` on, the
+//!   population pair takes `population-updates` steps.
+//! - Every episode's first observation goes to `Replay_s0`, from which the optimiser draws the
+//!   start-state batch of Eq. 5.6.
+
+use coadapt_core::{Batch, ReplayBuffer, ReplayError, Rng64, Transition, rng};
+use coadapt_nn::NnError;
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::{Sac, SacConfig, SacLosses};
+
+/// FEAR's learner settings; defaults are the reference's (DESIGN.md section 2).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct FearLearnerConfig {
+    /// SAC settings of both network pairs (`batch-size` is ignored: see the two batch fields).
+    pub sac: SacConfig,
+    /// Population samples in each individual batch.
+    pub population_batch: usize,
+    /// Species (current design) samples in each individual batch.
+    pub species_batch: usize,
+    /// Individual updates after each training episode.
+    pub individual_updates: usize,
+    /// Population updates after each training episode (batch of `sac.batch-size` from the
+    /// population buffer).
+    pub population_updates: usize,
+    /// Zero-based index of the first design whose episodes also train the population networks
+    /// (2: from the third design on).
+    pub population_updates_from_design: usize,
+    /// Episodes at the start of each design that act with the population policy and train
+    /// nothing.
+    pub warmup_episodes: usize,
+    pub population_capacity: usize,
+    pub species_capacity: usize,
+    /// Start states kept for the design objective.
+    pub start_state_capacity: usize,
+    /// Train only the population networks and act with them (the thesis's Fig. 5.7 ablation).
+    pub population_only: bool,
+}
+
+impl Default for FearLearnerConfig {
+    fn default() -> Self {
+        Self {
+            sac: SacConfig::default(),
+            population_batch: 26,
+            species_batch: 230,
+            individual_updates: 1000,
+            population_updates: 250,
+            population_updates_from_design: 2,
+            warmup_episodes: 3,
+            population_capacity: 10_000_000,
+            species_capacity: 1_000_000,
+            start_state_capacity: 100_000,
+            population_only: false,
+        }
+    }
+}
+
+/// Which network pair acts in the current episode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ActingPolicy {
+    Population,
+    Individual,
+}
+
+/// What one episode's training did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EpisodeTraining {
+    pub individual_updates: usize,
+    pub population_updates: usize,
+    /// Losses of the last individual (or, population-only, population) update.
+    pub last: Option<SacLosses>,
+}
+
+/// The learner's state across designs.
+#[derive(Debug)]
+pub struct FearLearner {
+    pub cfg: FearLearnerConfig,
+    population: Sac,
+    individual: Sac,
+    pop_replay: ReplayBuffer,
+    species_replay: ReplayBuffer,
+    start_states: ReplayBuffer,
+    design_index: Option<usize>,
+    episode_in_design: usize,
+    ind_batch: Batch,
+    pop_batch: Batch,
+    rng: Rng64,
+}
+
+impl FearLearner {
+    pub fn new(obs_dim: usize, act_dim: usize, cfg: FearLearnerConfig, seed: u64) -> Result<Self, NnError> {
+        let population = Sac::new(obs_dim, act_dim, cfg.sac.clone(), seed)?;
+        let individual = Sac::new(obs_dim, act_dim, cfg.sac.clone(), seed.wrapping_add(1))?;
+        Ok(Self {
+            pop_replay: ReplayBuffer::new(obs_dim, act_dim, cfg.population_capacity),
+            species_replay: ReplayBuffer::new(obs_dim, act_dim, cfg.species_capacity),
+            // Start states reuse the buffer type; only `obs` matters.
+            start_states: ReplayBuffer::new(obs_dim, 0, cfg.start_state_capacity),
+            ind_batch: Batch::new(cfg.population_batch + cfg.species_batch, obs_dim, act_dim),
+            pop_batch: Batch::new(cfg.sac.batch_size, obs_dim, act_dim),
+            population,
+            individual,
+            design_index: None,
+            episode_in_design: 0,
+            rng: rng(seed, 4),
+            cfg,
+        })
+    }
+
+    /// Starts design `index`: the individual networks become copies of the population ones
+    /// (fresh Adam state) and the species buffer is emptied.
+    pub fn begin_design(&mut self, index: usize) {
+        self.individual.copy_networks_from(&self.population);
+        self.species_replay.clear();
+        self.design_index = Some(index);
+        self.episode_in_design = 0;
+    }
+
+    /// The policy the next episode acts with.
+    pub fn acting(&self) -> ActingPolicy {
+        if self.cfg.population_only || self.episode_in_design < self.cfg.warmup_episodes {
+            ActingPolicy::Population
+        } else {
+            ActingPolicy::Individual
+        }
+    }
+
+    /// The agent of `which` pair (for acting and for the design optimiser).
+    pub fn agent(&self, which: ActingPolicy) -> &Sac {
+        match which {
+            ActingPolicy::Population => &self.population,
+            ActingPolicy::Individual => &self.individual,
+        }
+    }
+
+    pub fn agent_mut(&mut self, which: ActingPolicy) -> &mut Sac {
+        match which {
+            ActingPolicy::Population => &mut self.population,
+            ActingPolicy::Individual => &mut self.individual,
+        }
+    }
+
+    /// Stores one transition of the current design in both buffers.
+    pub fn add_transition(&mut self, t: &Transition<'_>) -> Result<(), ReplayError> {
+        self.pop_replay.push(t)?;
+        self.species_replay.push(t)
+    }
+
+    /// Stores an episode's first observation for the design objective.
+    pub fn add_start_state(&mut self, obs: &[f32]) -> Result<(), ReplayError> {
+        self.start_states.push(&Transition { obs, action: &[], reward: 0.0, next_obs: obs, terminated: false })
+    }
+
+    pub fn start_states(&self) -> usize {
+        self.start_states.len()
+    }
+
+    /// `n` start states drawn uniformly with replacement (`n x obs_dim`), or `None` if none.
+    pub fn sample_start_states(&mut self, n: usize) -> Option<Vec<f32>> {
+        if self.start_states.is_empty() {
+            return None;
+        }
+        let mut out = Vec::with_capacity(n * self.start_states.obs_dim());
+        for _ in 0..n {
+            let i = self.rng.random_range(0..self.start_states.len());
+            out.extend_from_slice(self.start_states.get(i).obs);
+        }
+        Some(out)
+    }
+
+    pub fn population_transitions(&self) -> usize {
+        self.pop_replay.len()
+    }
+
+    /// Ends an episode of the current design and trains as the schedule says.
+    pub fn end_episode(&mut self) -> Result<EpisodeTraining, ReplayError> {
+        let warm = self.episode_in_design < self.cfg.warmup_episodes;
+        self.episode_in_design += 1;
+        let mut out = EpisodeTraining::default();
+        if warm {
+            return Ok(out);
+        }
+        let design = self.design_index.unwrap_or(0);
+        if !self.cfg.population_only {
+            for _ in 0..self.cfg.individual_updates {
+                let parts = [(&self.pop_replay, self.cfg.population_batch), (&self.species_replay, self.cfg.species_batch)];
+                ReplayBuffer::sample_mixed(&parts, &mut self.rng, &mut self.ind_batch)?;
+                out.last = Some(self.individual.update(&self.ind_batch));
+                out.individual_updates += 1;
+            }
+        }
+        if self.cfg.population_only || design >= self.cfg.population_updates_from_design {
+            let n = if self.cfg.population_only { self.cfg.individual_updates } else { self.cfg.population_updates };
+            for _ in 0..n {
+                self.pop_replay.sample(&mut self.rng, &mut self.pop_batch)?;
+                let l = self.population.update(&self.pop_batch);
+                if self.cfg.population_only {
+                    out.last = Some(l);
+                }
+                out.population_updates += 1;
+            }
+        }
+        Ok(out)
+    }
+}
