@@ -4,8 +4,26 @@
 //! - [`objective`]: the design objective of FEAR (thesis Eq. 5.6),
 //!   `f(xi) = mean_s Q(s_xi, tanh(mu(s_xi)), s_xi)` over a batch of start states whose design
 //!   columns are replaced by `xi`, evaluated for a whole swarm of designs in one batched,
-//!   two-core pass.
+//!   two-core pass; [`CriticObjective`] is it as a [`SwarmObjective`].
+//! - [`swarm`]: what the searches share: the [`SwarmObjective`] trait (a batched function to
+//!   maximise, also any `FnMut(&[f32], &mut [f32])`), [`SearchResult`], [`Progress`].
+//! - [`pso`]: global-best particle swarm optimisation, the reference's 700 particles x 250
+//!   iterations as pyswarms' `GlobalBestPSO` runs them, with a choice of bound rules.
+//! - [`cmaes`]: Hansen's CMA-ES, in box-normalised coordinates with reflection at the bounds.
+//! - [`novelty`]: novelty search (thesis Eq. 5.7), the mean distance to the m nearest chosen
+//!   designs, maximised by the PSO.
+//!
+//! Every search is seeded (`coadapt_core::rng(seed, <its stream>)`): the same seed gives the
+//! same design.
 
+pub mod cmaes;
+pub mod novelty;
 pub mod objective;
+pub mod pso;
+pub mod swarm;
 
-pub use objective::{DesignObjective, ObjectiveError, ObjectiveWorkspace, QMode};
+pub use cmaes::CmaesConfig;
+pub use novelty::{Novelty, NoveltyConfig};
+pub use objective::{CriticObjective, DesignObjective, ObjectiveError, ObjectiveWorkspace, QMode};
+pub use pso::{BoundHandling, PsoConfig};
+pub use swarm::{Progress, SearchError, SearchResult, SwarmObjective};

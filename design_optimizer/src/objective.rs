@@ -267,3 +267,29 @@ impl DesignObjective {
         }
     }
 }
+
+/// [`DesignObjective`] as a [`SwarmObjective`](crate::SwarmObjective): a search scores each
+/// iteration's whole swarm in one batched pass over `workspaces.len()` cores.
+#[derive(Debug)]
+pub struct CriticObjective<'a> {
+    pub objective: &'a DesignObjective,
+    pub mode: QMode,
+    /// Rows (particle x start state) per chunk; 256 (8 particles x 32 states) keeps a chunk's
+    /// activations in L2 (BENCHMARKS.md).
+    pub chunk_rows: usize,
+    /// One per core.
+    pub workspaces: Vec<ObjectiveWorkspace>,
+}
+
+impl<'a> CriticObjective<'a> {
+    /// Scores with `mode` on `cores` cores (at least one), in chunks of 256 rows.
+    pub fn new(objective: &'a DesignObjective, mode: QMode, cores: usize) -> Self {
+        Self { objective, mode, chunk_rows: 256, workspaces: vec![ObjectiveWorkspace::default(); cores.max(1)] }
+    }
+}
+
+impl crate::SwarmObjective for CriticObjective<'_> {
+    fn evaluate(&mut self, designs: &[f32], scores: &mut [f32]) {
+        self.objective.evaluate(designs, self.mode, self.chunk_rows, scores, &mut self.workspaces);
+    }
+}
