@@ -17,7 +17,20 @@ fn every_robot_trains_a_few_episodes_and_renders() {
         let len = env.spec().max_episode_steps;
         let steps = (2 * len).to_string();
         let out = dir.join(name);
-        let o = coadapt(&["train", "--env", name, "--steps", &steps, "--hidden", "32,32", "--learning-starts", "200", "--quiet", "--out", out.to_str().unwrap()]);
+        let o = coadapt(&[
+            "train",
+            "--env",
+            name,
+            "--steps",
+            &steps,
+            "--hidden",
+            "32,32",
+            "--learning-starts",
+            "200",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(v["episodes"], 2, "{name}");
@@ -42,7 +55,10 @@ fn render_refuses_bad_input_clearly() {
     let cases: &[(&[&str], &str)] = &[
         (&["render", "--env", "nope", "--out", gif.to_str().unwrap()], "unknown environment"),
         (&["render", "--env", "half-cheetah", "--design", "3,3,3,3,3,3", "--out", gif.to_str().unwrap()], "design[0] = 3"),
-        (&["render", "--env", "pendulum", "--weights", "/nonexistent.safetensors", "--out", gif.to_str().unwrap()], "cannot read weights file"),
+        (
+            &["render", "--env", "pendulum", "--weights", "/nonexistent.safetensors", "--out", gif.to_str().unwrap()],
+            "cannot read weights file",
+        ),
         (&["render", "--env", "pendulum", "--every", "0", "--out", gif.to_str().unwrap()], "--every"),
     ];
     for (args, needle) in cases {

@@ -5,21 +5,30 @@
 //!   physics engine, so learning tests run in seconds.
 //! - [`half_cheetah`]: the reference's HalfCheetah (PyBullet) in rapier2d, six leg lengths as the
 //!   design.
+//! - [`walker`], [`hopper`]: the thesis's Walker (MuJoCo's walker2d) and four-joint Hopper
+//!   (dm_control's hopper) in rapier2d, leg segment lengths (and the Hopper's nose) as the design.
+//! - [`planar`]: what the rapier2d robots share: the capsule body built from a plan, the physics
+//!   setting and the environment around it.
 //! - [`bench`](mod@bench): env steps per second under random actions.
 //! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
 
 pub mod bench;
 mod draw;
 pub mod half_cheetah;
+pub mod hopper;
 pub mod pendulum;
+pub mod planar;
+pub mod walker;
 
 use coadapt_core::{Env, TimeLimit};
 
 pub use half_cheetah::HalfCheetah;
+pub use hopper::Hopper;
 pub use pendulum::Pendulum;
+pub use walker::Walker;
 
 /// Names accepted by [`make`].
-pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah"];
+pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper"];
 
 #[derive(Debug, thiserror::Error)]
 #[error("unknown environment `{0}` (known: {known})", known = ENV_NAMES.join(", "))]
@@ -30,6 +39,8 @@ pub fn make(name: &str) -> Result<Box<dyn Env>, UnknownEnv> {
     match name {
         "pendulum" => Ok(Box::new(TimeLimit::new(Pendulum::new()))),
         "half-cheetah" => Ok(Box::new(TimeLimit::new(HalfCheetah::new()))),
+        "walker" => Ok(Box::new(TimeLimit::new(Walker::new()))),
+        "hopper" => Ok(Box::new(TimeLimit::new(Hopper::new()))),
         other => Err(UnknownEnv(other.to_string())),
     }
 }

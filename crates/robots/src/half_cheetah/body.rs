@@ -1,12 +1,11 @@
-//! The cheetah's rapier body: geometry from MuJoCo's `half_cheetah.xml`, rebuilt for every design.
+//! The cheetah's body plan: geometry from MuJoCo's `half_cheetah.xml`, rebuilt for every design.
 //!
 //! MuJoCo's model lives in the x-z plane and turns about +y, which is clockwise seen with x to the
-//! right and z up; rapier's 2D angles are counter-clockwise. The accessors here convert, so every
-//! angle, limit and torque they take or return uses MuJoCo's signs: a positive thigh angle swings
-//! the leg backwards, a positive pitch is nose-down.
+//! right and z up ([`BodyPlan::clockwise`]); every angle, limit and torque uses MuJoCo's signs: a
+//! positive thigh angle swings the leg backwards, a positive pitch is nose-down.
 
-use super::{JointKind, SimConfig};
-use rapier2d::prelude::*;
+use crate::planar::{BodyPlan, Capsule, Limb, capsule_mass};
+use rapier2d::prelude::Vector;
 
 /// Capsule radius of every limb and of the torso.
 pub const RADIUS: f32 = 0.046;
@@ -44,39 +43,6 @@ const HEAD_TILT: f32 = 0.87;
 const DENSITY: f32 = 667.2;
 /// MuJoCo's friction for every geom (the floor included).
 const FRICTION: f32 = 0.4;
-/// Robot parts touch only the ground, as MuJoCo's contype/conaffinity set them.
-const ROBOT: Group = Group::GROUP_1;
-const GROUND: Group = Group::GROUP_2;
-
-/// Mass of a capsule of segment length `len` as a 3D solid, so masses follow MuJoCo's.
-fn capsule_mass(len: f32) -> f32 {
-    use std::f32::consts::PI;
-    DENSITY * (PI * RADIUS * RADIUS * len + 4.0 / 3.0 * PI * RADIUS.powi(3))
-}
-
-fn rotate(v: Vector, angle: f32) -> Vector {
-    let (s, c) = angle.sin_cos();
-    Vector::new(c * v.x - s * v.y, s * v.x + c * v.y)
-}
-
-fn wrap(x: f32) -> f32 {
-    use std::f32::consts::PI;
-    (x + PI).rem_euclid(2.0 * PI) - PI
-}
-
-/// One cheetah in its own world, with the ground.
-pub struct Body {
-    world: PhysicsWorld,
-    torso: RigidBodyHandle,
-    limbs: [RigidBodyHandle; 6],
-    lengths: [f32; 6],
-}
-
-impl std::fmt::Debug for Body {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Body").field("torso", &self.torso).field("limbs", &self.limbs).finish_non_exhaustive()
-    }
-}
 
 /// Where the torso's hips sit so that no leg reaches the ground whatever its joint angles: each
 /// segment reaches at most its length from its joint.
@@ -86,188 +52,28 @@ pub fn start_height(lengths: &[f32; 6]) -> f32 {
     back.max(front) + RADIUS + 0.01
 }
 
-impl Body {
-    /// A fresh world holding the body with segment `lengths`, at rest, torso level at
-    /// [`start_height`], joints at `angles` (MuJoCo signs, within the limits).
-    pub fn build(lengths: &[f32; 6], angles: &[f32; 6], cfg: &SimConfig) -> Self {
-        let mut world = PhysicsWorld::new();
-        world.gravity = Vector::new(0.0, -9.81);
-        let p = &mut world.integration_parameters;
-        p.dt = super::CONTROL_DT / cfg.substeps as f32;
-        p.num_solver_iterations = cfg.solver_iterations;
-        p.warmstart_joints = cfg.warmstart_joints;
-
-        // A half-space never runs out however far the cheetah runs.
-        let ground = world.insert_body(RigidBodyBuilder::fixed());
-        let floor_groups = InteractionGroups::new(GROUND, ROBOT, InteractionTestMode::And);
-        let floor = ColliderBuilder::new(SharedShape::halfspace(Vector::Y)).friction(FRICTION).collision_groups(floor_groups);
-        world.insert_collider(floor, Some(ground));
-
-        let groups = InteractionGroups::new(ROBOT, GROUND, InteractionTestMode::And);
-        let h = start_height(lengths);
-        let torso = world.insert_body(RigidBodyBuilder::dynamic().translation(Vector::new(0.0, h)).can_sleep(false));
-        let torso_len = 2.0 * TORSO_HALF_LENGTH;
-        let torso_col = ColliderBuilder::capsule_x(TORSO_HALF_LENGTH, RADIUS).mass(capsule_mass(torso_len));
-        world.insert_collider(torso_col.friction(FRICTION).collision_groups(groups), Some(torso));
-        let head_dir = Vector::new(HEAD_TILT.sin(), HEAD_TILT.cos()) * HEAD_HALF_LENGTH;
-        let head_c = Vector::from(HEAD_CENTRE);
-        let head = ColliderBuilder::capsule_from_endpoints(head_c - head_dir, head_c + head_dir, RADIUS)
-            .mass(capsule_mass(2.0 * HEAD_HALF_LENGTH))
-            .friction(FRICTION)
-            .collision_groups(groups);
-        world.insert_collider(head, Some(torso));
-
-        // Place every limb where the joint angles put it, so impulse joints start satisfied.
-        let mut limbs = [torso; 6];
-        let mut pose = [(Vector::ZERO, 0.0f32); 6];
-        let mut anchors = [Vector::ZERO; 6];
-        for i in 0..6 {
-            let (parent_pos, parent_angle, anchor) = match PARENT[i] {
-                None => (Vector::new(0.0, h), 0.0, Vector::from(HIPS[i / 3])),
-                Some(p) => (pose[p].0, pose[p].1, Vector::from(DIRECTIONS[p]) * lengths[p]),
-            };
-            // rapier turns counter-clockwise: a positive MuJoCo angle is a negative rapier one.
-            let angle = parent_angle - angles[i];
-            let pos = parent_pos + rotate(anchor, parent_angle);
-            pose[i] = (pos, angle);
-            anchors[i] = anchor;
-            limbs[i] = world.insert_body(RigidBodyBuilder::dynamic().translation(pos).rotation(angle).can_sleep(false));
-            let end = Vector::from(DIRECTIONS[i]) * lengths[i];
-            let col = ColliderBuilder::capsule_from_endpoints(Vector::ZERO, end, RADIUS).mass(capsule_mass(lengths[i]));
-            world.insert_collider(col.friction(FRICTION).collision_groups(groups), Some(limbs[i]));
-        }
-
-        let mut handles = [None; 6];
-        for i in 0..6 {
-            let parent = PARENT[i].map_or(torso, |p| limbs[p]);
-            let [lo, hi] = JOINT_LIMITS[i];
-            let joint = RevoluteJointBuilder::new().local_anchor1(anchors[i]).local_anchor2(Vector::ZERO).limits([-hi, -lo]);
-            match cfg.joints {
-                JointKind::Impulse => {
-                    world.insert_impulse_joint(parent, limbs[i], joint);
-                }
-                JointKind::Multibody => handles[i] = world.insert_multibody_joint(parent, limbs[i], joint),
-            }
-        }
-        if cfg.joints == JointKind::Multibody {
-            set_multibody_coordinates(&mut world, &handles, limbs, angles, cfg);
-        }
-        Self { world, torso, limbs, lengths: *lengths }
-    }
-
-    /// Advances the world by one physics step.
-    pub fn step(&mut self) {
-        self.world.step();
-    }
-
-    /// Sets the joint torques (MuJoCo signs) that act until the next call: rapier keeps user
-    /// torques across steps, so the old ones are cleared first.
-    pub fn set_torques(&mut self, torques: &[f32; 6]) {
-        for body in [self.torso].iter().chain(&self.limbs) {
-            if let Some(rb) = self.world.bodies.get_mut(*body) {
-                rb.reset_torques(true);
-            }
-        }
-        for i in 0..6 {
-            let parent = PARENT[i].map_or(self.torso, |p| self.limbs[p]);
-            // A positive MuJoCo torque turns the child clockwise against its parent.
-            if let Some(rb) = self.world.bodies.get_mut(self.limbs[i]) {
-                rb.add_torque(-torques[i], true);
-            }
-            if let Some(rb) = self.world.bodies.get_mut(parent) {
-                rb.add_torque(torques[i], true);
-            }
-        }
-    }
-
-    fn angle_and_rate(&self, h: RigidBodyHandle) -> (f32, f32) {
-        self.world.bodies.get(h).map_or((f32::NAN, f32::NAN), |rb| (rb.rotation().angle(), rb.angvel()))
-    }
-
-    /// Joint angles and velocities, MuJoCo signs.
-    pub fn joints(&self) -> ([f32; 6], [f32; 6]) {
-        let mut q = [0.0; 6];
-        let mut qd = [0.0; 6];
-        for i in 0..6 {
-            let parent = PARENT[i].map_or(self.torso, |p| self.limbs[p]);
-            let (a_p, w_p) = self.angle_and_rate(parent);
-            let (a_c, w_c) = self.angle_and_rate(self.limbs[i]);
-            q[i] = -wrap(a_c - a_p);
-            qd[i] = -(w_c - w_p);
-        }
-        (q, qd)
-    }
-
-    /// The body's capsules, for pictures.
-    pub fn draw(&self, out: &mut Vec<coadapt_core::Shape>) {
-        crate::draw::planar(&self.world.colliders, out)
-    }
-
-    /// Height of the lowest point of any capsule surface: below zero, that part is in the ground.
-    pub fn lowest_point(&self) -> f32 {
-        let lowest = |h: RigidBodyHandle, a: Vector, b: Vector| {
-            self.world.bodies.get(h).map_or(f32::NAN, |rb| {
-                let p = rb.position();
-                (*p * a).y.min((*p * b).y) - RADIUS
-            })
-        };
-        let head_dir = Vector::new(HEAD_TILT.sin(), HEAD_TILT.cos()) * HEAD_HALF_LENGTH;
-        let head_c = Vector::from(HEAD_CENTRE);
-        let mut low = lowest(self.torso, Vector::new(-TORSO_HALF_LENGTH, 0.0), Vector::new(TORSO_HALF_LENGTH, 0.0)).min(lowest(
-            self.torso,
-            head_c - head_dir,
-            head_c + head_dir,
-        ));
-        for i in 0..6 {
-            low = low.min(lowest(self.limbs[i], Vector::ZERO, Vector::from(DIRECTIONS[i]) * self.lengths[i]));
-        }
-        low
-    }
-
-    /// Torso centre `[x, z]`, the velocity of that point `[vx, vz]`, pitch and pitch rate
-    /// (MuJoCo signs: positive is nose-down).
-    pub fn torso(&self) -> ([f32; 2], [f32; 2], f32, f32) {
-        match self.world.bodies.get(self.torso) {
-            Some(rb) => {
-                let p = rb.translation();
-                let v = rb.velocity_at_point(p);
-                ([p.x, p.y], [v.x, v.y], -wrap(rb.rotation().angle()), -rb.angvel())
-            }
-            None => ([f32::NAN; 2], [f32::NAN; 2], f32::NAN, f32::NAN),
-        }
-    }
-}
-
-/// Multibody joints start at zero coordinates whatever the bodies' poses: set them to `angles`
-/// (rapier's coordinate is the child's counter-clockwise turn, minus the MuJoCo angle) and move the
-/// bodies to match.
-fn set_multibody_coordinates(
-    world: &mut PhysicsWorld,
-    handles: &[Option<MultibodyJointHandle>; 6],
-    limbs: [RigidBodyHandle; 6],
-    angles: &[f32; 6],
-    cfg: &SimConfig,
-) {
-    let Some(Some(first)) = handles.first() else { return };
-    let Some((mb, _)) = world.multibody_joints.get_mut(*first) else { return };
-    mb.forward_kinematics(&world.bodies, true);
-    // The free root's rotation gets rapier's default damping of 0.1: the torso flies freely.
-    for d in mb.damping_mut().iter_mut().take(3) {
-        *d = 0.0;
-    }
-    let mut disp = vec![0.0; mb.ndofs()];
-    let mut dofs = [0; 6];
-    for link in mb.links() {
-        if let Some(i) = limbs.iter().position(|&h| h == link.rigid_body_handle()) {
-            dofs[i] = link.assembly_id();
-            disp[dofs[i]] = -angles[i];
-        }
-    }
-    for i in 0..6 {
-        mb.armature_mut()[dofs[i]] = cfg.armature;
-        mb.damping_mut()[dofs[i]] = if cfg.joint_damping { DAMPING[i] } else { 0.0 };
-    }
-    mb.apply_displacements(&disp);
-    mb.forward_kinematics(&world.bodies, true);
-    mb.update_rigid_bodies(&mut world.bodies, true);
+/// The cheetah with segment `lengths`: a level torso capsule with the head, and two legs hinged
+/// at its ends, each segment a capsule from its joint along MuJoCo's geom axis.
+pub fn plan(lengths: &[f32; 6]) -> BodyPlan {
+    let capsule = |a: Vector, b: Vector, len: f32| Capsule { a, b, radius: RADIUS, mass: capsule_mass(DENSITY, RADIUS, len) };
+    let torso_end = Vector::X * TORSO_HALF_LENGTH;
+    let head_dir = Vector::new(HEAD_TILT.sin(), HEAD_TILT.cos()) * HEAD_HALF_LENGTH;
+    let head_c = Vector::from(HEAD_CENTRE);
+    let torso = vec![
+        capsule(-torso_end, torso_end, 2.0 * TORSO_HALF_LENGTH),
+        capsule(head_c - head_dir, head_c + head_dir, 2.0 * HEAD_HALF_LENGTH),
+    ];
+    let limbs = (0..6)
+        .map(|i| Limb {
+            parent: PARENT[i],
+            anchor: match PARENT[i] {
+                None => Vector::from(HIPS[i / 3]),
+                Some(p) => Vector::from(DIRECTIONS[p]) * lengths[p],
+            },
+            capsule: capsule(Vector::ZERO, Vector::from(DIRECTIONS[i]) * lengths[i], lengths[i]),
+            limits: JOINT_LIMITS[i],
+            damping: DAMPING[i],
+        })
+        .collect();
+    BodyPlan { torso, limbs, friction: FRICTION, clockwise: true }
 }

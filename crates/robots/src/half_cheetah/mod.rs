@@ -12,7 +12,9 @@
 //! narrows a few ranges); MuJoCo's joint springs are left out, so a zero action leaves the legs
 //! limp. Parts touch the ground only, not each other; friction 0.4. Torque
 //! `0.9 x power x clip(a, -1, 1)` with powers 120/90/60/90/60/30 N m (the reference's front thigh
-//! has 90, not MuJoCo's 120). See `body.rs` for the geometry and the sign conventions.
+//! has 90, not MuJoCo's 120). See `body.rs` for the geometry and the sign conventions; the body
+//! is built, and the episodes run, by the planar machinery all the planar robots share
+//! ([`crate::planar`]).
 //!
 //! # Episodes
 //! `reset` rebuilds the world for the design (about 15 us), puts the torso level above the longest
@@ -79,194 +81,48 @@
 
 mod body;
 
-pub use body::{BASE_LENGTHS, JOINT_LIMITS, POWERS, RADIUS, start_height};
+pub use crate::planar::{CONTROL_DT, JointKind, SimConfig};
+pub use body::{BASE_LENGTHS, JOINT_LIMITS, POWERS, RADIUS, plan, start_height};
 
-use body::Body;
-use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step, rng};
-use rand::Rng;
-
-/// Seconds per control step (the reference: 4 PyBullet steps of 0.0165 / 4).
-pub const CONTROL_DT: f32 = 0.0165;
-/// The reference scales every joint power by 0.9.
-const POWER_FACTOR: f32 = 0.9;
-const STATE_DIM: usize = 17;
-
-/// How the joints are simulated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum JointKind {
-    /// Reduced coordinates: the segments cannot drift apart, and limits hold far better.
-    Multibody,
-    /// One rigid body per segment held together by constraints: cheaper, but light segments
-    /// swing through their limits.
-    Impulse,
-}
-
-/// The physics knobs; [`SimConfig::default`] is the measured choice documented above.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SimConfig {
-    pub joints: JointKind,
-    /// Physics steps per control step.
-    pub substeps: usize,
-    /// rapier's solver iterations per physics step (each one a TGS substep).
-    pub solver_iterations: usize,
-    /// Impulse joints only: start each step from the last step's joint impulses.
-    pub warmstart_joints: bool,
-    /// Multibody joints only: rotor inertia added to each joint, kg m^2 (MuJoCo's is 0.1).
-    pub armature: f32,
-    /// Multibody joints only: MuJoCo's joint damping (6, 4.5, 3, 4.5, 3, 1.5 N m s/rad).
-    pub joint_damping: bool,
-    /// Zero-torque control steps after a reset, before the first observation.
-    pub settle_steps: usize,
-}
-
-impl Default for SimConfig {
-    fn default() -> Self {
-        Self {
-            joints: JointKind::Multibody,
-            substeps: 2,
-            solver_iterations: 4,
-            warmstart_joints: false,
-            armature: 0.1,
-            joint_damping: true,
-            settle_steps: 60,
-        }
-    }
-}
+use crate::planar::{BodyPlan, PlanarEnv, Robot, Torso};
 
 /// The HalfCheetah environment (see the module documentation).
+pub type HalfCheetah = PlanarEnv<Cheetah>;
+
+/// HalfCheetah's [`Robot`] description.
 #[derive(Debug)]
-pub struct HalfCheetah {
-    spec: EnvSpec,
-    cfg: SimConfig,
-    body: Option<Body>,
-    design: [f32; 6],
-    initial_height: f32,
-    obs: [f32; STATE_DIM + 6],
+pub struct Cheetah;
+
+fn lengths(design: &[f32]) -> [f32; 6] {
+    std::array::from_fn(|i| design[i] * BASE_LENGTHS[i])
 }
 
-impl Default for HalfCheetah {
-    fn default() -> Self {
-        Self::new()
-    }
-}
+impl Robot for Cheetah {
+    const NAME: &'static str = "half-cheetah";
+    const JOINT_LIMITS: &'static [[f32; 2]] = &JOINT_LIMITS;
+    const POWERS: &'static [f32] = &POWERS;
+    const DESIGN_LOW: &'static [f32] = &[0.8; 6];
+    const DESIGN_HIGH: &'static [f32] = &[2.0; 6];
+    const DEFAULT_DESIGN: &'static [f32] = &[1.0; 6];
 
-impl HalfCheetah {
-    pub fn new() -> Self {
-        Self::with_config(SimConfig::default())
-    }
-
-    /// The environment with other physics settings (for measurements).
-    pub fn with_config(cfg: SimConfig) -> Self {
-        let spec = EnvSpec {
-            name: "half-cheetah".into(),
-            state_dim: STATE_DIM,
-            action: BoxSpace::uniform(6, -1.0, 1.0),
-            design: BoxSpace::uniform(6, 0.8, 2.0),
-            default_design: vec![1.0; 6],
-            max_episode_steps: 1000,
-        };
-        Self { spec, cfg, body: None, design: [1.0; 6], initial_height: 0.0, obs: [0.0; STATE_DIM + 6] }
+    fn default_config() -> SimConfig {
+        SimConfig::default()
     }
 
-    pub fn config(&self) -> &SimConfig {
-        &self.cfg
+    fn plan(design: &[f32]) -> BodyPlan {
+        plan(&lengths(design))
     }
 
-    /// Joint angles in radians (MuJoCo's signs), or `None` before the first reset.
-    pub fn joint_angles(&self) -> Option<[f32; 6]> {
-        self.body.as_ref().map(|b| b.joints().0)
+    fn start_height(design: &[f32], _plan: &BodyPlan, _angles: &[f32]) -> f32 {
+        start_height(&lengths(design))
     }
 
-    /// How far the joint furthest outside its range is outside it, in radians (0 when all hold).
-    pub fn limit_violation(&self) -> f32 {
-        let Some(q) = self.joint_angles() else { return 0.0 };
-        q.iter().zip(&JOINT_LIMITS).map(|(&q, &[lo, hi])| (lo - q).max(q - hi).max(0.0)).fold(0.0, f32::max)
+    /// Forward velocity, pitch rate, vertical velocity, pitch, height change.
+    fn torso_state(t: &Torso, height_change: f32) -> [f32; 5] {
+        [t.vel[0], t.pitch_rate, t.vel[1], t.pitch, height_change]
     }
 
-    /// Torso height in metres, or `None` before the first reset.
-    pub fn torso_height(&self) -> Option<f32> {
-        self.body.as_ref().map(|b| b.torso().0[1])
-    }
-
-    /// Height of the lowest point of the body's surface (negative: a part is in the ground), or
-    /// `None` before the first reset.
-    pub fn lowest_point(&self) -> Option<f32> {
-        self.body.as_ref().map(Body::lowest_point)
-    }
-
-    fn advance(&mut self, torques: &[f32; 6]) {
-        if let Some(body) = self.body.as_mut() {
-            body.set_torques(torques);
-            for _ in 0..self.cfg.substeps {
-                body.step();
-            }
-        }
-    }
-
-    /// Fills the observation; errs if the simulation produced a non-finite state.
-    fn observe(&mut self) -> Result<(), EnvError> {
-        let Some(body) = self.body.as_ref() else { return Err(EnvError::NotRunning) };
-        let (q, qd) = body.joints();
-        let (pos, vel, pitch, pitch_rate) = body.torso();
-        for i in 0..6 {
-            let [lo, hi] = JOINT_LIMITS[i];
-            self.obs[i] = 2.0 * (q[i] - lo) / (hi - lo) - 1.0;
-            self.obs[6 + i] = 0.1 * qd[i];
-        }
-        self.obs[12..17].copy_from_slice(&[vel[0], pitch_rate, vel[1], pitch, pos[1] - self.initial_height]);
-        self.obs[17..].copy_from_slice(&self.design);
-        match self.obs.iter().position(|x| !x.is_finite()) {
-            Some(i) => Err(EnvError::Backend(format!("half-cheetah simulation diverged: observation[{i}] = {}", self.obs[i]))),
-            None => Ok(()),
-        }
-    }
-}
-
-impl Env for HalfCheetah {
-    fn spec(&self) -> &EnvSpec {
-        &self.spec
-    }
-
-    fn reset(&mut self, seed: u64, design: &[f32]) -> Result<&[f32], EnvError> {
-        self.spec.design.check("design", design).map_err(EnvError::Design)?;
-        self.body = None;
-        self.design.copy_from_slice(design);
-        let mut r = rng(seed, 0);
-        let mut angles = [0.0; 6];
-        for (a, [lo, hi]) in angles.iter_mut().zip(JOINT_LIMITS) {
-            *a = r.random_range(-0.5f32..0.5).clamp(lo, hi);
-        }
-        let lengths: [f32; 6] = std::array::from_fn(|i| design[i] * BASE_LENGTHS[i]);
-        self.body = Some(Body::build(&lengths, &angles, &self.cfg));
-        for _ in 0..self.cfg.settle_steps {
-            self.advance(&[0.0; 6]);
-        }
-        self.initial_height = self.torso_height().unwrap_or(0.0);
-        if let Err(e) = self.observe() {
-            self.body = None;
-            return Err(e);
-        }
-        Ok(&self.obs)
-    }
-
-    fn step(&mut self, action: &[f32]) -> Result<Step<'_>, EnvError> {
-        if self.body.is_none() {
-            return Err(EnvError::NotRunning);
-        }
-        self.spec.action.check_finite("action", action).map_err(EnvError::Action)?;
-        let torques: [f32; 6] = std::array::from_fn(|i| POWER_FACTOR * POWERS[i] * action[i].clamp(-1.0, 1.0));
-        self.advance(&torques);
-        if let Err(e) = self.observe() {
-            self.body = None;
-            return Err(e);
-        }
-        let reward = (self.obs[12] / 10.0).max(0.0);
-        Ok(Step { observation: &self.obs, reward, terminated: false, truncated: false })
-    }
-
-    fn draw(&self, out: &mut Vec<coadapt_core::Shape>) {
-        if let Some(b) = &self.body {
-            b.draw(out);
-        }
+    fn reward(t: &Torso) -> f32 {
+        (t.vel[0] / 10.0).max(0.0)
     }
 }
