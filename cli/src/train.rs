@@ -158,6 +158,10 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let cfg = resolve(&args)?;
     let mut env = coadapt_robots::make(&cfg.env)?;
+    // Refuse a bad design before anything is written.
+    if let Some(d) = &cfg.design {
+        env.spec().design.check("design", d).map_err(coadapt_core::EnvError::Design)?;
+    }
     let dir = match &args.out {
         Some(d) => d.clone(),
         None => {
