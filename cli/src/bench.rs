@@ -14,9 +14,22 @@ use serde_json::json;
 pub enum BenchCommand {
     /// Networks: SAC updates per second and the design-objective forward throughput.
     Nn(NnArgs),
+    /// Design optimisation over Q: one full PSO (700 particles x 250 iterations x 32 start
+    /// states, 3 x 256 networks) timed, with the GFLOP/s reached.
+    Pso(PsoArgs),
     /// Simulation: env steps per second of each robot on one core, random actions, resets
     /// included.
     Sim(SimArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct PsoArgs {
+    /// Start states per design (32 is the reference; 256 the landscape plots').
+    #[arg(long, value_delimiter = ',', default_values_t = vec![32usize])]
+    pub states: Vec<usize>,
+    /// PSO iterations (250 is the reference).
+    #[arg(long, default_value_t = 250)]
+    pub iterations: usize,
 }
 
 #[derive(Debug, Args)]
@@ -49,7 +62,31 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
         BenchCommand::Nn(a) => nn(&a),
         BenchCommand::Sim(a) => sim(&a),
+        BenchCommand::Pso(a) => pso(&a),
     }
+}
+
+fn pso(a: &PsoArgs) -> anyhow::Result<()> {
+    use coadapt_design_optimizer::{CriticObjective, PsoConfig, pso};
+    let (obs, act, design) = (23, 6, 6);
+    let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 3)?;
+    let bounds = coadapt_core::BoxSpace::uniform(design, 0.8, 2.0);
+    for &n_states in &a.states {
+        let mut r = rng(5, 0);
+        let start: Vec<f32> = (0..n_states * obs).map(|_| r.random_range(-1.0..1.0)).collect();
+        let (q1, _) = sac.critic_params(0);
+        let f = DesignObjective::new(sac.policy(), sac.policy_params(), sac.critic(), &[q1], &start, obs - design, design)?;
+        let mut objective = CriticObjective::new(&f, QMode::First, rayon::current_num_threads());
+        let cfg = PsoConfig { iterations: a.iterations, ..PsoConfig::default() };
+        let t = Instant::now();
+        let result = pso::maximise(&mut objective, &bounds, &cfg, 1)?;
+        let secs = t.elapsed().as_secs_f64();
+        let config = format!("{}x{}x{n_states}", cfg.particles, cfg.iterations);
+        emit("pso_over_q", &config, secs, "s");
+        let rows = result.evaluations as f64 * n_states as f64;
+        emit("pso_over_q", &config, rows * f.flops_per_row() as f64 / secs / 1e9, "GFLOP/s");
+    }
+    Ok(())
 }
 
 fn sim(a: &SimArgs) -> anyhow::Result<()> {
