@@ -9,10 +9,13 @@
 //!   (dm_control's hopper) in rapier2d, leg segment lengths (and the Hopper's nose) as the design.
 //! - [`planar`]: what the rapier2d robots share: the capsule body built from a plan, the physics
 //!   setting and the environment around it.
+//! - [`daisy`]: the thesis's Daisy hexapod (HEBI, 6 legs x 3 motors) in rapier3d, segment lengths
+//!   and base-motor range offsets per leg pair as the design.
 //! - [`bench`](mod@bench): env steps per second under random actions.
 //! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
 
 pub mod bench;
+pub mod daisy;
 mod draw;
 pub mod half_cheetah;
 pub mod hopper;
@@ -22,13 +25,14 @@ pub mod walker;
 
 use coadapt_core::{Env, TimeLimit};
 
+pub use daisy::Daisy;
 pub use half_cheetah::HalfCheetah;
 pub use hopper::Hopper;
 pub use pendulum::Pendulum;
 pub use walker::Walker;
 
 /// Names accepted by [`make`].
-pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper"];
+pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper", "daisy"];
 
 #[derive(Debug, thiserror::Error)]
 #[error("unknown environment `{0}` (known: {known})", known = ENV_NAMES.join(", "))]
@@ -41,6 +45,7 @@ pub fn make(name: &str) -> Result<Box<dyn Env>, UnknownEnv> {
         "half-cheetah" => Ok(Box::new(TimeLimit::new(HalfCheetah::new()))),
         "walker" => Ok(Box::new(TimeLimit::new(Walker::new()))),
         "hopper" => Ok(Box::new(TimeLimit::new(Hopper::new()))),
+        "daisy" => Ok(Box::new(TimeLimit::new(Daisy::new()))),
         other => Err(UnknownEnv(other.to_string())),
     }
 }
