@@ -35,7 +35,7 @@ def main(path):
         if ours is None or peer is None:
             continue
         ratio = ours / peer if higher else peer / ours
-        print(json.dumps({"bench": f"{bench}_ratio", "config": f"{ours_cfg} vs pytorch {peer_cfg}",
+        print(json.dumps({"bench": f"{bench}_ratio", "config": f"{ours_cfg} vs peer {peer_cfg}",
                           "value": round(ratio, 3), "unit": "x faster", "coadapt": ours, "peer": peer}))
 
 
