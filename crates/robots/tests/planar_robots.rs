@@ -347,7 +347,7 @@ fn sweep<R: Robot>(rows: &[(usize, usize, f32)]) {
 }
 
 #[test]
-#[ignore]
+#[ignore = "a measurement sweep that takes minutes: run with -- --ignored --nocapture"]
 fn measure_limit_violations() {
     sweep::<WalkerModel>(&[(2, 4, 0.01), (2, 8, 0.01), (4, 4, 0.01), (2, 4, 0.1), (2, 6, 0.1), (2, 8, 0.1), (4, 4, 0.1), (2, 4, 0.2)]);
     sweep::<HopperModel>(&[(2, 4, 0.2), (2, 6, 0.2), (2, 8, 0.2), (4, 4, 0.2), (2, 6, 0.1)]);
@@ -356,7 +356,7 @@ fn measure_limit_violations() {
 /// Env steps per second of each planar robot (uniform random actions, resets included), the best
 /// of 5 one-second runs taken in turns, so that load from other processes hits them alike.
 #[test]
-#[ignore]
+#[ignore = "a measurement sweep that takes minutes: run with -- --ignored --nocapture"]
 fn measure_speed() {
     let names = ["half-cheetah", "walker", "hopper"];
     let mut best = [0.0f64; 3];
