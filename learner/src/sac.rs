@@ -82,6 +82,8 @@ pub struct Sac {
     target_entropy: f32,
     work: PolicyWork,
     act_ws: Activations,
+    /// Noise of the last `act` call (any action width).
+    act_eps: Vec<f32>,
     rng: Rng64,
     updates: u64,
 }
@@ -177,6 +179,7 @@ impl Sac {
             critics: [c1, c2],
             work: PolicyWork::default(),
             act_ws: Activations::default(),
+            act_eps: Vec::new(),
             rng,
             updates: 0,
             cfg,
@@ -240,13 +243,12 @@ impl Sac {
         if deterministic {
             squashed::mean_action(head, self.act_dim, action);
         } else {
-            let mut eps = [0.0f32; 64];
-            let eps = &mut eps[..self.act_dim];
-            for e in eps.iter_mut() {
+            resize(&mut self.act_eps, self.act_dim);
+            for e in self.act_eps.iter_mut() {
                 *e = self.rng.sample(StandardNormal);
             }
             let mut lp = [0.0];
-            squashed::sample(head, eps, self.act_dim, action, &mut lp);
+            squashed::sample(head, &self.act_eps, self.act_dim, action, &mut lp);
         }
     }
 
