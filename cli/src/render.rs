@@ -69,9 +69,11 @@ impl Policy {
             _ => bail!("{} has neither a SAC `policy` nor a DDPG `actor` network", path.display()),
         };
         let out = if gaussian { 2 * act_dim } else { act_dim };
+        // An Mlp has at least an input and an output width: check both against the environment.
         let mut expected = net.mlp.sizes().to_vec();
+        let last = expected.len() - 1;
         expected[0] = obs_dim;
-        *expected.last_mut().unwrap_or(&mut 0) = out;
+        expected[last] = out;
         let net: &NamedNetwork = NamedNetwork::find(&nets, path, &net.name, &expected)?;
         Ok(Self { mlp: net.mlp.clone(), params: net.params.clone(), gaussian, act: Activations::default() })
     }
