@@ -3,9 +3,12 @@
 //! # Layout
 //! - [`Actor`]: holds an environment and a versioned copy of the policy's flat weights (as a
 //!   transport delivers them), runs whole episodes and hands each transition to a sink.
+//! - [`role`]: the actor role over the transport links: assignments in, experience out.
 //!
 //! The actor never learns: it acts with the newest weights it was given and reports the
 //! weights version it acted with, so the learner can measure policy lag.
+
+pub mod role;
 
 use std::ops::ControlFlow;
 

@@ -9,13 +9,17 @@
 //! - [`agent`]: [`Agent`], what a training loop needs of either algorithm.
 //! - [`fear`]: the FEAR learner: population and individual SAC pairs, their buffers and the
 //!   per-episode training schedule.
+//! - [`coadapt`]: the learner role of a co-adaptation: the design schedule, lock-step episodes
+//!   over the transport, evaluation, and the run directory's rows ([`run_dir`]).
 //! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
 
 pub mod agent;
+pub mod coadapt;
 pub mod config;
 pub mod ddpg;
 pub mod fear;
 pub mod networks;
+pub mod run_dir;
 pub mod sac;
 pub mod train;
 

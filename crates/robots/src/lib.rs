@@ -38,6 +38,23 @@ pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper",
 #[error("unknown environment `{0}` (known: {known})", known = ENV_NAMES.join(", "))]
 pub struct UnknownEnv(pub String);
 
+/// The fixed designs a co-adaptation of robot `name` starts with: the reference's five for
+/// HalfCheetah (DESIGN.md section 2: the original body and four fixed others); for the other
+/// robots, which the reference did not co-adapt, `None` (the caller picks the original design
+/// plus random ones).
+pub fn reference_initial_designs(name: &str) -> Option<Vec<Vec<f32>>> {
+    match name {
+        "half-cheetah" => Some(vec![
+            vec![1.0; 6],
+            vec![1.41, 0.96, 1.97, 1.73, 1.97, 1.17],
+            vec![1.52, 1.07, 1.11, 1.97, 1.51, 0.99],
+            vec![1.08, 1.18, 1.39, 1.76, 1.85, 0.92],
+            vec![0.85, 1.54, 0.97, 1.38, 1.10, 1.49],
+        ]),
+        _ => None,
+    }
+}
+
 /// A fresh environment `name`, truncating episodes at its declared length.
 pub fn make(name: &str) -> Result<Box<dyn Env>, UnknownEnv> {
     match name {

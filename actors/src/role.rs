@@ -1,0 +1,96 @@
+//! The actor role: take an episode assignment, act with the newest weights, stream the
+//! experience back, repeat until the learner closes the assignment queue or shutdown is asked.
+
+use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use coadapt_core::Env;
+use coadapt_transport::{ActorLinks, EpisodeEnd, EpisodeMode, ExperienceChunk, TransportError};
+
+use crate::{Actor, ActorError};
+
+/// How often a waiting actor looks at the shutdown flag.
+const POLL: Duration = Duration::from_millis(100);
+
+#[derive(Debug, thiserror::Error)]
+pub enum ActorRoleError {
+    #[error(transparent)]
+    Actor(#[from] ActorError),
+    #[error("transport: {0}")]
+    Transport(#[from] TransportError),
+}
+
+/// What an actor did before it stopped.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ActorSummary {
+    pub episodes: u64,
+    pub steps: u64,
+}
+
+/// Runs assignments until the queue closes (`Ok`) or `shutdown` is set. Training episodes send
+/// every transition in chunks of `chunk_len`; evaluation episodes send only their end.
+pub fn run<E: Env>(
+    actor: &mut Actor<E>,
+    links: &mut ActorLinks,
+    chunk_len: usize,
+    shutdown: &AtomicBool,
+) -> Result<ActorSummary, ActorRoleError> {
+    let chunk_len = chunk_len.max(1);
+    let mut summary = ActorSummary::default();
+    let mut chunk = ExperienceChunk::default();
+    while !shutdown.load(Ordering::Relaxed) {
+        let a = match links.assignments.recv_timeout(POLL) {
+            Ok(Some(a)) => a,
+            Ok(None) => continue,
+            Err(TransportError::Closed) => break,
+            Err(e) => return Err(e.into()),
+        };
+        let weights = loop {
+            match links.weights.wait_for(a.min_weights_version, POLL) {
+                Ok(Some(w)) => break w,
+                Ok(None) if shutdown.load(Ordering::Relaxed) => return Ok(summary),
+                Ok(None) => continue,
+                Err(TransportError::Closed) => return Ok(summary),
+                Err(e) => return Err(e.into()),
+            }
+        };
+        if weights.version != actor.weights_version() {
+            actor.set_weights(weights.version, &weights.policy)?;
+        }
+        let train = a.mode == EpisodeMode::Train;
+        chunk.clear();
+        chunk.assignment = a.id;
+        chunk.design_index = a.design_index;
+        chunk.weights_version = actor.weights_version();
+        chunk.first = train;
+        let mut sent: Result<(), TransportError> = Ok(());
+        let stats = actor.run_episode(a.seed, &a.design, train, &mut |t| {
+            if !train {
+                return ControlFlow::Continue(());
+            }
+            chunk.obs.extend_from_slice(t.obs);
+            chunk.actions.extend_from_slice(t.action);
+            chunk.rewards.push(t.reward);
+            chunk.next_obs.extend_from_slice(t.next_obs);
+            chunk.terminated.push(t.terminated);
+            if chunk.len() == chunk_len {
+                let full = std::mem::take(&mut chunk);
+                chunk.assignment = full.assignment;
+                chunk.design_index = full.design_index;
+                chunk.weights_version = full.weights_version;
+                if let Err(e) = links.experience.send(full) {
+                    sent = Err(e);
+                    return ControlFlow::Break(());
+                }
+            }
+            ControlFlow::Continue(())
+        })?;
+        sent?;
+        chunk.end = Some(EpisodeEnd { episode_return: stats.episode_return, length: stats.length });
+        links.experience.send(std::mem::take(&mut chunk))?;
+        summary.episodes += 1;
+        summary.steps += stats.length;
+    }
+    Ok(summary)
+}
