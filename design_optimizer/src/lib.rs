@@ -10,6 +10,10 @@
 //! - [`pso`]: global-best particle swarm optimisation, the reference's 700 particles x 250
 //!   iterations as pyswarms' `GlobalBestPSO` runs them, with a choice of bound rules.
 //! - [`cmaes`]: Hansen's CMA-ES, in box-normalised coordinates with reflection at the bounds.
+//! - [`es`]: the population-based ES baselines of Ha (thesis 5.5.2), one generation per
+//!   design: the [`AskTell`] interface shared by [`OpenAiEs`] (estool's OpenAI-ES, 256
+//!   candidates) and [`Cmaes`] (lambda 9), and [`one_generation`]: ask, score the candidates in
+//!   one batched call, tell, return the generation's best.
 //! - [`novelty`]: novelty search (thesis Eq. 5.7), the mean distance to the m nearest chosen
 //!   designs, maximised by the PSO.
 //!
@@ -17,12 +21,15 @@
 //! same design.
 
 pub mod cmaes;
+pub mod es;
 pub mod novelty;
 pub mod objective;
 pub mod pso;
 pub mod swarm;
 
+pub use cmaes::Cmaes;
 pub use cmaes::CmaesConfig;
+pub use es::{AskTell, OpenAiEs, OpenAiEsConfig, one_generation};
 pub use novelty::{Novelty, NoveltyConfig};
 pub use objective::{CriticObjective, DesignObjective, ObjectiveError, ObjectiveWorkspace, QMode};
 pub use pso::{BoundHandling, PsoConfig};
