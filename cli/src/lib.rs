@@ -8,6 +8,7 @@
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
+pub mod plot;
 pub mod progress;
 pub mod render;
 pub mod train;

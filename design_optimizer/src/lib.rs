@@ -16,12 +16,16 @@
 //!   one batched call, tell, return the generation's best.
 //! - [`novelty`]: novelty search (thesis Eq. 5.7), the mean distance to the m nearest chosen
 //!   designs, maximised by the PSO.
+//! - [`landscape`]: the design landscape of thesis Fig. 5.9: [`landscape::Pca2`], the plane of the
+//!   first two principal components of the designs tried, and [`landscape::grid`], a grid over
+//!   it mapped back to (clipped) designs for the objective to score.
 //!
 //! Every search is seeded (`coadapt_core::rng(seed, <its stream>)`): the same seed gives the
 //! same design.
 
 pub mod cmaes;
 pub mod es;
+pub mod landscape;
 pub mod novelty;
 pub mod objective;
 pub mod pso;
