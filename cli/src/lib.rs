@@ -2,6 +2,9 @@
 //!
 //! # Layout
 //! - [`Cli`] and [`run`]: the clap command tree and its dispatch.
+//! - [`run`]: `coadapt run`, a whole co-adaptation: learner, design optimiser and actors as
+//!   roles over the in-process transport, writing the run directory.
+//! - [`plot`]: `coadapt plot`, the run directory's SVG plots (also drawn at the end of a run).
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
 //! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure.
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
@@ -11,6 +14,7 @@ pub mod bench;
 pub mod plot;
 pub mod progress;
 pub mod render;
+pub mod run;
 pub mod train;
 
 use clap::{Parser, Subcommand};
@@ -25,6 +29,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    Run(run::RunArgs),
+    Plot(plot::PlotArgs),
     Train(train::TrainArgs),
     Render(render::RenderArgs),
     /// Run benchmarks; each prints one JSON line per figure.
@@ -35,6 +41,8 @@ pub enum Command {
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Run(args) => run::run(args),
+        Command::Plot(args) => plot::run(args),
         Command::Train(args) => train::run(args),
         Command::Render(args) => render::run(args),
         Command::Bench(cmd) => bench::run(cmd),

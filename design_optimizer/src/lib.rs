@@ -19,6 +19,9 @@
 //! - [`landscape`]: the design landscape of thesis Fig. 5.9: [`landscape::Pca2`], the plane of the
 //!   first two principal components of the designs tried, and [`landscape::grid`], a grid over
 //!   it mapped back to (clipped) designs for the objective to score.
+//! - [`role`]: the optimiser role: design requests in, designs out, by PSO/CMA-ES over Q,
+//!   the simulation baselines (through a [`role::RolloutEvaluator`]), ES or random; and
+//!   exploration by random designs or novelty.
 //!
 //! Every search is seeded (`coadapt_core::rng(seed, <its stream>)`): the same seed gives the
 //! same design.
@@ -29,6 +32,7 @@ pub mod landscape;
 pub mod novelty;
 pub mod objective;
 pub mod pso;
+pub mod role;
 pub mod swarm;
 
 pub use cmaes::Cmaes;

@@ -1,0 +1,191 @@
+//! `coadapt run` end to end: the tiny config through the binary, and every baseline and
+//! ablation as a configuration of the same run through the library.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::AtomicBool;
+
+use coadapt_cli::run::{RunConfig, resolve_initial_designs, run_config};
+use coadapt_design_optimizer::role::ExploitMethod;
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coadapt-run-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn workspace_file(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+fn tiny() -> RunConfig {
+    let text = std::fs::read_to_string(workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
+    toml::from_str(&text).unwrap()
+}
+
+/// Rows of a CSV file as header -> value maps.
+fn csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().split(',').map(String::from).collect::<Vec<_>>();
+    let rows = lines.map(|l| l.split(',').map(String::from).collect::<Vec<_>>()).collect::<Vec<_>>();
+    for (i, r) in rows.iter().enumerate() {
+        assert_eq!(r.len(), header.len(), "{} row {i} has {} fields: {r:?}", path.display(), r.len());
+    }
+    (header, rows)
+}
+
+fn col<'a>(header: &[String], rows: &'a [Vec<String>], name: &str) -> Vec<&'a str> {
+    let i = header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name} in {header:?}"));
+    rows.iter().map(|r| r[i].as_str()).collect()
+}
+
+#[test]
+fn the_tiny_config_writes_the_whole_run_directory() {
+    let out = tmpdir("tiny");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "stderr: {stderr}");
+    assert!(stderr.contains("design 3/4 [exploit pso-q]"), "progress names design, kind and method: {stderr}");
+    assert!(stderr.contains("ETA"), "progress shows an ETA: {stderr}");
+    let summary: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
+    assert_eq!(summary["designs"], 4);
+    assert_eq!(summary["design_rollouts"], 0, "FEAR spends no design rollouts");
+
+    // The resolved config reads back as the config that ran.
+    let resolved: RunConfig = toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
+    let mut expected = tiny();
+    resolve_initial_designs(&mut expected, &coadapt_robots::make("half-cheetah").unwrap().spec().clone());
+    assert_eq!(resolved, expected);
+
+    let (h, rows) = csv(&out.join("designs.csv"));
+    assert_eq!(
+        h,
+        ["index", "kind", "design", "episodes", "best_eval_return", "last_eval_return", "predicted_objective", "design_rollouts", "method"]
+    );
+    assert_eq!(col(&h, &rows, "index"), ["0", "1", "2", "3"]);
+    assert_eq!(col(&h, &rows, "kind"), ["initial", "initial", "exploit", "explore"]);
+    assert_eq!(col(&h, &rows, "method"), ["fixed", "fixed", "pso-q", "novelty"]);
+    assert_eq!(col(&h, &rows, "episodes"), ["3", "3", "2", "2"]);
+    for (i, d) in col(&h, &rows, "design").iter().enumerate() {
+        let v: Vec<f32> = d.split(';').map(|x| x.parse().unwrap()).collect();
+        assert_eq!(v.len(), 6, "design {i}");
+        assert!(v.iter().all(|x| (0.8..=2.0).contains(x)), "design {i} inside the bounds: {v:?}");
+    }
+    for (i, p) in col(&h, &rows, "predicted_objective").iter().enumerate() {
+        assert_eq!(p.is_empty(), i < 2, "only chosen designs carry a predicted objective (row {i}: {p:?})");
+    }
+    for r in col(&h, &rows, "best_eval_return").iter().chain(&col(&h, &rows, "last_eval_return")) {
+        assert!(r.parse::<f32>().unwrap().is_finite());
+    }
+
+    let (h, rows) = csv(&out.join("episodes.csv"));
+    assert_eq!(h, ["design", "episode", "global_episode", "steps", "return", "eval_return", "weights_version", "seconds"]);
+    assert_eq!(rows.len(), 10);
+    assert_eq!(col(&h, &rows, "design"), ["0", "0", "0", "1", "1", "1", "2", "2", "3", "3"]);
+    let steps: Vec<u64> = col(&h, &rows, "steps").iter().map(|s| s.parse().unwrap()).collect();
+    assert_eq!(steps.last(), Some(&10_000), "ten 1000-step episodes");
+    assert!(col(&h, &rows, "return").iter().all(|r| r.parse::<f32>().unwrap().is_finite()));
+
+    let (h, rows) = csv(&out.join("landscape.csv"));
+    assert_eq!(h, ["pc1", "pc2", "objective"]);
+    assert_eq!(rows.len(), 12 * 12);
+    let (h, rows) = csv(&out.join("landscape_designs.csv"));
+    assert_eq!(h, ["index", "kind", "pc1", "pc2"]);
+    assert_eq!(rows.len(), 4);
+
+    for f in ["checkpoints/population.safetensors", "checkpoints/individual.safetensors"] {
+        assert!(out.join(f).metadata().unwrap().len() > 1000, "{f}");
+    }
+    for f in ["learning_curves.svg", "best_return.svg", "landscape.svg"] {
+        let svg = std::fs::read_to_string(out.join("plots").join(f)).unwrap();
+        assert!(svg.contains("<svg"), "{f}");
+    }
+
+    // `coadapt plot` redraws them; a second run into the same directory is refused.
+    std::fs::remove_dir_all(out.join("plots")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt")).args(["plot", out.to_str().unwrap()]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("plots/landscape.svg").exists());
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("already holds a run"));
+}
+
+/// A tiny config with the design searches shrunk so rollouts stay cheap.
+fn small(exploit: ExploitMethod) -> RunConfig {
+    let mut c = tiny();
+    c.landscape_grid = 0;
+    c.optimizer.exploit = exploit;
+    c.optimizer.sim_pso.particles = 3;
+    c.optimizer.sim_pso.iterations = 2;
+    c.optimizer.sim_cmaes.population = Some(3);
+    c.optimizer.sim_cmaes.generations = 2;
+    c.optimizer.openai_es.population = 4;
+    c.optimizer.cmaes_es.population = Some(3);
+    c.optimizer.cmaes.generations = 5;
+    resolve_initial_designs(&mut c, &coadapt_robots::make("half-cheetah").unwrap().spec().clone());
+    c
+}
+
+fn rollouts_and_methods(c: &RunConfig, name: &str) -> Vec<(String, String, u64)> {
+    let out = tmpdir(name);
+    let outcome = run_config(c, &out, &AtomicBool::new(false)).unwrap();
+    assert!(!outcome.interrupted);
+    assert_eq!(outcome.designs.len(), c.schedule.designs);
+    outcome.designs.iter().map(|d| (d.kind.clone(), d.method.clone(), d.design_rollouts)).collect()
+}
+
+#[test]
+fn simulation_baselines_spend_rollouts_and_fear_spends_none() {
+    let r = rollouts_and_methods(&small(ExploitMethod::SimPso), "sim-pso");
+    assert_eq!(r[2], ("exploit".into(), "sim-pso".into(), 6), "PSO 3 particles x 2 iterations = 6 rollouts");
+    assert_eq!(r[3].2, 0, "exploration needs no rollouts");
+    let r = rollouts_and_methods(&small(ExploitMethod::SimCmaes), "sim-cmaes");
+    assert_eq!(r[2], ("exploit".into(), "sim-cmaes".into(), 6));
+    let r = rollouts_and_methods(&small(ExploitMethod::CmaesQ), "cmaes-q");
+    assert_eq!(r[2], ("exploit".into(), "cmaes-q".into(), 0));
+}
+
+#[test]
+fn es_baselines_take_one_generation_per_design() {
+    for (m, name, pop) in [(ExploitMethod::OpenaiEs, "openai-es", 4), (ExploitMethod::CmaesEs, "cmaes-es", 3)] {
+        let mut c = small(m);
+        c.schedule.alternate = false;
+        let r = rollouts_and_methods(&c, name);
+        assert_eq!(r[2], ("exploit".into(), name.into(), pop));
+        assert_eq!(r[3], ("exploit".into(), name.into(), pop), "no exploration when alternate = false");
+    }
+}
+
+#[test]
+fn random_designs_and_the_ablations_are_configurations() {
+    let mut c = small(ExploitMethod::Random);
+    c.schedule.alternate = false;
+    let r = rollouts_and_methods(&c, "random");
+    assert!(r[2..].iter().all(|(k, m, n)| k == "exploit" && m == "random" && *n == 0), "{r:?}");
+    let mut c = small(ExploitMethod::PsoQ);
+    c.learner.population_only = true;
+    c.schedule.start_state_batch = 1;
+    let r = rollouts_and_methods(&c, "pop-only");
+    assert_eq!(r[2].1, "pso-q");
+}
+
+#[test]
+fn bad_configs_are_refused_with_the_field_named() {
+    let out = tmpdir("bad");
+    let mut c = small(ExploitMethod::PsoQ);
+    c.schedule.initial_designs[1] = vec![1.0; 5];
+    let e = format!("{:#}", run_config(&c, &out, &AtomicBool::new(false)).unwrap_err());
+    assert!(e.contains("schedule.initial-designs[1]"), "{e}");
+    let e = toml::from_str::<RunConfig>("[schedule]\ndesings = 3\n").unwrap_err().to_string();
+    assert!(e.contains("desings"), "{e}");
+}

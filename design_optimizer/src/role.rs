@@ -1,0 +1,327 @@
+//! The design optimiser role: answers the learner's design requests with the configured
+//! method, scoring with the population networks it receives over the transport.
+//!
+//! Methods (`exploit`), all with the same request/reply shape, so the baselines of thesis
+//! 5.5.2 are configurations of one run:
+//! - `pso-q` (FEAR): PSO over Eq. 5.6; `cmaes-q`: CMA-ES over Eq. 5.6. Zero design rollouts.
+//! - `sim-pso`, `sim-cmaes`: the same searches over the mean per-step reward of one rollout
+//!   of the population policy per design, through a [`RolloutEvaluator`] (35 x 30 = 1050
+//!   rollouts per design by default).
+//! - `openai-es`, `cmaes-es`: one generation of a persistent ES per design (256 and 9
+//!   candidates evaluated in simulation); the generation's best candidate is trained on.
+//! - `random`: uniform in the box.
+//!
+//! Exploration requests use `explore`: `random` or `novelty` (Eq. 5.7). Every reply carries
+//! the Eq. 5.6 score of the chosen design under the current population networks.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use coadapt_core::{BoxSpace, Rng64, rng};
+use coadapt_nn::Mlp;
+use coadapt_transport::messages::Dims;
+use coadapt_transport::{DesignKind, DesignReply, DesignRequest, OptimizerLinks, TransportError, Validate, Weights};
+use serde::{Deserialize, Serialize};
+
+use crate::es::{AskTell, OpenAiEs, OpenAiEsConfig, one_generation};
+use crate::{Cmaes, CmaesConfig, CriticObjective, DesignObjective, NoveltyConfig, PsoConfig, QMode, SearchResult, cmaes, novelty, pso};
+
+/// How exploitation designs are chosen.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExploitMethod {
+    #[default]
+    PsoQ,
+    CmaesQ,
+    SimPso,
+    SimCmaes,
+    OpenaiEs,
+    CmaesEs,
+    Random,
+}
+
+impl ExploitMethod {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PsoQ => "pso-q",
+            Self::CmaesQ => "cmaes-q",
+            Self::SimPso => "sim-pso",
+            Self::SimCmaes => "sim-cmaes",
+            Self::OpenaiEs => "openai-es",
+            Self::CmaesEs => "cmaes-es",
+            Self::Random => "random",
+        }
+    }
+
+    pub fn needs_rollouts(self) -> bool {
+        matches!(self, Self::SimPso | Self::SimCmaes | Self::OpenaiEs | Self::CmaesEs)
+    }
+}
+
+/// How exploration designs are chosen.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExploreMethod {
+    #[default]
+    Random,
+    Novelty,
+}
+
+/// Which critic scores Eq. 5.6.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum QModeConfig {
+    /// Q1 alone, as the reference.
+    #[default]
+    Q1,
+    /// min(Q1, Q2).
+    MinOfTwin,
+}
+
+/// The optimiser's settings; defaults are the reference's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct OptimizerConfig {
+    /// `pso-q` (FEAR), `cmaes-q`, `sim-pso`, `sim-cmaes`, `openai-es`, `cmaes-es` or `random`.
+    pub exploit: ExploitMethod,
+    /// `random` or `novelty`.
+    pub explore: ExploreMethod,
+    /// `q1` or `min-of-twin`.
+    pub q: QModeConfig,
+    /// Cores for scoring the swarm over Q.
+    pub cores: usize,
+    /// PSO over Q (and novelty search's PSO).
+    pub pso: PsoConfig,
+    /// CMA-ES over Q.
+    pub cmaes: CmaesConfig,
+    pub novelty: NoveltyConfig,
+    /// PSO over rollouts (35 x 30).
+    pub sim_pso: PsoConfig,
+    /// CMA-ES over rollouts (35 candidates x 30 generations by default, the sim-PSO budget).
+    pub sim_cmaes: CmaesConfig,
+    pub openai_es: OpenAiEsConfig,
+    /// CMA-ES one generation per design (9 candidates).
+    pub cmaes_es: CmaesConfig,
+}
+
+impl Default for OptimizerConfig {
+    fn default() -> Self {
+        Self {
+            exploit: ExploitMethod::PsoQ,
+            explore: ExploreMethod::Random,
+            q: QModeConfig::Q1,
+            cores: 2,
+            pso: PsoConfig::default(),
+            cmaes: CmaesConfig::default(),
+            novelty: NoveltyConfig::default(),
+            sim_pso: PsoConfig { particles: 35, iterations: 30, ..PsoConfig::default() },
+            sim_cmaes: CmaesConfig { population: Some(35), generations: 30, tol_x: 0.0, ..CmaesConfig::default() },
+            openai_es: OpenAiEsConfig::default(),
+            cmaes_es: CmaesConfig { population: Some(9), ..CmaesConfig::default() },
+        }
+    }
+}
+
+/// Scores designs by simulation: one rollout of `policy` per design, fitness the mean
+/// per-step reward (higher is better).
+pub trait RolloutEvaluator {
+    fn evaluate(&mut self, policy: &[f32], designs: &[f32], fitness: &mut [f32]) -> Result<(), String>;
+}
+
+/// The shapes the optimiser scores with.
+#[derive(Clone, Debug)]
+pub struct OptimizerSpec {
+    pub policy: Mlp,
+    pub critic: Mlp,
+    pub bounds: BoxSpace,
+    /// Observation columns of the design: `design_at..design_at + bounds.dim()`.
+    pub design_at: usize,
+    pub obs_dim: usize,
+    pub act_dim: usize,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum OptimizerError {
+    #[error("transport: {0}")]
+    Transport(#[from] TransportError),
+    #[error("config: {0}")]
+    Config(String),
+    #[error("design {index}: {why}")]
+    Design { index: u32, why: String },
+}
+
+const POLL: Duration = Duration::from_millis(100);
+
+/// The optimiser's state across requests.
+pub struct Optimizer<'a> {
+    cfg: OptimizerConfig,
+    spec: OptimizerSpec,
+    evaluator: Option<&'a mut dyn RolloutEvaluator>,
+    es: Option<Box<dyn AskTell>>,
+    rng: Rng64,
+    seed: u64,
+    requests: u64,
+}
+
+impl std::fmt::Debug for Optimizer<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Optimizer").field("cfg", &self.cfg).field("requests", &self.requests).finish_non_exhaustive()
+    }
+}
+
+impl<'a> Optimizer<'a> {
+    pub fn new(
+        cfg: OptimizerConfig,
+        spec: OptimizerSpec,
+        evaluator: Option<&'a mut dyn RolloutEvaluator>,
+        seed: u64,
+    ) -> Result<Self, OptimizerError> {
+        if cfg.exploit.needs_rollouts() && evaluator.is_none() {
+            return Err(OptimizerError::Config(format!("optimizer.exploit = {} needs simulation rollouts", cfg.exploit.name())));
+        }
+        let es: Option<Box<dyn AskTell>> = match cfg.exploit {
+            ExploitMethod::OpenaiEs => Some(Box::new(
+                OpenAiEs::new(&spec.bounds, &cfg.openai_es, seed)
+                    .map_err(|e| OptimizerError::Config(format!("optimizer.openai-es: {e}")))?,
+            )),
+            ExploitMethod::CmaesEs => Some(Box::new(
+                Cmaes::new(&spec.bounds, &cfg.cmaes_es, seed).map_err(|e| OptimizerError::Config(format!("optimizer.cmaes-es: {e}")))?,
+            )),
+            _ => None,
+        };
+        Ok(Self { rng: rng(seed, 0x4f50_5449), cfg, spec, evaluator, es, seed, requests: 0 })
+    }
+
+    fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, String> {
+        let thetas: Vec<&[f32]> = match self.cfg.q {
+            QModeConfig::Q1 => vec![&w.q1],
+            QModeConfig::MinOfTwin => vec![&w.q1, &w.q2],
+        };
+        DesignObjective::new(
+            &self.spec.policy,
+            &w.policy,
+            &self.spec.critic,
+            &thetas,
+            start_states,
+            self.spec.design_at,
+            self.spec.bounds.dim(),
+        )
+        .map_err(|e| e.to_string())
+    }
+
+    /// Chooses the design of `req` with population weights `w`.
+    pub fn choose(&mut self, req: &DesignRequest, w: &Weights) -> Result<DesignReply, OptimizerError> {
+        let err = |why: String| OptimizerError::Design { index: req.index, why };
+        self.requests += 1;
+        let seed = self.seed.wrapping_add(self.requests.wrapping_mul(0x9E37_79B9));
+        let objective = self.objective(w, &req.start_states).map_err(err)?;
+        let mode = if self.cfg.q == QModeConfig::Q1 { QMode::First } else { QMode::MinOfTwin };
+        let mut q = CriticObjective::new(&objective, mode, self.cfg.cores);
+        let bounds = self.spec.bounds.clone();
+        let (method, result, rollouts): (&str, SearchResult, u64) = match req.kind {
+            DesignKind::Explore => match self.cfg.explore {
+                ExploreMethod::Random => ("random", self.random(), 0),
+                ExploreMethod::Novelty => {
+                    let r = novelty::most_novel(&req.chosen, &bounds, &self.cfg.novelty, seed).map_err(|e| err(e.to_string()))?;
+                    ("novelty", r, 0)
+                }
+            },
+            DesignKind::Exploit => {
+                let m = self.cfg.exploit;
+                let r = match m {
+                    ExploitMethod::PsoQ => pso::maximise(&mut q, &bounds, &self.cfg.pso, seed),
+                    ExploitMethod::CmaesQ => cmaes::maximise(&mut q, &bounds, &self.cfg.cmaes, seed),
+                    ExploitMethod::Random => Ok(self.random()),
+                    ExploitMethod::SimPso | ExploitMethod::SimCmaes | ExploitMethod::OpenaiEs | ExploitMethod::CmaesEs => {
+                        self.by_simulation(m, &w.policy, &bounds, seed)
+                    }
+                }
+                .map_err(|e| err(e.to_string()))?;
+                let rollouts = if m.needs_rollouts() { r.evaluations as u64 } else { 0 };
+                (m.name(), r, rollouts)
+            }
+        };
+        let mut predicted = [0.0];
+        q.evaluate_one(&result.design, &mut predicted);
+        Ok(DesignReply {
+            index: req.index,
+            design: result.design,
+            method: method.into(),
+            predicted_objective: predicted[0].is_finite().then_some(predicted[0]),
+            design_rollouts: rollouts,
+        })
+    }
+
+    fn random(&mut self) -> SearchResult {
+        let mut d = vec![0.0; self.spec.bounds.dim()];
+        self.spec.bounds.sample(&mut self.rng, &mut d);
+        SearchResult { design: d, score: f32::NAN, history: vec![], evaluations: 0 }
+    }
+
+    fn by_simulation(
+        &mut self,
+        m: ExploitMethod,
+        policy: &[f32],
+        bounds: &BoxSpace,
+        seed: u64,
+    ) -> Result<SearchResult, crate::SearchError> {
+        let Some(ev) = self.evaluator.as_deref_mut() else {
+            return Err(crate::SearchError::Config(format!("{} needs simulation rollouts", m.name())));
+        };
+        let mut failure: Option<String> = None;
+        let mut sim = |designs: &[f32], fitness: &mut [f32]| {
+            if let Err(e) = ev.evaluate(policy, designs, fitness) {
+                fitness.fill(f32::NAN);
+                failure.get_or_insert(e);
+            }
+        };
+        let r = match m {
+            ExploitMethod::SimPso => pso::maximise(&mut sim, bounds, &self.cfg.sim_pso, seed),
+            ExploitMethod::SimCmaes => cmaes::maximise(&mut sim, bounds, &self.cfg.sim_cmaes, seed),
+            _ => match self.es.as_deref_mut() {
+                Some(es) => one_generation(es, &mut sim),
+                None => Err(crate::SearchError::Config("no ES state".into())),
+            },
+        };
+        match failure {
+            Some(e) => Err(crate::SearchError::Config(format!("rollouts failed: {e}"))),
+            None => r,
+        }
+    }
+}
+
+impl CriticObjective<'_> {
+    fn evaluate_one(&mut self, design: &[f32], out: &mut [f32; 1]) {
+        crate::SwarmObjective::evaluate(self, design, out);
+    }
+}
+
+/// Serves design requests until the learner closes the queue (`Ok`) or `shutdown` is set.
+pub fn run(opt: &mut Optimizer<'_>, links: &mut OptimizerLinks, shutdown: &AtomicBool) -> Result<u64, OptimizerError> {
+    let dims = Dims { obs: opt.spec.obs_dim, act: opt.spec.act_dim, design: opt.spec.bounds.dim() };
+    let mut served = 0;
+    while !shutdown.load(Ordering::Relaxed) {
+        let req = match links.requests.recv_timeout(POLL) {
+            Ok(Some(r)) => r,
+            Ok(None) => continue,
+            Err(TransportError::Closed) => break,
+            Err(e) => return Err(e.into()),
+        };
+        if let Err(e) = req.validate(&dims) {
+            return Err(OptimizerError::Design { index: req.index, why: format!("malformed request: {e}") });
+        }
+        let w = loop {
+            match links.weights.wait_for(req.weights_version, POLL) {
+                Ok(Some(w)) => break w,
+                Ok(None) if shutdown.load(Ordering::Relaxed) => return Ok(served),
+                Ok(None) => continue,
+                Err(TransportError::Closed) => return Ok(served),
+                Err(e) => return Err(e.into()),
+            }
+        };
+        let reply = opt.choose(&req, &w)?;
+        links.replies.send(reply)?;
+        served += 1;
+    }
+    Ok(served)
+}
