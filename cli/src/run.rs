@@ -82,7 +82,8 @@ pub struct RunArgs {
     /// [optimizer] tables); a run directory's config.toml is a valid one.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Run directory (default: runs/<config name>-seed<seed>); must not hold a run already.
+    /// Run directory (default: runs/<config name>-seed<seed>, with -2, -3, ... appended if
+    /// taken); an explicit --out must not hold a run already.
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Override the seed.
@@ -347,8 +348,17 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
     Ok(())
 }
 
+/// `runs/<name>-seed<seed>`, or with `-2`, `-3`, ... appended when that already holds a run, so
+/// running the same command again never overwrites or refuses.
 fn default_out(name: &str, seed: u64) -> PathBuf {
-    PathBuf::from("runs").join(format!("{name}-seed{seed}"))
+    let base = PathBuf::from("runs").join(format!("{name}-seed{seed}"));
+    let mut dir = base.clone();
+    let mut i = 2;
+    while dir.join("designs.csv").exists() {
+        dir = PathBuf::from(format!("{}-{i}", base.display()));
+        i += 1;
+    }
+    dir
 }
 
 /// `coadapt run`.
