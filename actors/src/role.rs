@@ -2,16 +2,12 @@
 //! experience back, repeat until the learner closes the assignment queue or shutdown is asked.
 
 use std::ops::ControlFlow;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::sync::atomic::AtomicBool;
 
 use coadapt_core::Env;
-use coadapt_transport::{ActorLinks, EpisodeEnd, EpisodeMode, ExperienceChunk, TransportError};
+use coadapt_transport::{ActorLinks, EpisodeEnd, EpisodeMode, ExperienceChunk, TransportError, newest_or_stop, next_or_stop};
 
 use crate::{Actor, ActorError};
-
-/// How often a waiting actor looks at the shutdown flag.
-const POLL: Duration = Duration::from_millis(100);
 
 #[derive(Debug, thiserror::Error)]
 pub enum ActorRoleError {
@@ -39,22 +35,8 @@ pub fn run<E: Env>(
     let chunk_len = chunk_len.max(1);
     let mut summary = ActorSummary::default();
     let mut chunk = ExperienceChunk::default();
-    while !shutdown.load(Ordering::Relaxed) {
-        let a = match links.assignments.recv_timeout(POLL) {
-            Ok(Some(a)) => a,
-            Ok(None) => continue,
-            Err(TransportError::Closed) => break,
-            Err(e) => return Err(e.into()),
-        };
-        let weights = loop {
-            match links.weights.wait_for(a.min_weights_version, POLL) {
-                Ok(Some(w)) => break w,
-                Ok(None) if shutdown.load(Ordering::Relaxed) => return Ok(summary),
-                Ok(None) => continue,
-                Err(TransportError::Closed) => return Ok(summary),
-                Err(e) => return Err(e.into()),
-            }
-        };
+    while let Some(a) = next_or_stop(links.assignments.as_mut(), shutdown)? {
+        let Some(weights) = newest_or_stop(links.weights.as_mut(), a.min_weights_version, shutdown)? else { break };
         if weights.version != actor.weights_version() {
             actor.set_weights(weights.version, &weights.policy)?;
         }

@@ -14,13 +14,14 @@
 //! Exploration requests use `explore`: `random` or `novelty` (Eq. 5.7). Every reply carries
 //! the Eq. 5.6 score of the chosen design under the current population networks.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::sync::atomic::AtomicBool;
 
 use coadapt_core::{BoxSpace, Rng64, rng};
 use coadapt_nn::Mlp;
 use coadapt_transport::messages::Dims;
-use coadapt_transport::{DesignKind, DesignReply, DesignRequest, OptimizerLinks, TransportError, Validate, Weights};
+use coadapt_transport::{
+    DesignKind, DesignReply, DesignRequest, OptimizerLinks, TransportError, Validate, Weights, newest_or_stop, next_or_stop,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::es::{AskTell, OpenAiEs, OpenAiEsConfig, one_generation};
@@ -149,8 +150,6 @@ pub enum OptimizerError {
     #[error("design {index}: {why}")]
     Design { index: u32, why: String },
 }
-
-const POLL: Duration = Duration::from_millis(100);
 
 /// The optimiser's state across requests.
 pub struct Optimizer<'a> {
@@ -300,25 +299,11 @@ impl CriticObjective<'_> {
 pub fn run(opt: &mut Optimizer<'_>, links: &mut OptimizerLinks, shutdown: &AtomicBool) -> Result<u64, OptimizerError> {
     let dims = Dims { obs: opt.spec.obs_dim, act: opt.spec.act_dim, design: opt.spec.bounds.dim() };
     let mut served = 0;
-    while !shutdown.load(Ordering::Relaxed) {
-        let req = match links.requests.recv_timeout(POLL) {
-            Ok(Some(r)) => r,
-            Ok(None) => continue,
-            Err(TransportError::Closed) => break,
-            Err(e) => return Err(e.into()),
-        };
+    while let Some(req) = next_or_stop(links.requests.as_mut(), shutdown)? {
         if let Err(e) = req.validate(&dims) {
             return Err(OptimizerError::Design { index: req.index, why: format!("malformed request: {e}") });
         }
-        let w = loop {
-            match links.weights.wait_for(req.weights_version, POLL) {
-                Ok(Some(w)) => break w,
-                Ok(None) if shutdown.load(Ordering::Relaxed) => return Ok(served),
-                Ok(None) => continue,
-                Err(TransportError::Closed) => return Ok(served),
-                Err(e) => return Err(e.into()),
-            }
-        };
+        let Some(w) = newest_or_stop(links.weights.as_mut(), req.weights_version, shutdown)? else { break };
         let reply = opt.choose(&req, &w)?;
         links.replies.send(reply)?;
         served += 1;

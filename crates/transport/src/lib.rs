@@ -27,4 +27,4 @@ pub use links::{ActorLinks, LearnerLinks, OptimizerLinks};
 pub use messages::{
     Assignment, DesignKind, DesignReply, DesignRequest, EpisodeEnd, EpisodeMode, ExperienceChunk, MessageError, Validate, Weights,
 };
-pub use traits::{Publisher, Receiver, Sender, Subscriber, TransportError};
+pub use traits::{Publisher, Receiver, Sender, Subscriber, TransportError, newest_or_stop, next_or_stop};

@@ -44,3 +44,38 @@ pub trait Subscriber<T>: Send {
     /// one; `Ok(None)` on timeout.
     fn wait_for(&mut self, min_version: u64, timeout: Duration) -> Result<Option<Arc<T>>, TransportError>;
 }
+
+/// How often [`next_or_stop`] and [`newest_or_stop`] look at the stop flag.
+pub const STOP_POLL: Duration = Duration::from_millis(100);
+
+/// The next message, waiting as long as it takes; `Ok(None)` once `stop` is set or every
+/// sender has gone (a role's normal end).
+pub fn next_or_stop<T>(rx: &mut dyn Receiver<T>, stop: &std::sync::atomic::AtomicBool) -> Result<Option<T>, TransportError> {
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        match rx.recv_timeout(STOP_POLL) {
+            Ok(Some(m)) => return Ok(Some(m)),
+            Ok(None) => continue,
+            Err(TransportError::Closed) => return Ok(None),
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(None)
+}
+
+/// The newest value of at least `min_version`, waiting as long as it takes; `Ok(None)` once
+/// `stop` is set or the publisher has gone.
+pub fn newest_or_stop<T>(
+    sub: &mut dyn Subscriber<T>,
+    min_version: u64,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<Option<Arc<T>>, TransportError> {
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        match sub.wait_for(min_version, STOP_POLL) {
+            Ok(Some(w)) => return Ok(Some(w)),
+            Ok(None) => continue,
+            Err(TransportError::Closed) => return Ok(None),
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(None)
+}
