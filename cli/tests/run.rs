@@ -186,6 +186,10 @@ fn bad_configs_are_refused_with_the_field_named() {
     c.schedule.initial_designs[1] = vec![1.0; 5];
     let e = format!("{:#}", run_config(&c, &out, &AtomicBool::new(false)).unwrap_err());
     assert!(e.contains("schedule.initial-designs[1]"), "{e}");
+    let mut c = small(ExploitMethod::PsoQ);
+    c.schedule.episode_timeout_secs = f64::INFINITY;
+    let e = format!("{:#}", run_config(&c, &tmpdir("bad-timeout"), &AtomicBool::new(false)).unwrap_err());
+    assert!(e.contains("schedule.episode-timeout-secs"), "{e}");
     let e = toml::from_str::<RunConfig>("[schedule]\ndesings = 3\n").unwrap_err().to_string();
     assert!(e.contains("desings"), "{e}");
 }

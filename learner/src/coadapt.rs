@@ -168,7 +168,8 @@ impl Learner<'_> {
         let seed = mix(self.seed, 2 * global + u64::from(mode == EpisodeMode::Eval));
         let a = Assignment { id, design_index: design_index as u32, design: design.to_vec(), mode, seed, min_weights_version: version };
         self.links.assignments.send(a)?;
-        let timeout = Duration::from_secs_f64(self.cfg.episode_timeout_secs.max(1.0));
+        // `run` has checked the field; an unrepresentable value cannot reach here.
+        let timeout = Duration::try_from_secs_f64(self.cfg.episode_timeout_secs.max(1.0)).unwrap_or(Duration::from_secs(600));
         let mut last = Instant::now();
         loop {
             if self.shutdown.load(Ordering::Relaxed) {
@@ -254,6 +255,10 @@ pub fn run(
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     if cfg.initial_designs.is_empty() {
         return Err(CoadaptError::Config("schedule.initial-designs: at least one initial design is needed".into()));
+    }
+    let t = cfg.episode_timeout_secs;
+    if !(t.is_finite() && t > 0.0 && Duration::try_from_secs_f64(t).is_ok()) {
+        return Err(CoadaptError::Config(format!("schedule.episode-timeout-secs: {t} is not a positive number of seconds")));
     }
     for (i, d) in cfg.initial_designs.iter().enumerate() {
         spec.design.check_finite("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
