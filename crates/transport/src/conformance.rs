@@ -14,6 +14,7 @@ const LONG: Duration = Duration::from_secs(10);
 pub fn chunk(i: u64) -> ExperienceChunk {
     let x = i as f32;
     ExperienceChunk {
+        actor: 7,
         assignment: i,
         design_index: 0,
         weights_version: i,

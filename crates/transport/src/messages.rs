@@ -109,6 +109,8 @@ pub struct EpisodeEnd {
 /// Consecutive transitions of one episode, column-wise (`n` rows each).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ExperienceChunk {
+    /// The actor that ran the episode (for policy lag and liveness).
+    pub actor: u64,
     pub assignment: u64,
     pub design_index: u32,
     /// Weights version the transitions were acted with.

@@ -1,0 +1,1 @@
+//! coadapt over gRPC (being written).

@@ -1,0 +1,1 @@
+//! coadapt over iceoryx2 shared memory (being written).
