@@ -30,8 +30,8 @@ Options:
                       env COADAPT_FLEET
   --seed S            override the config's seed (learner)
   --listen ADDR       gRPC: learner listen address (default 0.0.0.0:50051); env COADAPT_LISTEN
-  --connect URL       gRPC: where actors and optimiser connect (default http://127.0.0.1:<port
-                      of --listen>); env COADAPT_CONNECT
+  --connect URL       gRPC: where actors and optimiser connect (default http://<host of --listen,
+                      127.0.0.1 for 0.0.0.0>:<port>); env COADAPT_CONNECT
   --roles LIST        comma-separated subset of learner,optimizer,actors (default all three)
   --bin PATH          coadapt binary (default $COADAPT_BIN, else <repo>/target/release/coadapt,
                       else coadapt on PATH)
@@ -149,7 +149,9 @@ done
 if [[ $transport == grpc && -z $connect ]]; then
   port=${listen##*:}
   is_uint "$port" || die "--listen '$listen' has no port"
-  connect="http://127.0.0.1:$port"
+  host=${listen%:*}
+  case $host in "" | 0.0.0.0 | "[::]") host=127.0.0.1 ;; esac
+  connect="http://$host:$port"
 fi
 
 if [[ -z $out ]]; then
@@ -270,8 +272,12 @@ if ((want_learner)); then
   if [[ $transport == grpc ]]; then
     # Wait until the learner accepts connections, so the others' first attempt succeeds.
     port=${listen##*:}
+    host=${listen%:*}
+    case $host in "" | 0.0.0.0 | "[::]") host=127.0.0.1 ;; esac
+    host=${host#[}
+    host=${host%]}
     deadline=$((SECONDS + ready_timeout))
-    until (exec 3<>"/dev/tcp/127.0.0.1/$port") 2>/dev/null; do
+    until (exec 3<>"/dev/tcp/$host/$port") 2>/dev/null; do
       kill -0 "$learner_pid" 2>/dev/null || break
       ((SECONDS < deadline)) || { log "learner not listening on port $port after ${ready_timeout}s; starting the others anyway"; break; }
       sleep 0.5

@@ -53,8 +53,12 @@ done
 
 port=${listen##*:}
 [[ $port =~ ^[0-9]+$ ]] || die "--listen '$listen' has no port"
+# The optimiser on this host connects to the learner here: 127.0.0.1 when it listens on all
+# addresses, else the address it listens on.
+host=${listen%:*}
+case $host in "" | 0.0.0.0 | "[::]") host=127.0.0.1 ;; esac
 args=(--transport grpc --roles "learner,optimizer" --config "$config" --listen "$listen"
-  --connect "http://127.0.0.1:$port" --fleet "$fleet")
+  --connect "http://$host:$port" --fleet "$fleet")
 [[ -z $out ]] || args+=(--out "$out")
 [[ -z $bin ]] || args+=(--bin "$bin")
 [[ -z $seed ]] || args+=(--seed "$seed")
