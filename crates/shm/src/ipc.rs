@@ -1,0 +1,178 @@
+//! The iceoryx2 plumbing every channel shares: the service flavour, nodes, how services are
+//! opened (every party opens them with the same settings, or iceoryx2 refuses), dead-node
+//! cleanup.
+
+use std::fmt::Debug;
+use std::time::{Duration, Instant};
+
+use coadapt_transport::TransportError;
+use iceoryx2::node::{NodeCleanupFailure, NodeView};
+use iceoryx2::prelude::*;
+
+/// Thread-safe ports, because links are boxed `Send` trait objects (ports of `ipc::Service`
+/// are `!Send`).
+pub(crate) type Svc = ipc_threadsafe::Service;
+/// Samples are encoded messages; the user header says what kind of sample it is ([`DATA`] or
+/// [`GOODBYE`]).
+pub(crate) type PubSub = iceoryx2::service::port_factory::publish_subscribe::PortFactory<Svc, [u8], u64>;
+pub(crate) type Event = iceoryx2::service::port_factory::event::PortFactory<Svc>;
+pub(crate) type Publisher = iceoryx2::port::publisher::Publisher<Svc, [u8], u64>;
+pub(crate) type Subscriber = iceoryx2::port::subscriber::Subscriber<Svc, [u8], u64>;
+pub(crate) type Listener = iceoryx2::port::listener::Listener<Svc>;
+pub(crate) type Notifier = iceoryx2::port::notifier::Notifier<Svc>;
+
+/// How often a waiting port looks for peers killed without saying goodbye (their ports stay
+/// registered until some node runs dead-node cleanup).
+pub(crate) const CLEANUP_EVERY: Duration = Duration::from_millis(500);
+
+/// A message.
+pub(crate) const DATA: u64 = 0;
+/// A sender's last sample: everything it sent is ahead of it in the buffer.
+pub(crate) const GOODBYE: u64 = 1;
+
+/// Event ids on a channel's wake-up services.
+pub(crate) const EV_DATA: usize = 0;
+const EV_PEER_DROPPED: usize = 1;
+const EV_PEER_DEAD: usize = 2;
+
+pub(crate) fn io(what: &str, e: impl Debug) -> TransportError {
+    TransportError::Io(format!("{what}: {e:?}"))
+}
+
+/// A node for one role's (or one test's) ports. Signal handling stays off: iceoryx2 would
+/// otherwise install SIGINT/SIGTERM handlers and the CLI's Ctrl-C would stop working.
+pub(crate) fn node(name: &str) -> Result<Node<Svc>, TransportError> {
+    let name = NodeName::new(name).map_err(|e| io("node name", e))?;
+    NodeBuilder::new()
+        .name(&name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Svc>()
+        .map_err(|e| io("creating an iceoryx2 node", e))
+}
+
+pub(crate) fn service_name(name: &str) -> Result<ServiceName, TransportError> {
+    ServiceName::new(name).map_err(|e| TransportError::Invalid(format!("service name {name:?}: {e:?}")))
+}
+
+/// Opening races with other processes creating the same service; iceoryx2 reports that as a
+/// transient error, so startup retries for a moment.
+fn retry<T, E: Debug>(what: &str, mut f: impl FnMut() -> Result<T, E>) -> Result<T, TransportError> {
+    let start = Instant::now();
+    loop {
+        match f() {
+            Ok(v) => return Ok(v),
+            Err(e) if start.elapsed() > Duration::from_secs(2) => return Err(io(what, e)),
+            Err(_) => std::thread::sleep(Duration::from_millis(10)),
+        }
+    }
+}
+
+/// The settings of one publish-subscribe service.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PubSubShape {
+    pub publishers: usize,
+    pub subscribers: usize,
+    pub nodes: usize,
+    pub buffer: usize,
+    /// Latest-value topics keep one sample for late joiners and overwrite; queues keep none
+    /// and push back on a full buffer.
+    pub topic: bool,
+}
+
+pub(crate) fn pubsub(node: &Node<Svc>, name: &str, s: PubSubShape) -> Result<PubSub, TransportError> {
+    let sname = service_name(name)?;
+    retry(&format!("opening publish-subscribe service {name}"), || {
+        node.service_builder(&sname)
+            .publish_subscribe::<[u8]>()
+            .user_header::<u64>()
+            .max_publishers(s.publishers)
+            .max_subscribers(s.subscribers)
+            .max_nodes(s.nodes)
+            .subscriber_max_buffer_size(s.buffer)
+            .subscriber_max_borrowed_samples(2)
+            .history_size(usize::from(s.topic))
+            .enable_safe_overflow(s.topic)
+            .open_or_create()
+    })
+}
+
+/// An event service used to wake the ports waiting on a channel; a dropped or dead notifier
+/// also wakes the listeners, so a reader learns its peer has gone without polling.
+pub(crate) fn event(node: &Node<Svc>, name: &str, peers: usize) -> Result<Event, TransportError> {
+    let sname = service_name(name)?;
+    retry(&format!("opening event service {name}"), || {
+        node.service_builder(&sname)
+            .event()
+            .max_listeners(peers)
+            .max_notifiers(peers)
+            .max_nodes(peers)
+            .notifier_dropped_event(EventId::new(EV_PEER_DROPPED))
+            .notifier_dead_event(EventId::new(EV_PEER_DEAD))
+            .open_or_create()
+    })
+}
+
+pub(crate) fn listener(ev: &Event) -> Result<Listener, TransportError> {
+    ev.listener_builder().create().map_err(|e| io("creating a listener", e))
+}
+
+pub(crate) fn notifier(ev: &Event) -> Result<Notifier, TransportError> {
+    ev.notifier_builder().default_event_id(EventId::new(EV_DATA)).create().map_err(|e| io("creating a notifier", e))
+}
+
+/// Blocks until something is notified or `timeout` passes, consuming every pending event.
+pub(crate) fn wait(listener: &Listener, timeout: Duration) -> Result<(), TransportError> {
+    listener.timed_wait(|_| {}, timeout).map(|_| ()).map_err(|e| io("waiting on an event", e))
+}
+
+/// Removes the resources of every dead node (processes killed without cleaning up); returns
+/// how many were removed.
+pub(crate) fn cleanup_dead_nodes() -> Result<usize, TransportError> {
+    let mut cleaned = 0;
+    Node::<Svc>::list(Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state {
+            let id = format!("{:?}", view.id());
+            match view.try_remove_stale_resources() {
+                Ok(()) => cleaned += 1,
+                // Someone else is at it, or was first: not ours to count.
+                Err(NodeCleanupFailure::ResourcesAlreadyCleanedUp | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode) => {}
+                Err(e) => eprintln!("coadapt-shm: could not clean up dead node {id}: {e:?}"),
+            }
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| io("listing iceoryx2 nodes", e))?;
+    Ok(cleaned)
+}
+
+/// Runs dead-node cleanup on a service at most every [`CLEANUP_EVERY`].
+#[derive(Debug)]
+pub(crate) struct Janitor(Instant);
+
+impl Janitor {
+    pub fn new() -> Self {
+        Self(Instant::now())
+    }
+
+    pub fn sweep<F: PortFactory>(&mut self, service: &F) {
+        if self.0.elapsed() >= CLEANUP_EVERY {
+            service.try_cleanup_dead_nodes();
+            self.0 = Instant::now();
+        }
+    }
+}
+
+/// Whether every subscriber of `service` lives in this process.
+pub(crate) fn subscribers_are_local(service: &PubSub) -> bool {
+    let me = std::process::id();
+    let mut local = true;
+    service.dynamic_config().list_subscribers(|d| {
+        let here = match Node::<Svc>::state_of(Config::global_config(), d.node_id) {
+            Ok(Some(NodeState::Alive(view))) => view.details().as_ref().is_some_and(|x| u32::try_from(x.process_id().value()) == Ok(me)),
+            _ => false,
+        };
+        local &= here;
+        CallbackProgression::Continue
+    });
+    local
+}
