@@ -1,0 +1,117 @@
+//! The receiving end of a queue from the learner (assignments, design requests): long polls
+//! that each confirm the previous delivery.
+
+use std::future::Future;
+use std::marker::PhantomData;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use coadapt_transport::{Assignment, DesignRequest, Receiver, TransportError};
+use coadapt_wire::Wire;
+use coadapt_wire::pb;
+use coadapt_wire::pb::fleet_client::FleetClient;
+use tonic::transport::Channel;
+
+use super::{Session, block};
+use crate::{Backoff, is_permanent, status_error};
+
+/// (payload, seq, finished)
+type Delivery<P> = (Option<P>, u64, bool);
+type Call<P> = Pin<Box<dyn Future<Output = Result<Delivery<P>, tonic::Status>> + Send>>;
+
+/// A message handed out by long poll.
+pub(crate) trait Polled: Wire<Pb: Send> + Send + 'static {
+    fn call(client: FleetClient<Channel>, poll: tonic::Request<pb::Poll>) -> Call<Self::Pb>;
+}
+
+impl Polled for Assignment {
+    fn call(mut client: FleetClient<Channel>, poll: tonic::Request<pb::Poll>) -> Call<pb::Assignment> {
+        Box::pin(async move {
+            let d = client.next_assignment(poll).await?.into_inner();
+            Ok((d.assignment, d.seq, d.finished))
+        })
+    }
+}
+
+impl Polled for DesignRequest {
+    fn call(mut client: FleetClient<Channel>, poll: tonic::Request<pb::Poll>) -> Call<pb::DesignRequest> {
+        Box::pin(async move {
+            let d = client.next_design_request(poll).await?.into_inner();
+            Ok((d.request, d.seq, d.finished))
+        })
+    }
+}
+
+#[derive(Debug)]
+pub(crate) struct PollReceiver<T: Polled> {
+    session: Arc<Session>,
+    /// The last delivery received; every poll confirms it.
+    received: u64,
+    backoff: Backoff,
+    _t: PhantomData<fn() -> T>,
+}
+
+impl<T: Polled> PollReceiver<T> {
+    pub(crate) fn new(session: Arc<Session>) -> Self {
+        let backoff = Backoff::new(session.conn.cfg.reconnect_backoff_max);
+        Self { session, received: 0, backoff, _t: PhantomData }
+    }
+
+    fn poll_once(&self, wait: Duration, leaving: bool) -> Result<Result<Delivery<T::Pb>, tonic::Status>, TransportError> {
+        let conn = &self.session.conn;
+        let deadline = wait + conn.cfg.poll_margin();
+        let mut req = tonic::Request::new(pb::Poll {
+            session: conn.session,
+            received: self.received,
+            wait_ms: u32::try_from(wait.as_millis()).unwrap_or(u32::MAX),
+            leaving,
+        });
+        req.set_timeout(deadline);
+        let call = T::call(conn.client.clone(), req);
+        block(async move {
+            match tokio::time::timeout(deadline, call).await {
+                Ok(r) => r,
+                Err(_) => Err(tonic::Status::deadline_exceeded("long poll")),
+            }
+        })
+    }
+}
+
+impl<T: Polled> Receiver<T> for PollReceiver<T> {
+    fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<T>, TransportError> {
+        let deadline = Instant::now() + timeout;
+        let cfg = self.session.conn.cfg.clone();
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.poll_once(left.min(cfg.long_poll_cap()), false)? {
+                Ok((Some(pb), seq, _)) => {
+                    self.received = seq;
+                    self.backoff.reset();
+                    return T::from_pb(pb).map(Some).map_err(|e| TransportError::Invalid(e.to_string()));
+                }
+                Ok((None, _, true)) => {
+                    self.session.conn.finished.store(true, Ordering::Relaxed);
+                    return Err(TransportError::Closed);
+                }
+                Ok((None, _, false)) => self.backoff.reset(),
+                Err(s) if is_permanent(&s) => return Err(status_error(&s)),
+                Err(_) if self.session.conn.is_finished() => return Err(TransportError::Closed),
+                // The learner is away: wait, then try again (the channel reconnects).
+                Err(_) => std::thread::sleep(self.backoff.next_delay().min(deadline.saturating_duration_since(Instant::now()))),
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+        }
+    }
+}
+
+impl<T: Polled> Drop for PollReceiver<T> {
+    fn drop(&mut self) {
+        // Hand back a delivery that may have been lost on its way to us (once only: if the
+        // learner is away, so is the delivery).
+        let _ = self.poll_once(Duration::ZERO, true);
+    }
+}

@@ -1,0 +1,242 @@
+//! The sending end of a queue to the learner (experience, design replies). `send` puts the
+//! frame in a window of unacknowledged frames and returns; a background task streams the
+//! window and drops what the learner acknowledges. After a reconnect it sends the whole
+//! window again (the learner drops what it already has), so an accepted message survives a
+//! learner that restarts, and `send` only waits when the window is full.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::Instant;
+
+use coadapt_transport::{Sender, TransportError};
+use coadapt_wire::Wire;
+use tokio::sync::{Notify, mpsc};
+use tokio_stream::wrappers::ReceiverStream;
+
+use super::{Conn, Session, random_u64, runtime};
+use crate::frames::Frame;
+use crate::{Backoff, is_permanent, status_error};
+
+#[derive(Debug)]
+struct Window<F> {
+    /// Unacknowledged frames, in sequence order.
+    pending: VecDeque<F>,
+    next_seq: u64,
+    /// The sender was dropped: close cleanly once `pending` is empty.
+    closing: bool,
+    /// The task has ended (clean close acknowledged, or given up).
+    done: bool,
+    /// Why sends are refused from now on.
+    fatal: Option<Fatal>,
+}
+
+#[derive(Clone, Debug)]
+enum Fatal {
+    Closed,
+    Invalid(String),
+}
+
+impl Fatal {
+    fn error(&self) -> TransportError {
+        match self {
+            Fatal::Closed => TransportError::Closed,
+            Fatal::Invalid(s) => TransportError::Invalid(s.clone()),
+        }
+    }
+}
+
+#[derive(Debug)]
+struct Shared<F> {
+    window: Mutex<Window<F>>,
+    /// Room in the window, or the task ended.
+    room: Condvar,
+    /// New frames, or closing.
+    work: Notify,
+}
+
+impl<F> Shared<F> {
+    fn lock(&self) -> Result<MutexGuard<'_, Window<F>>, TransportError> {
+        self.window.lock().map_err(|_| TransportError::Io("send window lock poisoned".into()))
+    }
+
+    fn end(&self, fatal: Option<Fatal>) {
+        if let Ok(mut w) = self.window.lock() {
+            w.done = true;
+            if fatal.is_some() {
+                w.fatal = fatal;
+            }
+        }
+        self.room.notify_all();
+    }
+}
+
+#[derive(Debug)]
+pub(crate) struct UpstreamSender<F: Frame> {
+    shared: Arc<Shared<F>>,
+    sender: u64,
+    task: tokio::task::AbortHandle,
+    session: Arc<Session>,
+}
+
+impl<F: Frame> UpstreamSender<F> {
+    pub(crate) fn start(session: Arc<Session>) -> Result<Self, TransportError> {
+        let shared = Arc::new(Shared {
+            window: Mutex::new(Window { pending: VecDeque::new(), next_seq: 1, closing: false, done: false, fatal: None }),
+            room: Condvar::new(),
+            work: Notify::new(),
+        });
+        let sender = random_u64();
+        let task = runtime()?.spawn(run::<F>(session.conn.clone(), sender, shared.clone())).abort_handle();
+        Ok(Self { shared, sender, task, session })
+    }
+}
+
+impl<F: Frame> Sender<F::Item> for UpstreamSender<F> {
+    fn send(&mut self, msg: F::Item) -> Result<(), TransportError> {
+        let cfg = &self.session.conn.cfg;
+        let pb = msg.to_pb();
+        // Refuse here what the learner would refuse, so an accepted message is never dropped.
+        F::Item::from_pb(pb.clone()).map_err(|e| TransportError::Invalid(format!("{}.{e}", F::PAYLOAD)))?;
+        let mut frame = F::build(self.sender, 0, Some(pb));
+        let bytes = frame.encoded_len();
+        if bytes > cfg.max_message_bytes {
+            return Err(TransportError::Invalid(format!(
+                "{} of {bytes} bytes is above the message limit of {} bytes",
+                F::PAYLOAD,
+                cfg.max_message_bytes
+            )));
+        }
+        let deadline = Instant::now() + cfg.rpc_timeout;
+        let mut w = self.shared.lock()?;
+        loop {
+            if let Some(f) = &w.fatal {
+                return Err(f.error());
+            }
+            if w.pending.len() < cfg.send_window.max(1) {
+                break;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(TransportError::Io(format!(
+                    "{} messages unacknowledged for {:?}: the learner is unreachable or not keeping up",
+                    w.pending.len(),
+                    cfg.rpc_timeout
+                )));
+            }
+            w = self.shared.room.wait_timeout(w, left).map_err(|_| TransportError::Io("send window lock poisoned".into()))?.0;
+        }
+        frame.set_seq(w.next_seq);
+        w.next_seq += 1;
+        w.pending.push_back(frame);
+        drop(w);
+        self.shared.work.notify_one();
+        Ok(())
+    }
+}
+
+impl<F: Frame> Drop for UpstreamSender<F> {
+    /// Flushes the window and closes cleanly, waiting up to the RPC deadline.
+    fn drop(&mut self) {
+        let deadline = Instant::now() + self.session.conn.cfg.rpc_timeout;
+        if let Ok(mut w) = self.shared.window.lock() {
+            w.closing = true;
+            drop(w);
+            self.shared.work.notify_one();
+        }
+        if let Ok(mut w) = self.shared.window.lock() {
+            while !w.done {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    break;
+                }
+                match self.shared.room.wait_timeout(w, left) {
+                    Ok((g, _)) => w = g,
+                    Err(_) => break,
+                }
+            }
+        }
+        self.task.abort();
+    }
+}
+
+/// What the task should send next on the current stream.
+fn next_frame<F: Frame>(w: &Window<F>, sender: u64, sent: u64) -> Option<F> {
+    let first = w.pending.front().map(|f| f.seq());
+    match first {
+        Some(first) => {
+            let i = (sent + 1).saturating_sub(first) as usize;
+            w.pending.get(i).cloned()
+        }
+        None if w.closing && sent < w.next_seq => Some(F::build(sender, w.next_seq, None)),
+        None => None,
+    }
+}
+
+/// One stream at a time, reopened with backoff until the sender closes cleanly or a
+/// message is refused.
+async fn run<F: Frame>(conn: Arc<Conn>, sender: u64, shared: Arc<Shared<F>>) {
+    let cfg = conn.cfg.clone();
+    let mut backoff = Backoff::new(cfg.reconnect_backoff_max);
+    loop {
+        match stream_once(&conn, sender, &shared, &mut backoff).await {
+            Ok(()) => return shared.end(None),
+            Err(s) if is_permanent(&s) => return shared.end(Some(Fatal::Invalid(status_error(&s).to_string()))),
+            Err(_) if conn.is_finished() => return shared.end(Some(Fatal::Closed)),
+            Err(_) => tokio::time::sleep(backoff.next_delay()).await,
+        }
+    }
+}
+
+/// Streams the window until the clean close is acknowledged (`Ok`) or the stream fails.
+async fn stream_once<F: Frame>(conn: &Conn, sender: u64, shared: &Shared<F>, backoff: &mut Backoff) -> Result<(), tonic::Status> {
+    let cfg = &conn.cfg;
+    let (tx, rx) = mpsc::channel::<F>(cfg.send_window.max(1));
+    let opened = tokio::time::timeout(cfg.rpc_timeout, F::open(conn.client.clone(), ReceiverStream::new(rx)))
+        .await
+        .map_err(|_| tonic::Status::deadline_exceeded("opening the stream"))??;
+    let mut acks = opened.into_inner();
+    let mut sent = 0u64;
+    let mut last_ack = tokio::time::Instant::now();
+    loop {
+        let work = shared.work.notified();
+        tokio::pin!(work);
+        work.as_mut().enable();
+        let (next, outstanding) = {
+            let w = shared.window.lock().map_err(|_| tonic::Status::internal("send window lock poisoned"))?;
+            let acked = w.pending.front().map_or(w.next_seq - 1, |f| f.seq() - 1);
+            (next_frame(&w, sender, sent.max(acked)), sent > acked)
+        };
+        let idle_deadline = last_ack + cfg.rpc_timeout;
+        tokio::select! {
+            permit = tx.reserve(), if next.is_some() => {
+                let permit = permit.map_err(|_| tonic::Status::unavailable("the stream closed"))?;
+                if let Some(f) = next {
+                    if !outstanding {
+                        // The deadline for an acknowledgement starts with the first frame.
+                        last_ack = tokio::time::Instant::now();
+                    }
+                    sent = f.seq();
+                    permit.send(f);
+                }
+            }
+            ack = acks.message() => {
+                let ack = ack?.ok_or_else(|| tonic::Status::unavailable("the learner ended the stream"))?;
+                last_ack = tokio::time::Instant::now();
+                backoff.reset();
+                if let Ok(mut w) = shared.window.lock() {
+                    while w.pending.front().is_some_and(|f| f.seq() <= ack.acked) {
+                        w.pending.pop_front();
+                    }
+                    if w.closing && w.pending.is_empty() && ack.acked >= w.next_seq {
+                        return Ok(());
+                    }
+                }
+                shared.room.notify_all();
+            }
+            _ = &mut work, if next.is_none() => {}
+            _ = tokio::time::sleep_until(idle_deadline), if outstanding => {
+                return Err(tonic::Status::deadline_exceeded("no acknowledgement within the RPC deadline"));
+            }
+        }
+    }
+}
