@@ -104,6 +104,12 @@ impl<E: Env> Actor<E> {
         self.version
     }
 
+    /// Restarts the exploration noise from `seed`, so an episode's actions depend on its own
+    /// seed only, not on which actor ran it or what that actor ran before.
+    pub fn reseed_noise(&mut self, seed: u64) {
+        self.rng = coadapt_core::rng(seed, 3);
+    }
+
     fn choose(&mut self, explore: bool) {
         let act_dim = self.action.len();
         let out = self.policy.forward(&self.params, &self.obs, 1, &mut self.act);

@@ -25,9 +25,12 @@ pub struct ActorSummary {
 }
 
 /// Runs assignments until the queue closes (`Ok`) or `shutdown` is set. Training episodes send
-/// every transition in chunks of `chunk_len`; evaluation episodes send only their end.
+/// every transition in chunks of `chunk_len`; evaluation episodes send an empty chunk every
+/// `chunk_len` steps (so the learner knows the actor is alive) and their end. Chunks carry
+/// `actor_id`.
 pub fn run<E: Env>(
     actor: &mut Actor<E>,
+    actor_id: u64,
     links: &mut ActorLinks,
     chunk_len: usize,
     shutdown: &AtomicBool,
@@ -41,23 +44,27 @@ pub fn run<E: Env>(
             actor.set_weights(weights.version, &weights.policy)?;
         }
         let train = a.mode == EpisodeMode::Train;
+        actor.reseed_noise(a.seed);
         chunk.clear();
+        chunk.actor = actor_id;
         chunk.assignment = a.id;
         chunk.design_index = a.design_index;
         chunk.weights_version = actor.weights_version();
         chunk.first = train;
         let mut sent: Result<(), TransportError> = Ok(());
+        let mut steps = 0usize;
         let stats = actor.run_episode(a.seed, &a.design, train, &mut |t| {
-            if !train {
-                return ControlFlow::Continue(());
+            steps += 1;
+            if train {
+                chunk.obs.extend_from_slice(t.obs);
+                chunk.actions.extend_from_slice(t.action);
+                chunk.rewards.push(t.reward);
+                chunk.next_obs.extend_from_slice(t.next_obs);
+                chunk.terminated.push(t.terminated);
             }
-            chunk.obs.extend_from_slice(t.obs);
-            chunk.actions.extend_from_slice(t.action);
-            chunk.rewards.push(t.reward);
-            chunk.next_obs.extend_from_slice(t.next_obs);
-            chunk.terminated.push(t.terminated);
-            if chunk.len() == chunk_len {
+            if steps.is_multiple_of(chunk_len) {
                 let full = std::mem::take(&mut chunk);
+                chunk.actor = full.actor;
                 chunk.assignment = full.assignment;
                 chunk.design_index = full.design_index;
                 chunk.weights_version = full.weights_version;

@@ -20,6 +20,9 @@ pub enum BenchCommand {
     /// Simulation: env steps per second of each robot on one core, random actions, resets
     /// included.
     Sim(SimArgs),
+    /// Transports between processes: weight broadcast latency to 1, 4 and 16 actor processes,
+    /// experience throughput, over shared memory and gRPC.
+    Transport(crate::bench_transport::TransportArgs),
 }
 
 #[derive(Debug, Args)]
@@ -63,6 +66,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Nn(a) => nn(&a),
         BenchCommand::Sim(a) => sim(&a),
         BenchCommand::Pso(a) => pso(&a),
+        BenchCommand::Transport(a) => crate::bench_transport::run(&a),
     }
 }
 
@@ -101,7 +105,7 @@ fn sim(a: &SimArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn emit(bench: &str, config: &str, value: f64, unit: &str) {
+pub(crate) fn emit(bench: &str, config: &str, value: f64, unit: &str) {
     let line = json!({"bench": bench, "config": config, "value": (value * 1000.0).round() / 1000.0, "unit": unit, "impl": "coadapt"});
     crate::progress::print_stdout_line(&line.to_string());
 }

@@ -2,18 +2,28 @@
 //!
 //! # Layout
 //! - [`Cli`] and [`run`]: the clap command tree and its dispatch.
-//! - [`run`]: `coadapt run`, a whole co-adaptation: learner, design optimiser and actors as
-//!   roles over the in-process transport, writing the run directory.
+//! - [`run`]: `coadapt run`, a whole co-adaptation, its config and the run directory's last
+//!   touches (landscape, plots, summary).
+//! - [`roles`]: the learner, actor and design-optimiser roles over any links.
+//! - [`role_cmd`]: `coadapt learner|actor|optimizer`, one role per process.
+//! - [`fleet`]: the `[fleet]` config and each role's links over shared memory or gRPC.
+//! - [`launch`]: the local fleet of `coadapt run`: starts, supervises and stops the processes.
 //! - [`plot`]: `coadapt plot`, the run directory's SVG plots (also drawn at the end of a run).
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
-//! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure.
+//! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure
+//!   ([`bench_transport`]: the fleet's transports between processes).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
+pub mod bench_transport;
+pub mod fleet;
+pub mod launch;
 pub mod plot;
 pub mod progress;
 pub mod render;
+pub mod role_cmd;
+pub mod roles;
 pub mod run;
 pub mod train;
 
@@ -30,6 +40,9 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     Run(run::RunArgs),
+    Learner(role_cmd::LearnerArgs),
+    Actor(role_cmd::ActorArgs),
+    Optimizer(role_cmd::OptimizerArgs),
     Plot(plot::PlotArgs),
     Train(train::TrainArgs),
     Render(render::RenderArgs),
@@ -42,6 +55,9 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Run(args) => run::run(args),
+        Command::Learner(args) => role_cmd::learner(args),
+        Command::Actor(args) => role_cmd::actor(args),
+        Command::Optimizer(args) => role_cmd::optimizer(args),
         Command::Plot(args) => plot::run(args),
         Command::Train(args) => train::run(args),
         Command::Render(args) => render::run(args),

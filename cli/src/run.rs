@@ -1,6 +1,7 @@
-//! `coadapt run`: a whole co-adaptation (FEAR or a baseline) on one robot, with the learner,
-//! the design optimiser and the actors as separate roles talking through the in-process
-//! transport (one thread each).
+//! `coadapt run`: a whole co-adaptation (FEAR or a baseline) on one robot. The learner, the
+//! design optimiser and the actors run as separate processes over shared memory (the default;
+//! [`crate::fleet`] launches and supervises them), or as threads of this process over the
+//! in-process transport (`--transport in-process`, [`run_config`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -9,20 +10,19 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use coadapt_actors::{Actor, PolicyKind};
-use coadapt_core::{Env, EnvSpec};
+use coadapt_core::EnvSpec;
 use coadapt_design_optimizer::landscape::{self, Pca2};
-use coadapt_design_optimizer::role::{
-    self as optimizer, ExploitMethod, ExploreMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutEvaluator,
-};
+use coadapt_design_optimizer::role::{ExploitMethod, ExploreMethod, OptimizerConfig};
 use coadapt_design_optimizer::{CriticObjective, DesignObjective, QMode, SwarmObjective};
-use coadapt_learner::coadapt::{self, RunEvent, ScheduleConfig};
+use coadapt_learner::coadapt::{self, ScheduleConfig};
 use coadapt_learner::fear::{ActingPolicy, FearLearner, FearLearnerConfig};
-use coadapt_learner::networks;
+use coadapt_learner::flow::FlowConfig;
 use coadapt_transport::in_process;
 use serde::{Deserialize, Serialize};
 
-use crate::progress::{duration, print_stdout_line, shutdown_on_ctrl_c};
+use crate::fleet::{FleetConfig, TransportKind};
+use crate::progress::{print_stdout_line, shutdown_on_ctrl_c};
+use crate::roles::{self, make_env};
 
 /// The reference protocol on HalfCheetah, used when no `--config` is given.
 pub const DEFAULT_CONFIG: &str = include_str!("../../configs/half-cheetah-reference.toml");
@@ -35,7 +35,7 @@ pub struct RunConfig {
     pub env: String,
     /// Seed of every random stream: the same seed and config give the same run.
     pub seed: u64,
-    /// Actor threads running episodes (the lock-step schedule uses one at a time).
+    /// Actors running episodes (processes, or threads in-process; lock-step uses one at a time).
     pub actors: usize,
     /// Transitions per experience chunk an actor sends.
     pub chunk_len: usize,
@@ -44,6 +44,10 @@ pub struct RunConfig {
     /// Points per side of the design-landscape grid drawn at the end (0: no landscape).
     pub landscape_grid: usize,
     pub schedule: ScheduleConfig,
+    /// Collection against training: lock-step (the reference) or episodes in flight.
+    pub flow: FlowConfig,
+    /// How the roles talk and find each other.
+    pub fleet: FleetConfig,
     pub learner: FearLearnerConfig,
     pub optimizer: OptimizerConfig,
 }
@@ -58,6 +62,8 @@ impl Default for RunConfig {
             sim_threads: 2,
             landscape_grid: 40,
             schedule: ScheduleConfig::default(),
+            flow: FlowConfig::default(),
+            fleet: FleetConfig::default(),
             learner: FearLearnerConfig::default(),
             optimizer: OptimizerConfig::default(),
         }
@@ -99,6 +105,13 @@ pub struct RunArgs {
     /// Override the number of designs.
     #[arg(long)]
     pub designs: Option<usize>,
+    /// Override how the roles talk: shm (separate processes over iceoryx2 shared memory, the
+    /// default), grpc (separate processes over gRPC on this machine), in-process (threads).
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportKind>,
+    /// Override the number of actors.
+    #[arg(long)]
+    pub actors: Option<usize>,
 }
 
 fn parse_enum<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> anyhow::Result<T> {
@@ -127,6 +140,12 @@ pub fn resolve(args: &RunArgs) -> anyhow::Result<(RunConfig, String)> {
     if let Some(d) = args.designs {
         cfg.schedule.designs = d;
     }
+    if let Some(t) = args.transport {
+        cfg.fleet.transport = t;
+    }
+    if let Some(n) = args.actors {
+        cfg.actors = n;
+    }
     Ok((cfg, name))
 }
 
@@ -147,7 +166,7 @@ pub fn resolve_initial_designs(cfg: &mut RunConfig, spec: &EnvSpec) {
     });
 }
 
-fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
+pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
     if cfg.schedule.designs == 0 {
         bail!("schedule.designs: must be at least 1");
     }
@@ -160,156 +179,54 @@ fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
     for (i, d) in cfg.schedule.initial_designs.iter().enumerate() {
         spec.design.check_finite("design", d).map_err(|e| anyhow::anyhow!("schedule.initial-designs[{i}]: {e}"))?;
     }
+    cfg.flow.lease().map_err(anyhow::Error::msg)?;
     Ok(())
 }
 
-/// Simulation rollouts for the baselines: one deterministic episode of the population policy
-/// per design, fitness the mean per-step reward; designs are shared out over the threads.
-struct SimEvaluator {
-    actors: Vec<Actor<Box<dyn Env>>>,
-    version: u64,
-    seed: u64,
-}
-
-impl RolloutEvaluator for SimEvaluator {
-    fn evaluate(&mut self, policy: &[f32], designs: &[f32], fitness: &mut [f32]) -> Result<(), String> {
-        self.version += 1;
-        let dim = designs.len() / fitness.len().max(1);
-        let per = fitness.len().div_ceil(self.actors.len());
-        let (version, seed) = (self.version, self.seed);
-        std::thread::scope(|s| {
-            let jobs: Vec<_> = self
-                .actors
-                .iter_mut()
-                .zip(fitness.chunks_mut(per.max(1)))
-                .zip(designs.chunks(per.max(1) * dim))
-                .map(|((actor, fit), des)| {
-                    s.spawn(move || -> Result<(), String> {
-                        actor.set_weights(version, policy).map_err(|e| e.to_string())?;
-                        for (f, d) in fit.iter_mut().zip(des.chunks_exact(dim)) {
-                            let st = actor
-                                .run_episode(seed, d, false, &mut |_| std::ops::ControlFlow::Continue(()))
-                                .map_err(|e| e.to_string())?;
-                            *f = st.episode_return / st.length.max(1) as f32;
-                        }
-                        Ok(())
-                    })
-                })
-                .collect();
-            jobs.into_iter().try_for_each(|j| j.join().map_err(|_| "a rollout thread panicked".to_string())?)
-        })
-    }
-}
-
-fn make_env(name: &str) -> anyhow::Result<Box<dyn Env>> {
-    Ok(coadapt_robots::make(name)?)
-}
-
-/// Runs the co-adaptation described by `cfg` into `dir`.
+/// Runs the co-adaptation described by `cfg` into `dir`, every role a thread of this process
+/// over the in-process transport.
 pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Result<coadapt::RunOutcome> {
     let spec = make_env(&cfg.env)?.spec().clone();
     check(cfg, &spec)?;
-    let hidden = &cfg.learner.sac.hidden;
-    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
-    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
-    let mut writer =
-        coadapt_learner::run_dir::RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?;
-    std::fs::write(dir.join("config.toml"), toml::to_string(cfg)?).context("writing config.toml")?;
     let (mut learner_links, actor_links, mut optimizer_links) = in_process::fleet(cfg.actors);
-    let total_episodes = cfg.schedule.total_episodes();
-    let start = Instant::now();
-    let mut done_episodes = 0usize;
-    let designs_total = cfg.schedule.designs;
-    let mut on_event = |e: &RunEvent<'_>| match e {
-        RunEvent::DesignStart { index, row } => {
-            let pred = row.predicted_objective.map(|p| format!(", predicted objective {p:.3}")).unwrap_or_default();
-            let rollouts = if row.design_rollouts > 0 { format!(", {} design rollouts", row.design_rollouts) } else { String::new() };
-            eprintln!(
-                "design {}/{designs_total} [{} {}] {:?}{pred}{rollouts}",
-                index + 1,
-                row.kind,
-                row.method,
-                row.design.iter().map(|v| (v * 1000.0).round() / 1000.0).collect::<Vec<_>>()
-            );
-        }
-        RunEvent::Episode { row, episodes_in_design } => {
-            done_episodes += 1;
-            let el = start.elapsed().as_secs_f64();
-            let eta = el / done_episodes as f64 * (total_episodes.saturating_sub(done_episodes)) as f64;
-            let eval = row.eval_return.map(|r| format!(" eval {r:8.2}")).unwrap_or_default();
-            eprintln!(
-                "  design {}/{designs_total} episode {:>4}/{episodes_in_design} return {:8.2}{eval}  [{} elapsed, ETA {}]",
-                row.design + 1,
-                row.episode + 1,
-                row.train_return,
-                duration(el),
-                duration(eta)
-            );
-        }
-        RunEvent::DesignEnd { row } => {
-            let f = |v: Option<f32>| v.map_or("-".into(), |v| format!("{v:.2}"));
-            eprintln!("design {} done: best eval {}, last eval {}", row.index + 1, f(row.best_eval_return), f(row.last_eval_return));
-        }
-    };
-    let outcome = std::thread::scope(|s| -> anyhow::Result<coadapt::RunOutcome> {
-        let mut actor_threads = Vec::new();
-        for (i, mut links) in actor_links.into_iter().enumerate() {
-            let (policy, name, seed, chunk) = (policy.clone(), cfg.env.clone(), cfg.seed, cfg.chunk_len);
-            actor_threads.push(s.spawn(move || -> anyhow::Result<()> {
-                let mut actor = Actor::new(make_env(&name)?, policy, PolicyKind::SquashedGaussian, seed.wrapping_add(i as u64))?;
-                coadapt_actors::role::run(&mut actor, &mut links, chunk, shutdown).with_context(|| format!("actor {i}"))?;
-                Ok(())
-            }));
-        }
-        let ospec = OptimizerSpec {
-            policy: policy.clone(),
-            critic: critic.clone(),
-            bounds: spec.design.clone(),
-            design_at: spec.state_dim,
-            obs_dim: spec.obs_dim(),
-            act_dim: spec.act_dim(),
+    std::thread::scope(|s| -> anyhow::Result<coadapt::RunOutcome> {
+        let spec = &spec;
+        // A role that fails stops the run: in one process nothing would restart it.
+        let stop_on_error = |r: anyhow::Result<()>| {
+            if r.is_err() {
+                shutdown.store(true, Ordering::Relaxed);
+            }
+            r
         };
-        let ocfg = cfg.optimizer.clone();
-        let (name, seed, threads) = (cfg.env.clone(), cfg.seed, cfg.sim_threads.max(1));
-        let pol = policy.clone();
-        let opt_thread = s.spawn(move || -> anyhow::Result<()> {
-            let mut sim = if ocfg.exploit.needs_rollouts() {
-                let actors = (0..threads)
-                    .map(|i| Ok(Actor::new(make_env(&name)?, pol.clone(), PolicyKind::SquashedGaussian, seed ^ (0x5349_4d00 + i as u64))?))
-                    .collect::<anyhow::Result<Vec<_>>>()?;
-                Some(SimEvaluator { actors, version: 0, seed })
-            } else {
-                None
-            };
-            let mut opt = Optimizer::new(ocfg, ospec, sim.as_mut().map(|s| s as &mut dyn RolloutEvaluator), seed)?;
-            optimizer::run(&mut opt, &mut optimizer_links, shutdown).context("design optimiser")?;
-            Ok(())
-        });
-        let result = coadapt::run(&cfg.schedule, &cfg.learner, &spec, cfg.seed, &mut learner_links, &mut writer, shutdown, &mut on_event);
+        let actors: Vec<_> = actor_links
+            .into_iter()
+            .enumerate()
+            .map(|(i, mut links)| s.spawn(move || stop_on_error(roles::actor(cfg, spec, i as u64, &mut links, shutdown))))
+            .collect();
+        let opt = s.spawn(move || stop_on_error(roles::optimizer(cfg, spec, &mut optimizer_links, shutdown)));
+        let result = roles::learner(cfg, spec, dir, &mut learner_links, shutdown);
         // Closing the learner's channels lets the other roles finish.
         drop(learner_links);
         let mut errors = Vec::new();
-        for t in actor_threads.into_iter().map(|t| t.join()).chain(std::iter::once(opt_thread.join())) {
+        for t in actors.into_iter().map(|t| t.join()).chain(std::iter::once(opt.join())) {
             match t {
                 Ok(Ok(())) => {}
                 Ok(Err(e)) => errors.push(format!("{e:#}")),
                 Err(_) => errors.push("a role thread panicked".into()),
             }
         }
-        match result {
-            Ok(o) => {
-                if let Some(e) = errors.first() {
+        match (result, errors.first()) {
+            (Ok(o), Some(first)) if o.interrupted => Err(anyhow::anyhow!("{first}")),
+            (Ok(o), first) => {
+                if let Some(e) = first {
                     eprintln!("warning: {e}");
                 }
                 Ok(o)
             }
-            Err(e) => match errors.first() {
-                Some(first) => Err(anyhow::anyhow!("{e} (first role failure: {first})")),
-                None => Err(e.into()),
-            },
+            (Err(e), Some(first)) => Err(e.context(format!("first role failure: {first}"))),
+            (Err(e), None) => Err(e),
         }
-    })?;
-    Ok(outcome)
+    })
 }
 
 /// Scores the design objective on a grid over the first two principal components of the
@@ -350,7 +267,7 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
 
 /// `runs/<name>-seed<seed>`, or with `-2`, `-3`, ... appended when that already holds a run, so
 /// running the same command again never overwrites or refuses.
-fn default_out(name: &str, seed: u64) -> PathBuf {
+pub fn default_out(name: &str, seed: u64) -> PathBuf {
     let base = PathBuf::from("runs").join(format!("{name}-seed{seed}"));
     let mut dir = base.clone();
     let mut i = 2;
@@ -361,47 +278,66 @@ fn default_out(name: &str, seed: u64) -> PathBuf {
     dir
 }
 
-/// `coadapt run`.
-pub fn run(args: RunArgs) -> anyhow::Result<()> {
-    let (mut cfg, name) = resolve(&args)?;
-    let spec = make_env(&cfg.env)?.spec().clone();
-    resolve_initial_designs(&mut cfg, &spec);
-    let dir = args.out.clone().unwrap_or_else(|| default_out(&name, cfg.seed));
-    if dir.join("designs.csv").exists() {
-        bail!("{} already holds a run (designs.csv exists); choose another --out", dir.display());
-    }
-    let shutdown = shutdown_on_ctrl_c();
-    eprintln!(
-        "coadapt run: {} on {}, {} designs ({} episodes), exploit {}, explore {}, into {}",
-        name,
-        cfg.env,
-        cfg.schedule.designs,
-        cfg.schedule.total_episodes(),
-        cfg.optimizer.exploit.name(),
-        if cfg.schedule.alternate { format!("{:?}", cfg.optimizer.explore).to_lowercase() } else { "none".into() },
-        dir.display()
-    );
-    let start = Instant::now();
-    let mut outcome = run_config(&cfg, &dir, &shutdown)?;
-    if let Err(e) = write_landscape(&cfg, &dir, &mut outcome) {
+/// What a finished learner leaves besides its rows: the design landscape, the plots, and the
+/// one JSON summary line on stdout.
+pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, shutdown: &AtomicBool, start: Instant) -> anyhow::Result<()> {
+    if let Err(e) = write_landscape(cfg, dir, outcome) {
         eprintln!("warning: design landscape not written: {e:#}");
     }
-    let plots = crate::plot::draw_run(&dir).context("drawing the plots")?;
+    let plots = crate::plot::draw_run(dir).context("drawing the plots")?;
     for p in &plots {
         eprintln!("wrote {}", p.display());
     }
     let best = outcome.designs.iter().filter_map(|d| d.best_eval_return.map(|r| (r, d))).max_by(|a, b| a.0.total_cmp(&b.0));
+    let t = outcome.time;
     let summary = serde_json::json!({
         "run_dir": dir.display().to_string(),
         "env": cfg.env,
         "exploit": cfg.optimizer.exploit.name(),
+        "transport": cfg.fleet.transport.name(),
         "designs": outcome.designs.len(),
         "interrupted": outcome.interrupted || shutdown.load(Ordering::Relaxed),
         "best_eval_return": best.map(|b| b.0),
         "best_design": best.map(|b| b.1.design.clone()),
         "design_rollouts": outcome.designs.iter().map(|d| d.design_rollouts).sum::<u64>(),
         "seconds": start.elapsed().as_secs_f64(),
+        "learner_waiting_seconds": t.waiting,
+        "learner_sending_seconds": t.sending,
+        "learner_training_seconds": t.training,
+        "episodes_reissued": t.reissued,
+        "max_policy_lag": t.max_policy_lag,
     });
     print_stdout_line(&summary.to_string());
     Ok(())
+}
+
+/// `coadapt run`.
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    let (mut cfg, name) = resolve(&args)?;
+    let spec = make_env(&cfg.env)?.spec().clone();
+    resolve_initial_designs(&mut cfg, &spec);
+    check(&cfg, &spec)?;
+    let dir = args.out.clone().unwrap_or_else(|| default_out(&name, cfg.seed));
+    if dir.join("designs.csv").exists() {
+        bail!("{} already holds a run (designs.csv exists); choose another --out", dir.display());
+    }
+    let shutdown = shutdown_on_ctrl_c();
+    eprintln!(
+        "coadapt run: {} on {}, {} designs ({} episodes), exploit {}, explore {}, {} actor(s) over {}, into {}",
+        name,
+        cfg.env,
+        cfg.schedule.designs,
+        cfg.schedule.total_episodes(),
+        cfg.optimizer.exploit.name(),
+        if cfg.schedule.alternate { format!("{:?}", cfg.optimizer.explore).to_lowercase() } else { "none".into() },
+        cfg.actors,
+        cfg.fleet.transport.name(),
+        dir.display()
+    );
+    if cfg.fleet.transport != TransportKind::InProcess {
+        return crate::launch::launch(&cfg, &dir, &shutdown);
+    }
+    let start = Instant::now();
+    let mut outcome = run_config(&cfg, &dir, &shutdown)?;
+    finish(&cfg, &dir, &mut outcome, &shutdown, start)
 }

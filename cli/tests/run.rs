@@ -58,7 +58,9 @@ fn the_tiny_config_writes_the_whole_run_directory() {
     assert_eq!(summary["design_rollouts"], 0, "FEAR spends no design rollouts");
 
     // The resolved config reads back as the config that ran.
-    let resolved: RunConfig = toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
+    let mut resolved: RunConfig = toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
+    assert!(resolved.fleet.name.starts_with("coadapt-"), "the fleet gets a name of its own: {:?}", resolved.fleet.name);
+    resolved.fleet.name.clear();
     let mut expected = tiny();
     resolve_initial_designs(&mut expected, &coadapt_robots::make("half-cheetah").unwrap().spec().clone());
     assert_eq!(resolved, expected);
@@ -85,7 +87,10 @@ fn the_tiny_config_writes_the_whole_run_directory() {
     }
 
     let (h, rows) = csv(&out.join("episodes.csv"));
-    assert_eq!(h, ["design", "episode", "global_episode", "steps", "return", "eval_return", "weights_version", "seconds"]);
+    assert_eq!(
+        h,
+        ["design", "episode", "global_episode", "steps", "return", "eval_return", "weights_version", "seconds", "actor", "policy_lag"]
+    );
     assert_eq!(rows.len(), 10);
     assert_eq!(col(&h, &rows, "design"), ["0", "0", "0", "1", "1", "1", "2", "2", "3", "3"]);
     let steps: Vec<u64> = col(&h, &rows, "steps").iter().map(|s| s.parse().unwrap()).collect();

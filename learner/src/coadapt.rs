@@ -3,9 +3,10 @@
 //! the actors one episode at a time, learns from the experience they stream back, evaluates
 //! the deterministic policy, and records everything in the run directory.
 //!
-//! The schedule is lock-step, the reference's: collect one episode, then train on it, so a
-//! seed reproduces a run whatever the number of actors (more actors only add evaluation
-//! capacity here; parallel collection with a rate limiter is the fleet's business).
+//! How episodes are spread over the actors is [`crate::flow`]'s business: lock-step (the
+//! reference: collect one episode, then train on it, so a seed reproduces a run whatever the
+//! number of actors) or a window of episodes in flight; either way each training episode buys
+//! the same updates.
 //! Designs: `initial-designs` fixed ones with `initial-episodes` each, then
 //! `episodes-per-design` for each later one, alternating exploitation and exploration
 //! (`alternate = false`: every later design is an exploitation).
@@ -15,10 +16,11 @@ use std::time::{Duration, Instant};
 
 use coadapt_core::{EnvSpec, Transition};
 use coadapt_transport::messages::Dims;
-use coadapt_transport::{Assignment, DesignKind, DesignRequest, EpisodeEnd, EpisodeMode, LearnerLinks, TransportError, Validate, Weights};
+use coadapt_transport::{Assignment, DesignKind, DesignRequest, EpisodeMode, LearnerLinks, TransportError, Validate, Weights};
 use serde::{Deserialize, Serialize};
 
 use crate::fear::{ActingPolicy, FearLearner, FearLearnerConfig};
+use crate::flow::{Completed, FlowConfig, LearnerTime, Pending};
 use crate::run_dir::{DesignRow, EpisodeRow, RunWriter};
 
 /// The co-adaptation schedule; defaults are the reference's.
@@ -41,7 +43,7 @@ pub struct ScheduleConfig {
     /// Evaluate the deterministic policy after every this many episodes of a design (and
     /// always after its last); 0: only after the last.
     pub eval_every: usize,
-    /// Fail when an actor sends nothing for this long (seconds).
+    /// Fail when no actor has sent anything for this long (seconds): the fleet is gone.
     pub episode_timeout_secs: f64,
 }
 
@@ -113,6 +115,8 @@ pub struct RunOutcome {
     pub learner: FearLearner,
     pub designs: Vec<DesignRow>,
     pub interrupted: bool,
+    /// Where the learner's time went.
+    pub time: LearnerTime,
 }
 
 fn mix(seed: u64, i: u64) -> u64 {
@@ -130,19 +134,33 @@ struct Learner<'a> {
     shutdown: &'a AtomicBool,
     fear: FearLearner,
     acting_version: u64,
+    /// The acting policy changed since it was last published.
+    acting_dirty: bool,
+    acting_which: Option<ActingPolicy>,
     population_version: u64,
     next_assignment: u64,
     seed: u64,
+    lease: Duration,
+    /// No message at all for this long fails the run (every actor gone).
+    silence: Duration,
+    pending: Vec<Pending>,
+    time: LearnerTime,
 }
 
-/// Episode outcome from the actors, or `None` on shutdown.
-type Collected = Option<EpisodeEnd>;
-
 impl Learner<'_> {
-    fn publish_acting(&mut self, which: ActingPolicy) -> Result<u64, CoadaptError> {
+    /// Publishes the acting policy if it changed; returns the version actors must act with.
+    fn publish_acting(&mut self) -> Result<u64, CoadaptError> {
+        let which = self.fear.acting();
+        if !self.acting_dirty && self.acting_which == Some(which) {
+            return Ok(self.acting_version);
+        }
+        let t = Instant::now();
         self.acting_version += 1;
         let policy = self.fear.agent(which).policy_params().to_vec();
         self.links.acting_weights.publish(Weights { version: self.acting_version, policy, q1: vec![], q2: vec![] })?;
+        self.acting_dirty = false;
+        self.acting_which = Some(which);
+        self.time.sending += t.elapsed().as_secs_f64();
         Ok(self.acting_version)
     }
 
@@ -159,56 +177,141 @@ impl Learner<'_> {
         Ok(self.population_version)
     }
 
-    /// Runs one episode on an actor; training episodes go into the replay buffers.
-    fn episode(&mut self, design_index: usize, design: &[f32], mode: EpisodeMode, global: u64) -> Result<Collected, CoadaptError> {
-        let which = self.fear.acting();
-        let version = self.publish_acting(which)?;
-        self.next_assignment += 1;
-        let id = self.next_assignment;
+    /// Hands episode `episode` of design `design_index` to the actors.
+    fn issue(&mut self, design_index: usize, design: &[f32], episode: usize, global: u64, mode: EpisodeMode) -> Result<(), CoadaptError> {
+        let version = self.publish_acting()?;
         let seed = mix(self.seed, 2 * global + u64::from(mode == EpisodeMode::Eval));
-        let a = Assignment { id, design_index: design_index as u32, design: design.to_vec(), mode, seed, min_weights_version: version };
+        self.send_assignment(
+            design_index,
+            design,
+            Pending { id: 0, episode, global, mode, seed, min_weights_version: version, chunks: Vec::new(), last_heard: Instant::now() },
+        )
+    }
+
+    fn send_assignment(&mut self, design_index: usize, design: &[f32], mut p: Pending) -> Result<(), CoadaptError> {
+        let t = Instant::now();
+        self.next_assignment += 1;
+        p.id = self.next_assignment;
+        p.last_heard = Instant::now();
+        let a = Assignment {
+            id: p.id,
+            design_index: design_index as u32,
+            design: design.to_vec(),
+            mode: p.mode,
+            seed: p.seed,
+            min_weights_version: p.min_weights_version,
+        };
         self.links.assignments.send(a)?;
-        // `run` has checked the field; an unrepresentable value cannot reach here.
-        let timeout = Duration::try_from_secs_f64(self.cfg.episode_timeout_secs.max(1.0)).unwrap_or(Duration::from_secs(600));
-        let mut last = Instant::now();
+        self.pending.push(p);
+        self.time.sending += t.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Issues again every episode whose actor has fallen silent.
+    fn reissue_expired(&mut self, design_index: usize, design: &[f32]) -> Result<(), CoadaptError> {
+        while let Some(i) = self.pending.iter().position(|p| p.last_heard.elapsed() > self.lease) {
+            let mut p = self.pending.swap_remove(i);
+            let old = p.id;
+            p.chunks.clear();
+            self.send_assignment(design_index, design, p)?;
+            self.time.reissued += 1;
+            eprintln!(
+                "learner: assignment {old} (design {design_index}) silent for {:?}: issued again as {}",
+                self.lease, self.next_assignment
+            );
+        }
+        Ok(())
+    }
+
+    /// Waits for the next episode to come back; `None` on shutdown.
+    fn next_completed(&mut self, design_index: usize, design: &[f32]) -> Result<Option<Completed>, CoadaptError> {
+        let mut heard = Instant::now();
         loop {
             if self.shutdown.load(Ordering::Relaxed) {
                 return Ok(None);
             }
-            let Some(chunk) = self.links.experience.recv_timeout(POLL)? else {
-                if last.elapsed() > timeout {
-                    return Err(CoadaptError::Protocol(format!("no experience for assignment {id} within {timeout:?}")));
+            let t = Instant::now();
+            let got = match self.links.experience.recv_timeout(POLL) {
+                Ok(got) => got,
+                // Every actor has gone for now; restarted or new ones may join.
+                Err(TransportError::Closed) => {
+                    std::thread::sleep(POLL);
+                    None
+                }
+                Err(e) => return Err(e.into()),
+            };
+            self.time.waiting += t.elapsed().as_secs_f64();
+            let Some(chunk) = got else {
+                self.reissue_expired(design_index, design)?;
+                if heard.elapsed() > self.silence {
+                    return Err(CoadaptError::Protocol(format!(
+                        "no actor has sent anything for {:?} ({} episodes outstanding): are the actors running?",
+                        self.silence,
+                        self.pending.len()
+                    )));
                 }
                 continue;
             };
-            last = Instant::now();
-            if chunk.assignment != id {
-                eprintln!("learner: dropped a chunk of assignment {} while waiting for {id}", chunk.assignment);
+            heard = Instant::now();
+            let Some(i) = self.pending.iter().position(|p| p.id == chunk.assignment) else {
+                // A late chunk of an episode already issued again elsewhere.
                 continue;
-            }
+            };
             if let Err(e) = chunk.validate(&self.dims) {
-                eprintln!("learner: dropped a malformed chunk of assignment {id}: {e}");
+                let p = self.pending.swap_remove(i);
+                eprintln!("learner: a malformed chunk of assignment {} from actor {}: {e}; issuing the episode again", p.id, chunk.actor);
+                self.send_assignment(design_index, design, Pending { chunks: Vec::new(), ..p })?;
                 continue;
             }
-            if mode == EpisodeMode::Train {
-                let (o, a) = (self.dims.obs, self.dims.act);
-                if chunk.first {
-                    self.fear.add_start_state(&chunk.obs[..o])?;
-                }
-                for i in 0..chunk.len() {
-                    self.fear.add_transition(&Transition {
-                        obs: &chunk.obs[i * o..(i + 1) * o],
-                        action: &chunk.actions[i * a..(i + 1) * a],
-                        reward: chunk.rewards[i],
-                        next_obs: &chunk.next_obs[i * o..(i + 1) * o],
-                        terminated: chunk.terminated[i],
-                    })?;
-                }
+            let p = &mut self.pending[i];
+            p.last_heard = Instant::now();
+            let end = chunk.end;
+            if !chunk.is_empty() || chunk.end.is_some() {
+                p.chunks.push(chunk);
             }
-            if let Some(end) = chunk.end {
-                return Ok(Some(end));
+            if let Some(end) = end {
+                let p = self.pending.swap_remove(i);
+                let last = p.chunks.last();
+                let actor = last.map_or(0, |c| c.actor);
+                let weights_version = p.chunks.iter().map(|c| c.weights_version).min().unwrap_or(p.min_weights_version);
+                let policy_lag = self.acting_version.saturating_sub(weights_version);
+                self.time.max_policy_lag = self.time.max_policy_lag.max(policy_lag);
+                return Ok(Some(Completed {
+                    episode: p.episode,
+                    global: p.global,
+                    mode: p.mode,
+                    chunks: p.chunks,
+                    end,
+                    actor,
+                    weights_version,
+                    policy_lag,
+                }));
             }
         }
+    }
+
+    /// Puts a finished training episode into the replay buffers and trains on it.
+    fn learn_from(&mut self, c: &Completed) -> Result<(), CoadaptError> {
+        let (o, a) = (self.dims.obs, self.dims.act);
+        for chunk in &c.chunks {
+            if chunk.first {
+                self.fear.add_start_state(&chunk.obs[..o])?;
+            }
+            for i in 0..chunk.len() {
+                self.fear.add_transition(&Transition {
+                    obs: &chunk.obs[i * o..(i + 1) * o],
+                    action: &chunk.actions[i * a..(i + 1) * a],
+                    reward: chunk.rewards[i],
+                    next_obs: &chunk.next_obs[i * o..(i + 1) * o],
+                    terminated: chunk.terminated[i],
+                })?;
+            }
+        }
+        let t = Instant::now();
+        self.fear.end_episode()?;
+        self.time.training += t.elapsed().as_secs_f64();
+        self.acting_dirty = true;
+        Ok(())
     }
 
     fn request_design(
@@ -224,20 +327,32 @@ impl Learner<'_> {
             .ok_or_else(|| CoadaptError::Protocol("no start states yet: the run needs at least one initial design".into()))?;
         let req = DesignRequest { index: index as u32, kind, weights_version: version, start_states, chosen: chosen.to_vec() };
         self.links.design_requests.send(req)?;
-        loop {
+        let t = Instant::now();
+        let result = loop {
             if self.shutdown.load(Ordering::Relaxed) {
-                return Ok(None);
+                break Ok(None);
             }
-            let Some(reply) = self.links.design_replies.recv_timeout(POLL)? else { continue };
+            let reply = match self.links.design_replies.recv_timeout(POLL) {
+                Ok(Some(reply)) => reply,
+                Ok(None) => continue,
+                // The optimiser has gone; a restarted one answers the request it finds.
+                Err(TransportError::Closed) => {
+                    std::thread::sleep(POLL);
+                    continue;
+                }
+                Err(e) => break Err(e.into()),
+            };
             if reply.index as usize != index {
                 eprintln!("learner: ignored a reply for design {} while waiting for {index}", reply.index);
                 continue;
             }
             if let Err(e) = reply.validate(&self.dims) {
-                return Err(CoadaptError::Protocol(format!("the optimiser's design {index} is malformed: {e}")));
+                break Err(CoadaptError::Protocol(format!("the optimiser's design {index} is malformed: {e}")));
             }
-            return Ok(Some(reply));
-        }
+            break Ok(Some(reply));
+        };
+        self.time.waiting += t.elapsed().as_secs_f64();
+        result
     }
 }
 
@@ -247,6 +362,8 @@ pub fn run(
     fear_cfg: &FearLearnerConfig,
     spec: &EnvSpec,
     seed: u64,
+    flow: &FlowConfig,
+    actors: usize,
     links: &mut LearnerLinks,
     out: &mut RunWriter,
     shutdown: &AtomicBool,
@@ -264,7 +381,25 @@ pub fn run(
         spec.design.check_finite("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
     }
     let fear = FearLearner::new(dims.obs, dims.act, fear_cfg.clone(), seed).map_err(|e| CoadaptError::Config(e.to_string()))?;
-    let mut l = Learner { cfg, dims, links, shutdown, fear, acting_version: 0, population_version: 0, next_assignment: 0, seed };
+    let lease = flow.lease().map_err(CoadaptError::Config)?;
+    let in_flight = flow.in_flight(actors);
+    let mut l = Learner {
+        cfg,
+        dims,
+        links,
+        shutdown,
+        fear,
+        acting_version: 0,
+        acting_dirty: true,
+        acting_which: None,
+        population_version: 0,
+        next_assignment: 0,
+        seed,
+        lease,
+        silence: Duration::from_secs_f64(t),
+        pending: Vec::new(),
+        time: LearnerTime::default(),
+    };
     let start = Instant::now();
     let mut rows: Vec<DesignRow> = Vec::new();
     let mut chosen: Vec<f32> = Vec::new();
@@ -300,28 +435,41 @@ pub fn run(
         chosen.extend_from_slice(&row.design);
         on_event(&RunEvent::DesignStart { index, row: &row });
         l.fear.begin_design(index);
+        l.acting_dirty = true;
         let n = cfg.episodes_of(index);
+        let design = row.design.clone();
+        let base = global;
+        let (mut issued, mut written) = (0usize, 0usize);
+        // Training episodes back and trained on, waiting for their evaluation.
+        let mut awaiting_eval: Vec<(Completed, u64)> = Vec::new();
         let mut interrupted = false;
-        for e in 0..n {
-            let design = row.design.clone();
-            let Some(end) = l.episode(index, &design, EpisodeMode::Train, global)? else {
+        while written < n {
+            while l.pending.len() < in_flight && issued < n {
+                l.issue(index, &design, issued, base + issued as u64, EpisodeMode::Train)?;
+                issued += 1;
+            }
+            let Some(c) = l.next_completed(index, &design)? else {
                 interrupted = true;
                 break;
             };
-            steps += end.length;
-            let version = l.acting_version;
-            l.fear.end_episode()?;
-            let eval = cfg.eval_every > 0 && (e + 1) % cfg.eval_every == 0 || e + 1 == n;
-            let eval_return = if eval {
-                match l.episode(index, &design, EpisodeMode::Eval, global)? {
-                    Some(end) => Some(end.episode_return),
-                    None => {
-                        interrupted = true;
-                        None
+            let ((c, steps_then), eval_return) = match c.mode {
+                EpisodeMode::Train => {
+                    l.learn_from(&c)?;
+                    steps += c.end.length;
+                    let e = c.episode;
+                    if cfg.eval_every > 0 && (e + 1) % cfg.eval_every == 0 || e + 1 == n {
+                        l.issue(index, &design, e, c.global, EpisodeMode::Eval)?;
+                        awaiting_eval.push((c, steps));
+                        continue;
                     }
+                    ((c, steps), None)
                 }
-            } else {
-                None
+                EpisodeMode::Eval => {
+                    let Some(i) = awaiting_eval.iter().position(|(t, _)| t.episode == c.episode) else {
+                        return Err(CoadaptError::Protocol(format!("an evaluation of episode {} nobody asked for", c.episode)));
+                    };
+                    (awaiting_eval.swap_remove(i), Some(c.end.episode_return))
+                }
             };
             row.episodes += 1;
             if let Some(r) = eval_return {
@@ -330,30 +478,32 @@ pub fn run(
             }
             let ep = EpisodeRow {
                 design: index,
-                episode: e,
-                global_episode: global as usize,
-                steps,
-                train_return: end.episode_return,
+                episode: c.episode,
+                global_episode: c.global as usize,
+                steps: steps_then,
+                train_return: c.end.episode_return,
                 eval_return,
-                weights_version: version,
+                weights_version: c.weights_version,
+                actor: c.actor,
+                policy_lag: c.policy_lag,
                 seconds: start.elapsed().as_secs_f64(),
             };
             out.episode(&ep)?;
             on_event(&RunEvent::Episode { row: &ep, episodes_in_design: n });
+            written += 1;
             global += 1;
-            if interrupted {
-                break;
-            }
         }
+        // An interrupted design drops what is still out; the actors' late chunks are ignored.
+        l.pending.clear();
         out.design(&row)?;
         l.fear.agent(ActingPolicy::Population).save(&out.checkpoint_path("population"))?;
         l.fear.agent(ActingPolicy::Individual).save(&out.checkpoint_path("individual"))?;
         on_event(&RunEvent::DesignEnd { row: &row });
         rows.push(row);
         if interrupted || shutdown.load(Ordering::Relaxed) {
-            return Ok(RunOutcome { learner: l.fear, designs: rows, interrupted: true });
+            return Ok(RunOutcome { learner: l.fear, designs: rows, interrupted: true, time: l.time });
         }
     }
     let interrupted = rows.len() < cfg.designs;
-    Ok(RunOutcome { learner: l.fear, designs: rows, interrupted })
+    Ok(RunOutcome { learner: l.fear, designs: rows, interrupted, time: l.time })
 }

@@ -9,8 +9,10 @@
 //! - [`agent`]: [`Agent`], what a training loop needs of either algorithm.
 //! - [`fear`]: the FEAR learner: population and individual SAC pairs, their buffers and the
 //!   per-episode training schedule.
-//! - [`coadapt`]: the learner role of a co-adaptation: the design schedule, lock-step episodes
-//!   over the transport, evaluation, and the run directory's rows ([`run_dir`]).
+//! - [`coadapt`]: the learner role of a co-adaptation: the design schedule, episodes over the
+//!   transport, evaluation, and the run directory's rows ([`run_dir`]).
+//! - [`flow`]: flow control between collection and training (lock-step or a window of
+//!   episodes in flight), leases that re-issue a silent actor's episode, policy lag.
 //! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
 
 pub mod agent;
@@ -18,6 +20,7 @@ pub mod coadapt;
 pub mod config;
 pub mod ddpg;
 pub mod fear;
+pub mod flow;
 pub mod networks;
 pub mod run_dir;
 pub mod sac;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 /// The header of `designs.csv`. `design` is the design vector joined with `;`.
 pub const DESIGNS_HEADER: &str = "index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts,method";
 /// The header of `episodes.csv`; `eval_return` is empty for episodes without an evaluation.
-pub const EPISODES_HEADER: &str = "design,episode,global_episode,steps,return,eval_return,weights_version,seconds";
+pub const EPISODES_HEADER: &str = "design,episode,global_episode,steps,return,eval_return,weights_version,seconds,actor,policy_lag";
 
 /// One finished (or interrupted) design.
 #[derive(Clone, Debug, PartialEq)]
@@ -40,6 +40,11 @@ pub struct EpisodeRow {
     pub weights_version: u64,
     /// Since the run started.
     pub seconds: f64,
+    /// The actor that ran the training episode.
+    pub actor: u64,
+    /// Weights versions published between the one the episode acted with and the newest
+    /// when it came back (0 in lock-step).
+    pub policy_lag: u64,
 }
 
 fn opt(v: Option<f32>) -> String {
@@ -100,7 +105,7 @@ impl RunWriter {
     pub fn episode(&mut self, r: &EpisodeRow) -> io::Result<()> {
         writeln!(
             self.episodes,
-            "{},{},{},{},{},{},{},{:.3}",
+            "{},{},{},{},{},{},{},{:.3},{},{}",
             r.design,
             r.episode,
             r.global_episode,
@@ -108,7 +113,9 @@ impl RunWriter {
             r.train_return,
             opt(r.eval_return),
             r.weights_version,
-            r.seconds
+            r.seconds,
+            r.actor,
+            r.policy_lag
         )?;
         self.episodes.flush()
     }

@@ -1,0 +1,274 @@
+//! `coadapt bench transport`: the fleet's links between separate processes, timed.
+//!
+//! - `weights_broadcast`: the learner publishes the acting policy (3 x 256, obs 23, act 6:
+//!   143,878 values, 575 KB) and waits until each of N actor processes has received it and
+//!   answered with a small chunk naming the version; the figure is that round trip, median
+//!   and 99th percentile over many publishes.
+//! - `experience`: N actor processes send 250-transition chunks (obs 23, act 6) as fast as
+//!   the transport takes them; the learner receives and decodes; transitions/s and MB/s of
+//!   encoded payload.
+//!
+//! The actor side runs as `coadapt bench transport --peer ...` children of this process.
+
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use coadapt_transport::{ExperienceChunk, Weights};
+
+use crate::bench::emit;
+use crate::fleet::{FleetConfig, TransportKind};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Peer {
+    /// Answer every weights version with a chunk naming it.
+    Echo,
+    /// Send experience chunks for `--seconds`.
+    Flood,
+}
+
+#[derive(Debug, Args)]
+pub struct TransportArgs {
+    /// Transports to time.
+    #[arg(long, value_enum, value_delimiter = ',', default_values = ["shm", "grpc"])]
+    pub transport: Vec<TransportKind>,
+    /// Actor processes for the weight broadcast.
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16])]
+    pub actors: Vec<usize>,
+    /// Actor processes sending experience.
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4])]
+    pub senders: Vec<usize>,
+    /// Seconds per figure.
+    #[arg(long, default_value_t = 5.0)]
+    pub seconds: f64,
+    /// Internal: run as an actor-side peer of a running benchmark.
+    #[arg(long, value_enum, hide = true)]
+    pub peer: Option<Peer>,
+    #[arg(long, hide = true, default_value = "")]
+    pub fleet: String,
+    #[arg(long, hide = true, default_value = "")]
+    pub connect: String,
+    #[arg(long, hide = true, default_value_t = 0)]
+    pub id: u64,
+}
+
+const OBS: usize = 23;
+const ACT: usize = 6;
+const ROWS: usize = 250;
+
+fn policy_len() -> usize {
+    let hidden = [256usize; 3];
+    let mut n = 0;
+    let mut fan_in = OBS;
+    for h in hidden {
+        n += fan_in * h + h;
+        fan_in = h;
+    }
+    n + fan_in * 2 * ACT + 2 * ACT
+}
+
+fn experience_chunk(id: u64) -> ExperienceChunk {
+    ExperienceChunk {
+        actor: id,
+        assignment: 1,
+        design_index: 0,
+        weights_version: 0,
+        first: false,
+        obs: (0..ROWS * OBS).map(|i| (i % 97) as f32 * 0.01).collect(),
+        actions: vec![0.5; ROWS * ACT],
+        rewards: vec![0.1; ROWS],
+        next_obs: (0..ROWS * OBS).map(|i| (i % 89) as f32 * 0.01).collect(),
+        terminated: vec![false; ROWS],
+        end: None,
+    }
+}
+
+fn fleet_config(kind: TransportKind, fleet: &str, connect: &str) -> FleetConfig {
+    FleetConfig { transport: kind, name: fleet.into(), listen: "127.0.0.1:0".into(), connect: connect.into(), ..FleetConfig::default() }
+}
+
+pub fn run(a: &TransportArgs) -> anyhow::Result<()> {
+    if let Some(peer) = a.peer {
+        let kind = *a.transport.first().context("--peer needs --transport")?;
+        return run_peer(peer, &fleet_config(kind, &a.fleet, &a.connect), a);
+    }
+    for &kind in &a.transport {
+        if kind == TransportKind::InProcess {
+            bail!("--transport: in-process has nothing to time here; use shm or grpc");
+        }
+        for &n in &a.actors {
+            broadcast(kind, n, a.seconds)?;
+        }
+        for &n in &a.senders {
+            experience(kind, n, a.seconds)?;
+        }
+    }
+    Ok(())
+}
+
+/// The learner side of one figure: its links, and how peers reach it.
+struct Learner {
+    links: coadapt_transport::LearnerLinks,
+    _guard: crate::fleet::LearnerGuard,
+    fleet: String,
+    connect: String,
+}
+
+fn learner(kind: TransportKind, tag: &str) -> anyhow::Result<Learner> {
+    let fleet = format!("coadapt-bench-{}-{tag}", std::process::id());
+    let cfg = fleet_config(kind, &fleet, "");
+    let (links, guard) = cfg.learner_links()?;
+    let connect = match &guard {
+        crate::fleet::LearnerGuard::Grpc(s) => format!("http://{}", s.local_addr()),
+        crate::fleet::LearnerGuard::None => String::new(),
+    };
+    Ok(Learner { links, _guard: guard, fleet, connect })
+}
+
+fn spawn_peers(kind: TransportKind, l: &Learner, peer: &str, n: usize, seconds: f64) -> anyhow::Result<Vec<Child>> {
+    let exe = std::env::current_exe().context("finding the coadapt binary")?;
+    (0..n)
+        .map(|i| {
+            Command::new(&exe)
+                .args(["bench", "transport", "--peer", peer, "--transport", kind.name(), "--fleet", &l.fleet, "--connect", &l.connect])
+                .args(["--id", &i.to_string(), "--seconds", &seconds.to_string()])
+                .stdin(Stdio::null())
+                .stdout(Stdio::null())
+                .spawn()
+                .context("starting a peer process")
+        })
+        .collect()
+}
+
+fn reap(children: Vec<Child>) {
+    for mut c in children {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while matches!(c.try_wait(), Ok(None)) && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = c.kill();
+        let _ = c.wait();
+    }
+}
+
+fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> {
+    let mut l = learner(kind, &format!("w{n}"))?;
+    let peers = spawn_peers(kind, &l, "echo", n, seconds)?;
+    let len = policy_len();
+    let mut version = 0u64;
+    let publish = |l: &mut Learner, version: u64| -> anyhow::Result<()> {
+        let policy = (0..len).map(|i| (i as f32 * 1e-4) + version as f32).collect();
+        l.links.acting_weights.publish(Weights { version, policy, q1: vec![], q2: vec![] })?;
+        Ok(())
+    };
+    // Until every peer has answered once, they are still starting.
+    let mut seen = vec![false; n];
+    let ready_by = Instant::now() + Duration::from_secs(60);
+    while seen.iter().any(|s| !s) {
+        version += 1;
+        publish(&mut l, version)?;
+        let t = Instant::now();
+        while t.elapsed() < Duration::from_millis(200) {
+            if let Some(c) = l.links.experience.recv_timeout(Duration::from_millis(50))?
+                && let Some(s) = seen.get_mut(c.actor as usize)
+            {
+                *s = true;
+            }
+        }
+        if Instant::now() > ready_by {
+            bail!("the {n} peer processes did not all answer within 60 s");
+        }
+    }
+    let mut times = Vec::new();
+    let start = Instant::now();
+    while start.elapsed().as_secs_f64() < seconds || times.len() < 20 {
+        version += 1;
+        let t = Instant::now();
+        publish(&mut l, version)?;
+        let mut got = 0;
+        while got < n {
+            match l.links.experience.recv_timeout(Duration::from_secs(10))? {
+                Some(c) if c.weights_version == version => got += 1,
+                Some(_) => {}
+                None => bail!("a peer did not answer version {version} within 10 s"),
+            }
+        }
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    drop(l);
+    reap(peers);
+    times.sort_by(f64::total_cmp);
+    let config = format!("{}-{n}actors-{}KB", kind.name(), len * 4 / 1000);
+    emit("weights_broadcast_median", &config, times[times.len() / 2], "ms");
+    emit("weights_broadcast_p99", &config, times[(times.len() * 99 / 100).min(times.len() - 1)], "ms");
+    Ok(())
+}
+
+fn experience(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> {
+    let mut l = learner(kind, &format!("e{n}"))?;
+    let peers = spawn_peers(kind, &l, "flood", n, seconds)?;
+    let bytes_per_row = (2 * OBS + ACT + 1) * 4 + 1;
+    let (mut rows, mut first, mut last) = (0usize, None, Instant::now());
+    let mut idle = Instant::now();
+    loop {
+        match l.links.experience.recv_timeout(Duration::from_millis(200)) {
+            Ok(Some(c)) => {
+                // The clock starts at the first chunk, so process start-up is not counted.
+                if first.is_none() {
+                    first = Some(Instant::now());
+                } else {
+                    rows += c.len();
+                }
+                last = Instant::now();
+                idle = Instant::now();
+            }
+            Ok(None) | Err(coadapt_transport::TransportError::Closed) => {
+                let waited = if first.is_some() { Duration::from_secs(2) } else { Duration::from_secs(60) };
+                if idle.elapsed() > waited {
+                    break;
+                }
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+    drop(l);
+    reap(peers);
+    let Some(first) = first else { bail!("no experience arrived from {n} peer processes") };
+    let secs = last.duration_since(first).as_secs_f64().max(1e-9);
+    let config = format!("{}-{n}senders-{ROWS}rows", kind.name());
+    emit("experience", &config, rows as f64 / secs, "transitions/s");
+    emit("experience", &config, (rows * bytes_per_row) as f64 / secs / 1e6, "MB/s");
+    Ok(())
+}
+
+fn run_peer(peer: Peer, cfg: &FleetConfig, a: &TransportArgs) -> anyhow::Result<()> {
+    let mut links = cfg.actor_links(a.id)?;
+    match peer {
+        Peer::Echo => {
+            let mut seen = 0;
+            loop {
+                let w = match links.weights.wait_for(seen + 1, Duration::from_secs(5)) {
+                    Ok(Some(w)) => w,
+                    Ok(None) | Err(coadapt_transport::TransportError::Closed) => return Ok(()),
+                    Err(e) => return Err(e.into()),
+                };
+                seen = w.version;
+                let ack = ExperienceChunk { actor: a.id, weights_version: w.version, ..ExperienceChunk::default() };
+                if links.experience.send(ack).is_err() {
+                    return Ok(());
+                }
+            }
+        }
+        Peer::Flood => {
+            let chunk = experience_chunk(a.id);
+            let start = Instant::now();
+            while start.elapsed().as_secs_f64() < a.seconds {
+                if links.experience.send(chunk.clone()).is_err() {
+                    break;
+                }
+            }
+            Ok(())
+        }
+    }
+}

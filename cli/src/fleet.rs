@@ -1,0 +1,155 @@
+//! Which transport the roles talk over, and each role's links for it.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use anyhow::Context;
+use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
+use serde::{Deserialize, Serialize};
+
+/// How the roles talk.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum TransportKind {
+    /// Separate processes on one machine over iceoryx2 shared memory.
+    #[default]
+    Shm,
+    /// Separate processes, on one machine or many, over gRPC.
+    Grpc,
+    /// Threads of one process (`coadapt run` only).
+    InProcess,
+}
+
+impl TransportKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Shm => "shm",
+            Self::Grpc => "grpc",
+            Self::InProcess => "in-process",
+        }
+    }
+}
+
+/// The `[fleet]` table: how the processes of a run find each other.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct FleetConfig {
+    /// `shm` (iceoryx2 shared memory, one machine; the default), `grpc` (across machines) or
+    /// `in-process` (threads; `coadapt run` only).
+    pub transport: TransportKind,
+    /// Shared memory: the fleet's name; every process of one run uses the same one (empty:
+    /// `coadapt run` picks `coadapt-<its pid>`; the role commands need it set or `--fleet`).
+    pub name: String,
+    /// gRPC: the address the learner listens on.
+    pub listen: String,
+    /// gRPC: the learner's address as actors and the optimiser reach it.
+    pub connect: String,
+    /// gRPC: the deadline of every call (seconds).
+    pub rpc_timeout_secs: f64,
+    /// `coadapt run`: restarts of crashed actors and optimisers allowed in one run.
+    pub max_restarts: usize,
+}
+
+impl Default for FleetConfig {
+    fn default() -> Self {
+        Self {
+            transport: TransportKind::Shm,
+            name: String::new(),
+            listen: "0.0.0.0:50051".into(),
+            connect: "http://127.0.0.1:50051".into(),
+            rpc_timeout_secs: 10.0,
+            max_restarts: 100,
+        }
+    }
+}
+
+/// What keeps a learner's transport alive (the gRPC server); drop it last.
+pub enum LearnerGuard {
+    None,
+    Grpc(coadapt_grpc::LearnerServer),
+}
+
+impl std::fmt::Debug for LearnerGuard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::None => "LearnerGuard::None",
+            Self::Grpc(_) => "LearnerGuard::Grpc",
+        })
+    }
+}
+
+impl FleetConfig {
+    fn shm(&self) -> anyhow::Result<coadapt_shm::ShmConfig> {
+        if self.name.is_empty() {
+            anyhow::bail!("fleet.name: a shared-memory fleet needs a name shared by all its processes (or --fleet NAME)");
+        }
+        Ok(coadapt_shm::ShmConfig { fleet: self.name.clone(), ..coadapt_shm::ShmConfig::default() })
+    }
+
+    fn grpc(&self) -> anyhow::Result<coadapt_grpc::GrpcConfig> {
+        let t = self.rpc_timeout_secs;
+        let rpc_timeout = Duration::try_from_secs_f64(t)
+            .ok()
+            .filter(|d| !d.is_zero())
+            .ok_or_else(|| anyhow::anyhow!("fleet.rpc-timeout-secs: {t} is not a positive number of seconds"))?;
+        Ok(coadapt_grpc::GrpcConfig { rpc_timeout, ..coadapt_grpc::GrpcConfig::default() })
+    }
+
+    /// The learner's side; for gRPC this starts the server.
+    pub fn learner_links(&self) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
+        match self.transport {
+            TransportKind::Shm => {
+                let cfg = self.shm()?;
+                clean_stale();
+                let links = coadapt_shm::learner_links(&cfg).with_context(|| format!("opening shared-memory fleet {}", cfg.fleet))?;
+                Ok((links, LearnerGuard::None))
+            }
+            TransportKind::Grpc => {
+                let addr: SocketAddr =
+                    self.listen.parse().with_context(|| format!("fleet.listen: {:?} is not an address like 0.0.0.0:50051", self.listen))?;
+                let (links, server) =
+                    coadapt_grpc::serve_learner(addr, &self.grpc()?).with_context(|| format!("serving gRPC on {addr}"))?;
+                eprintln!("learner: gRPC on {}", server.local_addr());
+                Ok((links, LearnerGuard::Grpc(server)))
+            }
+            TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
+        }
+    }
+
+    pub fn actor_links(&self, id: u64) -> anyhow::Result<ActorLinks> {
+        match self.transport {
+            TransportKind::Shm => {
+                let cfg = self.shm()?;
+                clean_stale();
+                coadapt_shm::actor_links(&cfg, id).with_context(|| format!("joining shared-memory fleet {}", cfg.fleet))
+            }
+            TransportKind::Grpc => {
+                coadapt_grpc::actor_links(&self.connect, id, &self.grpc()?).with_context(|| format!("connecting to {}", self.connect))
+            }
+            TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
+        }
+    }
+
+    pub fn optimizer_links(&self) -> anyhow::Result<OptimizerLinks> {
+        match self.transport {
+            TransportKind::Shm => {
+                let cfg = self.shm()?;
+                clean_stale();
+                coadapt_shm::optimizer_links(&cfg).with_context(|| format!("joining shared-memory fleet {}", cfg.fleet))
+            }
+            TransportKind::Grpc => {
+                coadapt_grpc::optimizer_links(&self.connect, &self.grpc()?).with_context(|| format!("connecting to {}", self.connect))
+            }
+            TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
+        }
+    }
+}
+
+/// Removes what killed processes left in shared memory; a failure is worth a warning only.
+pub fn clean_stale() {
+    match coadapt_shm::cleanup_stale() {
+        Ok(0) => {}
+        Ok(n) => eprintln!("cleaned up shared memory of {n} dead process(es)"),
+        Err(e) => eprintln!("warning: cleaning up stale shared memory: {e}"),
+    }
+}

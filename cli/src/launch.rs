@@ -1,0 +1,164 @@
+//! `coadapt run` as a local fleet: the learner, the design optimiser and N actors as separate
+//! processes of this binary (`coadapt learner|optimizer|actor`), supervised: a crashed actor or
+//! optimiser is started again (the learner re-issues the episode it had), Ctrl-C or SIGTERM is
+//! passed on once to every process, and when the learner is done the others are given a few
+//! seconds to leave before they are stopped. Shared memory left by killed processes is cleaned
+//! up when the fleet starts and when it ends.
+
+use std::fs::File;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::Path;
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+use crate::fleet::{TransportKind, clean_stale};
+use crate::run::RunConfig;
+
+/// How long the other processes get to leave after the learner is done.
+const GRACE: Duration = Duration::from_secs(10);
+
+struct Proc {
+    name: String,
+    args: Vec<String>,
+    log: Option<std::path::PathBuf>,
+    child: Child,
+    started: Instant,
+}
+
+fn spawn(name: &str, args: &[String], log: Option<&Path>) -> anyhow::Result<Proc> {
+    let exe = std::env::current_exe().context("finding the coadapt binary")?;
+    let mut cmd = Command::new(exe);
+    cmd.args(args).stdin(Stdio::null());
+    // A process group of its own: a terminal's Ctrl-C reaches only the supervisor, which passes
+    // it on exactly once (a second SIGINT means "abort now" to a role).
+    cmd.process_group(0);
+    if let Some(log) = log {
+        let f = File::options().create(true).append(true).open(log).with_context(|| format!("opening {}", log.display()))?;
+        cmd.stdout(f.try_clone()?).stderr(f);
+    }
+    let child = cmd.spawn().with_context(|| format!("starting {name}"))?;
+    Ok(Proc { name: name.into(), args: args.to_vec(), log: log.map(Path::to_path_buf), child, started: Instant::now() })
+}
+
+fn signal(p: &Proc, sig: Signal) {
+    if let Ok(pid) = i32::try_from(p.child.id()) {
+        // The process may have exited already; nothing to do then.
+        let _ = kill(Pid::from_raw(pid), sig);
+    }
+}
+
+fn describe(s: ExitStatus) -> String {
+    match (s.code(), s.signal()) {
+        (Some(c), _) => format!("exit code {c}"),
+        (None, Some(sig)) => format!("signal {sig}"),
+        _ => "unknown status".into(),
+    }
+}
+
+/// Launches the fleet for `cfg` into `dir` and supervises it until the learner is done.
+pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Result<()> {
+    let mut cfg = cfg.clone();
+    match cfg.fleet.transport {
+        TransportKind::Shm => {
+            if cfg.fleet.name.is_empty() {
+                cfg.fleet.name = format!("coadapt-{}", std::process::id());
+            }
+            clean_stale();
+        }
+        TransportKind::Grpc => {
+            // A free loopback port for this fleet.
+            let port = std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).context("finding a free port")?.port();
+            cfg.fleet.listen = format!("127.0.0.1:{port}");
+            cfg.fleet.connect = format!("http://127.0.0.1:{port}");
+        }
+        TransportKind::InProcess => bail!("fleet.transport: in-process runs without a fleet"),
+    }
+    let logs = dir.join("logs");
+    std::fs::create_dir_all(&logs).with_context(|| format!("creating {}", logs.display()))?;
+    let config = dir.join("config.toml");
+    std::fs::write(&config, toml::to_string(&cfg)?).with_context(|| format!("writing {}", config.display()))?;
+    let config = config.display().to_string();
+    let common = ["--config".to_string(), config.clone(), "--transport".into(), cfg.fleet.transport.name().into()];
+
+    let mut learner_args = vec!["learner".to_string()];
+    learner_args.extend(common.iter().cloned());
+    learner_args.extend(["--out".into(), dir.display().to_string()]);
+    let mut learner = spawn("learner", &learner_args, None)?;
+    let mut others = Vec::new();
+    let mut opt_args = vec!["optimizer".to_string()];
+    opt_args.extend(common.iter().cloned());
+    others.push(spawn("optimizer", &opt_args, Some(&logs.join("optimizer.log")))?);
+    for i in 0..cfg.actors {
+        let mut a = vec!["actor".to_string()];
+        a.extend(common.iter().cloned());
+        a.extend(["--id".into(), i.to_string()]);
+        others.push(spawn(&format!("actor {i}"), &a, Some(&logs.join(format!("actor-{i}.log"))))?);
+    }
+    eprintln!(
+        "fleet {}: learner pid {}, {}; logs in {}",
+        if cfg.fleet.name.is_empty() { cfg.fleet.connect.as_str() } else { cfg.fleet.name.as_str() },
+        learner.child.id(),
+        others.iter().map(|p| format!("{} pid {}", p.name, p.child.id())).collect::<Vec<_>>().join(", "),
+        logs.display()
+    );
+
+    let mut restarts = 0usize;
+    let mut interrupted = false;
+    let status = loop {
+        if shutdown.load(Ordering::Relaxed) && !interrupted {
+            interrupted = true;
+            for p in std::iter::once(&learner).chain(&others) {
+                signal(p, Signal::SIGINT);
+            }
+        }
+        if let Some(s) = learner.child.try_wait().context("watching the learner")? {
+            break s;
+        }
+        for p in others.iter_mut() {
+            let Some(s) = p.child.try_wait().with_context(|| format!("watching {}", p.name))? else { continue };
+            if interrupted || restarts >= cfg.fleet.max_restarts {
+                continue;
+            }
+            // A role that leaves while the learner still runs has crashed: start it again,
+            // after a pause if it crashed straight away.
+            eprintln!(
+                "fleet: {} (pid {}) ended with {}; starting it again (log {})",
+                p.name,
+                p.child.id(),
+                describe(s),
+                p.log.as_ref().map_or("-".into(), |l| l.display().to_string())
+            );
+            if p.started.elapsed() < Duration::from_secs(2) {
+                std::thread::sleep(Duration::from_secs(1));
+            }
+            *p = spawn(&p.name.clone(), &p.args.clone(), p.log.as_deref())?;
+            restarts += 1;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+
+    let until = Instant::now() + GRACE;
+    for p in others.iter_mut() {
+        while p.child.try_wait()?.is_none() && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        if p.child.try_wait()?.is_none() {
+            signal(p, Signal::SIGTERM);
+            std::thread::sleep(Duration::from_millis(200));
+            let _ = p.child.kill();
+            let _ = p.child.wait();
+        }
+    }
+    if cfg.fleet.transport == TransportKind::Shm {
+        clean_stale();
+    }
+    if !status.success() {
+        bail!("the learner ended with {} (its output is above; actor and optimiser logs in {})", describe(status), logs.display());
+    }
+    Ok(())
+}

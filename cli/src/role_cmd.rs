@@ -1,0 +1,152 @@
+//! `coadapt learner`, `coadapt actor`, `coadapt optimizer`: one role per process, for a fleet
+//! launched by `coadapt run`, by `deploy/` scripts, systemd or Kubernetes. Every role reads the
+//! same run config; flags override its `[fleet]` table.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::bail;
+use clap::Args;
+
+use crate::fleet::TransportKind;
+use crate::progress::shutdown_on_ctrl_c;
+use crate::roles::{self, make_env};
+use crate::run::{RunArgs, RunConfig, check, finish, resolve, resolve_initial_designs};
+
+/// What every role takes.
+#[derive(Debug, Args)]
+pub struct RoleArgs {
+    /// The run's TOML config (the same file for every process of a fleet; default: the
+    /// embedded reference protocol).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override fleet.transport: shm (one machine) or grpc.
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportKind>,
+    /// Override fleet.name: the shared-memory fleet every process of the run joins.
+    #[arg(long)]
+    pub fleet: Option<String>,
+    /// Override the seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+impl RoleArgs {
+    fn load(&self) -> anyhow::Result<(RunConfig, String)> {
+        let run = RunArgs {
+            config: self.config.clone(),
+            out: None,
+            seed: self.seed,
+            exploit: None,
+            explore: None,
+            designs: None,
+            transport: self.transport,
+            actors: None,
+        };
+        let (mut cfg, name) = resolve(&run)?;
+        if let Some(f) = &self.fleet {
+            cfg.fleet.name = f.clone();
+        }
+        let spec = make_env(&cfg.env)?.spec().clone();
+        resolve_initial_designs(&mut cfg, &spec);
+        check(&cfg, &spec)?;
+        Ok((cfg, name))
+    }
+}
+
+/// The learner: owns the schedule and the run directory; for gRPC it serves the fleet.
+#[derive(Debug, Args)]
+pub struct LearnerArgs {
+    #[command(flatten)]
+    pub role: RoleArgs,
+    /// Run directory (default: runs/<config name>-seed<seed>, -2, -3, ... if taken).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Override fleet.listen: the gRPC address to serve on (port 0: any free port).
+    #[arg(long)]
+    pub listen: Option<String>,
+}
+
+/// An actor: runs the episodes the learner hands out, with the newest weights.
+#[derive(Debug, Args)]
+pub struct ActorArgs {
+    #[command(flatten)]
+    pub role: RoleArgs,
+    /// This actor's id, unique in the fleet (default: derived from the host and process id).
+    #[arg(long)]
+    pub id: Option<u64>,
+    /// Override fleet.connect: the learner's gRPC address, e.g. http://10.0.0.1:50051.
+    #[arg(long)]
+    pub connect: Option<String>,
+}
+
+/// The design optimiser: answers the learner's design requests.
+#[derive(Debug, Args)]
+pub struct OptimizerArgs {
+    #[command(flatten)]
+    pub role: RoleArgs,
+    /// Override fleet.connect: the learner's gRPC address.
+    #[arg(long)]
+    pub connect: Option<String>,
+}
+
+/// `coadapt learner`.
+pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
+    let (mut cfg, name) = args.role.load()?;
+    if let Some(l) = args.listen {
+        cfg.fleet.listen = l;
+    }
+    let dir = args.out.unwrap_or_else(|| crate::run::default_out(&name, cfg.seed));
+    if dir.join("designs.csv").exists() {
+        bail!("{} already holds a run (designs.csv exists); choose another --out", dir.display());
+    }
+    let spec = make_env(&cfg.env)?.spec().clone();
+    let shutdown = shutdown_on_ctrl_c();
+    let (mut links, guard) = cfg.fleet.learner_links()?;
+    eprintln!("learner: {} on {} over {}, into {}", name, cfg.env, cfg.fleet.transport.name(), dir.display());
+    let start = Instant::now();
+    let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown);
+    // Closing the channels tells actors and optimiser the run is over.
+    drop(links);
+    let mut outcome = result?;
+    finish(&cfg, &dir, &mut outcome, &shutdown, start)?;
+    drop(guard);
+    Ok(())
+}
+
+/// A default actor id: the same process never gets two, two hosts rarely collide.
+fn default_id() -> u64 {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in host.trim().bytes() {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+    }
+    (h << 20) ^ u64::from(std::process::id())
+}
+
+/// `coadapt actor`.
+pub fn actor(args: ActorArgs) -> anyhow::Result<()> {
+    let (mut cfg, _) = args.role.load()?;
+    if let Some(c) = args.connect {
+        cfg.fleet.connect = c;
+    }
+    let id = args.id.unwrap_or_else(default_id);
+    let spec = make_env(&cfg.env)?.spec().clone();
+    let shutdown = shutdown_on_ctrl_c();
+    let mut links = cfg.fleet.actor_links(id)?;
+    eprintln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
+    roles::actor(&cfg, &spec, id, &mut links, &shutdown)
+}
+
+/// `coadapt optimizer`.
+pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
+    let (mut cfg, _) = args.role.load()?;
+    if let Some(c) = args.connect {
+        cfg.fleet.connect = c;
+    }
+    let spec = make_env(&cfg.env)?.spec().clone();
+    let shutdown = shutdown_on_ctrl_c();
+    let mut links = cfg.fleet.optimizer_links()?;
+    eprintln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());
+    roles::optimizer(&cfg, &spec, &mut links, &shutdown)
+}

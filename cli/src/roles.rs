@@ -1,0 +1,154 @@
+//! The three roles of a co-adaptation, each over whatever links it is given: the same code runs
+//! as threads (`coadapt run` over the in-process transport) and as separate processes
+//! (`coadapt learner`, `coadapt actor`, `coadapt optimizer`).
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::Context;
+use coadapt_actors::{Actor, PolicyKind};
+use coadapt_core::{Env, EnvSpec};
+use coadapt_design_optimizer::role::{self as optimizer, Optimizer, OptimizerSpec, RolloutEvaluator};
+use coadapt_learner::coadapt::{self, RunEvent};
+use coadapt_learner::networks;
+use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
+
+use crate::progress::duration;
+use crate::run::RunConfig;
+
+pub fn make_env(name: &str) -> anyhow::Result<Box<dyn Env>> {
+    Ok(coadapt_robots::make(name)?)
+}
+
+/// Simulation rollouts for the baselines: one deterministic episode of the population policy
+/// per design, fitness the mean per-step reward; designs are shared out over the threads.
+struct SimEvaluator {
+    actors: Vec<Actor<Box<dyn Env>>>,
+    version: u64,
+    seed: u64,
+}
+
+impl RolloutEvaluator for SimEvaluator {
+    fn evaluate(&mut self, policy: &[f32], designs: &[f32], fitness: &mut [f32]) -> Result<(), String> {
+        self.version += 1;
+        let dim = designs.len() / fitness.len().max(1);
+        let per = fitness.len().div_ceil(self.actors.len());
+        let (version, seed) = (self.version, self.seed);
+        std::thread::scope(|s| {
+            let jobs: Vec<_> = self
+                .actors
+                .iter_mut()
+                .zip(fitness.chunks_mut(per.max(1)))
+                .zip(designs.chunks(per.max(1) * dim))
+                .map(|((actor, fit), des)| {
+                    s.spawn(move || -> Result<(), String> {
+                        actor.set_weights(version, policy).map_err(|e| e.to_string())?;
+                        for (f, d) in fit.iter_mut().zip(des.chunks_exact(dim)) {
+                            let st = actor
+                                .run_episode(seed, d, false, &mut |_| std::ops::ControlFlow::Continue(()))
+                                .map_err(|e| e.to_string())?;
+                            *f = st.episode_return / st.length.max(1) as f32;
+                        }
+                        Ok(())
+                    })
+                })
+                .collect();
+            jobs.into_iter().try_for_each(|j| j.join().map_err(|_| "a rollout thread panicked".to_string())?)
+        })
+    }
+}
+
+/// The progress lines of a run: one per design start and end, one per episode with an ETA.
+pub fn progress_printer(cfg: &RunConfig) -> impl FnMut(&RunEvent<'_>) + use<> {
+    let total_episodes = cfg.schedule.total_episodes();
+    let designs_total = cfg.schedule.designs;
+    let start = Instant::now();
+    let mut done_episodes = 0usize;
+    move |e: &RunEvent<'_>| match e {
+        RunEvent::DesignStart { index, row } => {
+            let pred = row.predicted_objective.map(|p| format!(", predicted objective {p:.3}")).unwrap_or_default();
+            let rollouts = if row.design_rollouts > 0 { format!(", {} design rollouts", row.design_rollouts) } else { String::new() };
+            eprintln!(
+                "design {}/{designs_total} [{} {}] {:?}{pred}{rollouts}",
+                index + 1,
+                row.kind,
+                row.method,
+                row.design.iter().map(|v| (v * 1000.0).round() / 1000.0).collect::<Vec<_>>()
+            );
+        }
+        RunEvent::Episode { row, episodes_in_design } => {
+            done_episodes += 1;
+            let el = start.elapsed().as_secs_f64();
+            let eta = el / done_episodes as f64 * (total_episodes.saturating_sub(done_episodes)) as f64;
+            let eval = row.eval_return.map(|r| format!(" eval {r:8.2}")).unwrap_or_default();
+            let lag = if row.policy_lag > 0 { format!(" lag {}", row.policy_lag) } else { String::new() };
+            eprintln!(
+                "  design {}/{designs_total} episode {:>4}/{episodes_in_design} return {:8.2}{eval}  actor {}{lag}  [{} elapsed, ETA {}]",
+                row.design + 1,
+                row.episode + 1,
+                row.train_return,
+                row.actor,
+                duration(el),
+                duration(eta)
+            );
+        }
+        RunEvent::DesignEnd { row } => {
+            let f = |v: Option<f32>| v.map_or("-".into(), |v| format!("{v:.2}"));
+            eprintln!("design {} done: best eval {}, last eval {}", row.index + 1, f(row.best_eval_return), f(row.last_eval_return));
+        }
+    }
+}
+
+/// The learner: runs the schedule over `links` and writes the run directory `dir` (created
+/// here; `config.toml` is written first).
+pub fn learner(
+    cfg: &RunConfig,
+    spec: &EnvSpec,
+    dir: &Path,
+    links: &mut LearnerLinks,
+    shutdown: &AtomicBool,
+) -> anyhow::Result<coadapt::RunOutcome> {
+    let mut writer =
+        coadapt_learner::run_dir::RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?;
+    std::fs::write(dir.join("config.toml"), toml::to_string(cfg)?).context("writing config.toml")?;
+    let mut on_event = progress_printer(cfg);
+    Ok(coadapt::run(&cfg.schedule, &cfg.learner, spec, cfg.seed, &cfg.flow, cfg.actors, links, &mut writer, shutdown, &mut on_event)?)
+}
+
+/// One actor: runs the episodes it is handed until the learner is done.
+pub fn actor(cfg: &RunConfig, spec: &EnvSpec, id: u64, links: &mut ActorLinks, shutdown: &AtomicBool) -> anyhow::Result<()> {
+    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), &cfg.learner.sac.hidden)?;
+    let mut actor = Actor::new(make_env(&cfg.env)?, policy, PolicyKind::SquashedGaussian, cfg.seed.wrapping_add(id))?;
+    let s = coadapt_actors::role::run(&mut actor, id, links, cfg.chunk_len, shutdown).with_context(|| format!("actor {id}"))?;
+    eprintln!("actor {id}: done after {} episodes, {} steps", s.episodes, s.steps);
+    Ok(())
+}
+
+/// The design optimiser: answers design requests until the learner is done.
+pub fn optimizer(cfg: &RunConfig, spec: &EnvSpec, links: &mut OptimizerLinks, shutdown: &AtomicBool) -> anyhow::Result<()> {
+    let hidden = &cfg.learner.sac.hidden;
+    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let ospec = OptimizerSpec {
+        policy: policy.clone(),
+        critic,
+        bounds: spec.design.clone(),
+        design_at: spec.state_dim,
+        obs_dim: spec.obs_dim(),
+        act_dim: spec.act_dim(),
+    };
+    let mut sim = if cfg.optimizer.exploit.needs_rollouts() {
+        let actors = (0..cfg.sim_threads.max(1))
+            .map(|i| {
+                Ok(Actor::new(make_env(&cfg.env)?, policy.clone(), PolicyKind::SquashedGaussian, cfg.seed ^ (0x5349_4d00 + i as u64))?)
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        Some(SimEvaluator { actors, version: 0, seed: cfg.seed })
+    } else {
+        None
+    };
+    let mut opt = Optimizer::new(cfg.optimizer.clone(), ospec, sim.as_mut().map(|s| s as &mut dyn RolloutEvaluator), cfg.seed)?;
+    optimizer::run(&mut opt, links, shutdown).context("design optimiser")?;
+    Ok(())
+}

@@ -1,0 +1,183 @@
+//! The co-adaptation as a fleet of processes: over shared memory (the default) and gRPC, with
+//! actors killed mid-run; and the learner's flow control (leases, episodes in flight) over
+//! the in-process transport.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use coadapt_cli::fleet::TransportKind;
+use coadapt_cli::roles;
+use coadapt_cli::run::{RunConfig, resolve_initial_designs};
+use coadapt_learner::flow::FlowMode;
+use coadapt_transport::in_process;
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coadapt-fleet-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn tiny() -> RunConfig {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
+    let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    c.landscape_grid = 0;
+    c
+}
+
+fn write_config(dir: &Path, c: &RunConfig) -> PathBuf {
+    let p = dir.join("fleet.toml");
+    std::fs::write(&p, toml::to_string(c).unwrap()).unwrap();
+    p
+}
+
+fn rows(path: &Path) -> usize {
+    std::fs::read_to_string(path).map_or(0, |t| t.lines().count().saturating_sub(1))
+}
+
+/// Child processes of `pid` as (pid, command line).
+fn children(pid: u32) -> Vec<(u32, String)> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(p) = e.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{p}/stat")) else { continue };
+        // Fields after the command name, which is in parentheses and may hold spaces.
+        let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r.to_string()) else { continue };
+        let ppid: u32 = rest.split_whitespace().nth(1).and_then(|s| s.parse().ok()).unwrap_or(0);
+        if ppid == pid {
+            let cmd = std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default();
+            out.push((p, String::from_utf8_lossy(&cmd).replace('\0', " ")));
+        }
+    }
+    out
+}
+
+fn summary(stdout: &[u8]) -> serde_json::Value {
+    let text = String::from_utf8_lossy(stdout);
+    serde_json::from_str(text.lines().last().unwrap_or_default()).unwrap_or_else(|e| panic!("summary line {text:?}: {e}"))
+}
+
+#[test]
+fn a_shared_memory_fleet_survives_killed_actors() {
+    let dir = tmpdir("shm-kill");
+    let mut c = tiny();
+    c.actors = 2;
+    c.schedule.initial_episodes = 8;
+    c.flow.mode = FlowMode::Async;
+    c.flow.assignment_lease_secs = 2.0;
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let stderr_path = dir.join("stderr.txt");
+    let child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(&stderr_path).unwrap())
+        .spawn()
+        .unwrap();
+    // Both actors are busy in async mode with two in flight: killing both loses an episode.
+    let t = Instant::now();
+    while rows(&out.join("episodes.csv")) < 3 {
+        assert!(t.elapsed() < Duration::from_secs(120), "no episodes after 120 s: {}", std::fs::read_to_string(&stderr_path).unwrap());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let procs = children(child.id());
+    let count = |role: &str| procs.iter().filter(|(_, c)| c.contains(&format!(" {role} "))).count();
+    assert_eq!((count("learner"), count("optimizer"), count("actor")), (1, 1, 2), "separate processes: {procs:?}");
+    for (pid, cmd) in procs.iter().filter(|(_, c)| c.contains(" actor ")) {
+        let ok = Command::new("kill").args(["-KILL", &pid.to_string()]).status().unwrap().success();
+        assert!(ok, "killing {cmd}");
+    }
+    let o = child.wait_with_output().unwrap();
+    let stderr = std::fs::read_to_string(&stderr_path).unwrap();
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("ended with signal 9; starting it again"), "{stderr}");
+    let s = summary(&o.stdout);
+    assert_eq!(s["designs"], 4, "{s}");
+    assert!(s["episodes_reissued"].as_u64().unwrap() >= 1, "the killed actors' episodes were issued again: {s}");
+    assert_eq!(rows(&out.join("episodes.csv")), 2 * 8 + 2 * 2, "every episode of the run is in episodes.csv");
+    // The restarted actors report; the killed ones' partial episodes never reached the replay.
+    let logs: Vec<_> = std::fs::read_dir(out.join("logs")).unwrap().flatten().map(|e| e.file_name()).collect();
+    assert_eq!(logs.len(), 3, "{logs:?}");
+}
+
+#[test]
+fn a_grpc_fleet_runs_the_same_co_adaptation() {
+    let dir = tmpdir("grpc");
+    let mut c = tiny();
+    c.actors = 2;
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "grpc"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let s = summary(&o.stdout);
+    assert_eq!((s["designs"].as_u64(), s["transport"].as_str()), (Some(4), Some("grpc")), "{s}");
+    assert_eq!(rows(&out.join("episodes.csv")), 10);
+    assert_eq!(rows(&out.join("designs.csv")), 4);
+}
+
+/// The learner and one real actor over the in-process transport, plus one actor that takes an
+/// episode and never answers (a process that died holding it).
+#[test]
+fn a_silent_actors_episode_is_issued_again() {
+    let mut c = tiny();
+    c.schedule.designs = 2;
+    c.flow.assignment_lease_secs = 0.5;
+    let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
+    resolve_initial_designs(&mut c, &spec);
+    let (mut learner, mut actors, mut optimizer) = in_process::fleet(2);
+    let shutdown = AtomicBool::new(false);
+    let finished = AtomicBool::new(false);
+    let dir = tmpdir("lease").join("run");
+    let outcome = std::thread::scope(|s| {
+        let mut dead = actors.pop().unwrap();
+        let mut live = actors.pop().unwrap();
+        let finished = &finished;
+        let taken = s.spawn(move || {
+            let a = dead.assignments.recv_timeout(Duration::from_secs(30)).unwrap().expect("an episode for the dead actor");
+            // Hold the channels and say nothing until the run is over.
+            while !finished.load(std::sync::atomic::Ordering::Relaxed) {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            drop(dead);
+            a.id
+        });
+        let (c, spec, shutdown) = (&c, &spec, &shutdown);
+        std::thread::sleep(Duration::from_millis(50));
+        s.spawn(move || roles::actor(c, spec, 1, &mut live, shutdown).unwrap());
+        s.spawn(move || roles::optimizer(c, spec, &mut optimizer, shutdown).unwrap());
+        let outcome = roles::learner(c, spec, &dir, &mut learner, shutdown).unwrap();
+        drop(learner);
+        finished.store(true, std::sync::atomic::Ordering::Relaxed);
+        assert_eq!(taken.join().unwrap(), 1, "the silent actor took the first episode");
+        outcome
+    });
+    assert!(!outcome.interrupted);
+    assert_eq!(outcome.time.reissued, 1);
+    assert_eq!(outcome.designs.iter().map(|d| d.episodes).sum::<usize>(), 6);
+}
+
+#[test]
+fn async_flow_keeps_episodes_in_flight_and_reports_policy_lag() {
+    let dir = tmpdir("async");
+    let mut c = tiny();
+    c.fleet.transport = TransportKind::InProcess;
+    c.actors = 3;
+    c.flow.mode = FlowMode::Async;
+    let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
+    resolve_initial_designs(&mut c, &spec);
+    let o = coadapt_cli::run::run_config(&c, &dir.join("run"), &AtomicBool::new(false)).unwrap();
+    assert!(!o.interrupted);
+    assert_eq!(o.designs.iter().map(|d| d.episodes).sum::<usize>(), 10);
+    assert!(o.time.max_policy_lag >= 1, "with three episodes in flight some act with older weights: {:?}", o.time);
+    let csv = std::fs::read_to_string(dir.join("run/episodes.csv")).unwrap();
+    let actors: std::collections::BTreeSet<&str> = csv.lines().skip(1).filter_map(|l| l.split(',').nth(8)).collect();
+    assert!(actors.len() >= 2, "episodes spread over the actors: {actors:?}");
+}
