@@ -193,9 +193,10 @@ fn loopback_throughput() {
 
     let size = 20 << 20;
     let rounds = 8;
+    let versions: Vec<Weights> = (1..=rounds).map(|v| big_weights(v, size)).collect();
     let t = Instant::now();
-    for v in 1..=rounds {
-        learner.acting_weights.publish(big_weights(v, size)).expect("publish");
+    for (w, v) in versions.into_iter().zip(1..) {
+        learner.acting_weights.publish(w).expect("publish");
         assert_eq!(actor.weights.wait_for(v, LONG).expect("wait").expect("weights").version, v);
     }
     let secs = t.elapsed().as_secs_f64();

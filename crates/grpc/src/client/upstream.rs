@@ -182,6 +182,9 @@ async fn run<F: Frame>(conn: Arc<Conn>, sender: u64, shared: Arc<Shared<F>>) {
             Ok(()) => return shared.end(None),
             Err(s) if is_permanent(&s) => return shared.end(Some(Fatal::Invalid(status_error(&s).to_string()))),
             Err(_) if conn.is_finished() => return shared.end(Some(Fatal::Closed)),
+            // Closing with nothing left to deliver: the clean close is a courtesy that can
+            // wait for no one (the learner then counts us as vanished, not finished).
+            Err(_) if shared.lock().is_ok_and(|w| w.closing && w.pending.is_empty()) => return shared.end(None),
             Err(_) => tokio::time::sleep(backoff.next_delay()).await,
         }
     }
