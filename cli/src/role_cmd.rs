@@ -42,6 +42,7 @@ impl RoleArgs {
             designs: None,
             transport: self.transport,
             actors: None,
+            flow: None,
         };
         let (mut cfg, name) = resolve(&run)?;
         if let Some(f) = &self.fleet {

@@ -16,7 +16,7 @@ use coadapt_design_optimizer::role::{ExploitMethod, ExploreMethod, OptimizerConf
 use coadapt_design_optimizer::{CriticObjective, DesignObjective, QMode, SwarmObjective};
 use coadapt_learner::coadapt::{self, ScheduleConfig};
 use coadapt_learner::fear::{ActingPolicy, FearLearner, FearLearnerConfig};
-use coadapt_learner::flow::FlowConfig;
+use coadapt_learner::flow::{FlowConfig, FlowMode};
 use coadapt_transport::in_process;
 use serde::{Deserialize, Serialize};
 
@@ -112,6 +112,10 @@ pub struct RunArgs {
     /// Override the number of actors.
     #[arg(long)]
     pub actors: Option<usize>,
+    /// Override flow.mode: lock-step (the reference schedule, reproducible) or async
+    /// (episodes in flight on every actor while the learner trains).
+    #[arg(long)]
+    pub flow: Option<String>,
 }
 
 fn parse_enum<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> anyhow::Result<T> {
@@ -145,6 +149,9 @@ pub fn resolve(args: &RunArgs) -> anyhow::Result<(RunConfig, String)> {
     }
     if let Some(n) = args.actors {
         cfg.actors = n;
+    }
+    if let Some(f) = &args.flow {
+        cfg.flow.mode = parse_enum::<FlowMode>("flow", f)?;
     }
     Ok((cfg, name))
 }
