@@ -282,6 +282,16 @@ if not e:
     problems.append("episodes.csv has no rows")
 if {r.get("design") for r in e} != {r.get("index") for r in d}:
     problems.append("episodes.csv does not cover every design of designs.csv")
+if e and "actor" in e[0]:
+    by_actor = {}
+    for r in e:
+        by_actor[r["actor"]] = by_actor.get(r["actor"], 0) + 1
+    print(f"  episodes by actor: {by_actor}", file=sys.stderr)
+    strangers = set(by_actor) - {"0", "100"}
+    if strangers:
+        problems.append(f"episodes.csv names actors {sorted(strangers)}, not ours (0, 100)")
+    if len(by_actor) < 2:
+        print("  note: one actor host ran every episode (allowed: lock-step hands them out one at a time)", file=sys.stderr)
 try:
     s = json.loads(summary.strip().splitlines()[-1])
     if designs is not None and s.get("designs") != designs:
