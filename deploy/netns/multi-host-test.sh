@@ -32,9 +32,14 @@ SCRIPT_DIR=$(cd -- "$(dirname -- "${BASH_SOURCE[0]}")" && pwd)
 REPO_ROOT=$(cd -- "$SCRIPT_DIR/../.." && pwd)
 say() { printf '[netns-test %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
 fail() { say "FAIL: $*"; exit 1; }
-skip() { say "SKIP: $*"; exit 77; }
+skip() {
+  say "SKIP: $*"
+  passed=1 # nothing ran: nothing to keep
+  exit 77
+}
 usage_err() { printf 'multi-host-test.sh: %s (see --help)\n' "$*" >&2; exit 2; }
 
+passed=0
 bin=${COADAPT_BIN:-}
 config=""
 timeout=900
@@ -87,7 +92,6 @@ learner_ip=$subnet.1
 work=$(mktemp -d "${TMPDIR:-/tmp}/coadapt-netns.XXXXXX")
 created_ns=()
 bg_pids=()
-passed=0
 
 cleanup() {
   local st=$? pid ns
