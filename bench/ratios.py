@@ -1,4 +1,8 @@
-"""Ratios of coadapt's figures to the PyTorch peers' from one JSON-lines file (>1: coadapt is faster).
+"""Ratios of coadapt's figures to the peers' from one JSON-lines file (>1: coadapt is faster).
+
+Peers: PyTorch (`"impl": "pytorch"`), MuJoCo (`"mujoco"`), Python grpcio (`"grpcio"`). Each pair
+says whether its unit is higher-is-better (updates/s, MB/s) or lower-is-better (s, ms), so the
+ratio is always ours-is-better-by.
 
 usage: python3 bench/ratios.py runs/bench-nn-*.jsonl
 """
@@ -17,7 +21,23 @@ PAIRS = [
     ("pso_over_q", "700x250x32", "700x250x32", "s", False),
     ("pso_over_q", "700x250x256", "700x250x256", "s", False),
 ]
+PEERS = ("pytorch", "mujoco", "grpcio")
 
+# `coadapt bench transport` (benches below) is paired with bench/peers/transport_grpc.py by
+# config, found in the file: our grpc-* configs against the same grpcio config, and (for
+# context) our shm-* configs against the grpcio figure of the same shape. ms: lower is better;
+# transitions/s and MB/s: higher is better.
+TRANSPORT_BENCHES = ("weights_broadcast_median", "weights_broadcast_p99", "experience")
+HIGHER_IS_BETTER = {"ms": False, "s": False, "s/pass": False}
+
+
+def transport_pairs(figures):
+    pairs = []
+    for impl, bench, cfg, unit in figures:  # in the order they were printed
+        if impl == "coadapt" and bench in TRANSPORT_BENCHES and cfg.startswith(("grpc-", "shm-")):
+            peer_cfg = "grpc-" + cfg.split("-", 1)[1]
+            pairs.append((bench, cfg, peer_cfg, unit, HIGHER_IS_BETTER.get(unit, True)))
+    return sorted(pairs, key=lambda p: not p[1].startswith("grpc-"))  # grpc rows first, then shm
 
 def main(path):
     # A figure measured twice (before and after the peer) counts as the mean of both runs.
@@ -29,14 +49,15 @@ def main(path):
                 r = json.loads(line)
                 runs.setdefault((r.get("impl"), r["bench"], r["config"], r["unit"]), []).append(r["value"])
     figures = {k: sum(v) / len(v) for k, v in runs.items()}
-    for bench, ours_cfg, peer_cfg, unit, higher in PAIRS:
+    for bench, ours_cfg, peer_cfg, unit, higher in PAIRS + transport_pairs(figures):
         ours = figures.get(("coadapt", bench, ours_cfg, unit))
-        peer = figures.get(("pytorch", bench, peer_cfg, unit)) or figures.get(("mujoco", bench, peer_cfg, unit))
-        if ours is None or peer is None:
+        peer = next((figures[k] for k in ((p, bench, peer_cfg, unit) for p in PEERS) if k in figures), None)
+        if ours is None or peer is None or ours == 0 or peer == 0:
             continue
         ratio = ours / peer if higher else peer / ours
         print(json.dumps({"bench": f"{bench}_ratio", "config": f"{ours_cfg} vs peer {peer_cfg}",
-                          "value": round(ratio, 3), "unit": "x faster", "coadapt": ours, "peer": peer}))
+                          "value": round(ratio, 3), "unit": "x faster", "coadapt": ours, "peer": peer,
+                          "figure_unit": unit}))
 
 
 if __name__ == "__main__":

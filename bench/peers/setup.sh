@@ -7,6 +7,8 @@
 # plus its pure-python deps, then build tiny stub libraries for the CUDA .so
 # files torch links against (cuda_stubs.py; needs cc and readelf).
 # Idempotent: a second run only re-checks the environment.
+#   usage: bench/peers/setup.sh            torch, sim and transport peers
+#          bench/peers/setup.sh transport  only what bench/peers/transport_grpc.py needs (no torch)
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -36,8 +38,29 @@ sim_peer() {
         || "$VENV/bin/python" -m pip install --quiet --only-binary=:all: -r "$HERE/requirements-sim.txt"
 }
 
+transport_peer() {
+    # grpcio + grpcio-tools for bench/peers/transport_grpc.py; ordinary wheels with their dependencies.
+    "$VENV/bin/python" - "$HERE/requirements-transport.txt" 2>/dev/null <<'EOF' \
+        || "$VENV/bin/python" -m pip install --quiet --only-binary=:all: -r "$HERE/requirements-transport.txt"
+import sys, importlib.metadata as md
+for line in open(sys.argv[1]):
+    line = line.split("#")[0].strip()
+    if line:
+        name, version = line.split("==")
+        assert md.version(name) == version, (name, md.version(name), version)
+EOF
+}
+
+if [ "${1:-}" = transport ]; then
+    # Only the transport peer: no torch needed (a later full run adds it to the same venv).
+    [ -x "$VENV/bin/python" ] || "$PY" -m venv "$VENV"
+    transport_peer
+    exit 0
+fi
+
 if [ -x "$VENV/bin/python" ] && check 2>/dev/null; then
     sim_peer
+    transport_peer
     exit 0
 fi
 
@@ -51,3 +74,4 @@ TORCH_LIB="$("$VENV/bin/python" -c 'import importlib.util, os; print(os.path.joi
 "$VENV/bin/python" "$HERE/cuda_stubs.py" "$TORCH_LIB"
 check
 sim_peer
+transport_peer
