@@ -39,6 +39,7 @@ def transport_pairs(figures):
             pairs.append((bench, cfg, peer_cfg, unit, HIGHER_IS_BETTER.get(unit, True)))
     return sorted(pairs, key=lambda p: not p[1].startswith("grpc-"))  # grpc rows first, then shm
 
+
 def main(path):
     # A figure measured twice (before and after the peer) counts as the mean of both runs.
     runs = {}
