@@ -22,6 +22,9 @@
 //! finished (it dropped the assignment or design-request sender, or stopped publishing), which
 //! is how a normal end of the learner ends its clients; a crash does not, so they wait for it.
 //! Every RPC has a deadline; streams are kept honest by keep-alive messages every heartbeat.
+//! Delivery is exactly once while the learner lives; across a learner crash, messages it had
+//! stored but whose acknowledgement was lost with it go again to its successor. Assignments
+//! still queued when the learner ends are dropped with it (nobody would learn from them).
 
 use std::time::Duration;
 
