@@ -75,9 +75,13 @@ pub fn run<E: Env>(
             }
             ControlFlow::Continue(())
         })?;
-        sent?;
         chunk.end = Some(EpisodeEnd { episode_return: stats.episode_return, length: stats.length });
-        links.experience.send(std::mem::take(&mut chunk))?;
+        match sent.and_then(|()| links.experience.send(std::mem::take(&mut chunk))) {
+            Ok(()) => {}
+            // The learner has finished and taken nothing more: a normal end.
+            Err(TransportError::Closed) => break,
+            Err(e) => return Err(e.into()),
+        }
         summary.episodes += 1;
         summary.steps += stats.length;
     }

@@ -1,12 +1,13 @@
 //! `coadapt bench transport`: the fleet's links between separate processes, timed.
 //!
 //! - `weights_broadcast`: the learner publishes the acting policy (3 x 256, obs 23, act 6:
-//!   143,878 values, 575 KB) and waits until each of N actor processes has received it and
+//!   140,812 values, 563 KB) and waits until each of N actor processes has received it and
 //!   answered with a small chunk naming the version; the figure is that round trip, median
-//!   and 99th percentile over many publishes.
-//! - `experience`: N actor processes send 250-transition chunks (obs 23, act 6) as fast as
-//!   the transport takes them; the learner receives and decodes; transitions/s and MB/s of
-//!   encoded payload.
+//!   and 99th percentile over many publishes, and the weights delivered per second at the
+//!   median (N x 563 KB / median).
+//! - `experience`: N actor processes send 250-transition chunks (obs 23, act 6: 213 bytes of
+//!   payload per transition) as fast as the transport takes them; the learner receives and
+//!   decodes; transitions/s and MB/s of payload.
 //!
 //! The actor side runs as `coadapt bench transport --peer ...` children of this process.
 
@@ -118,7 +119,7 @@ struct Learner {
 fn learner(kind: TransportKind, tag: &str) -> anyhow::Result<Learner> {
     let fleet = format!("coadapt-bench-{}-{tag}", std::process::id());
     let cfg = fleet_config(kind, &fleet, "");
-    let (links, guard) = cfg.learner_links()?;
+    let (links, guard) = cfg.learner_links(None)?;
     let connect = match &guard {
         crate::fleet::LearnerGuard::Grpc(s) => format!("http://{}", s.local_addr()),
         crate::fleet::LearnerGuard::None => String::new(),
@@ -202,6 +203,8 @@ fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> 
     let config = format!("{}-{n}actors-{}KB", kind.name(), len * 4 / 1000);
     emit("weights_broadcast_median", &config, times[times.len() / 2], "ms");
     emit("weights_broadcast_p99", &config, times[(times.len() * 99 / 100).min(times.len() - 1)], "ms");
+    // Weights delivered per second of median round trip, all actors together.
+    emit("weights_broadcast", &config, (n * len * 4) as f64 / (times[times.len() / 2] / 1e3) / 1e6, "MB/s");
     Ok(())
 }
 

@@ -4,6 +4,7 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use anyhow::Context;
+use coadapt_transport::messages::Dims;
 use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 use serde::{Deserialize, Serialize};
 
@@ -95,8 +96,9 @@ impl FleetConfig {
         Ok(coadapt_grpc::GrpcConfig { rpc_timeout, ..coadapt_grpc::GrpcConfig::default() })
     }
 
-    /// The learner's side; for gRPC this starts the server.
-    pub fn learner_links(&self) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
+    /// The learner's side; for gRPC this starts the server, which then refuses experience of
+    /// other widths than `dims` at the edge.
+    pub fn learner_links(&self, dims: Option<Dims>) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
@@ -110,6 +112,9 @@ impl FleetConfig {
                 let (links, server) =
                     coadapt_grpc::serve_learner(addr, &self.grpc()?).with_context(|| format!("serving gRPC on {addr}"))?;
                 eprintln!("learner: gRPC on {}", server.local_addr());
+                if let Some(d) = dims {
+                    server.expect_dims(d);
+                }
                 Ok((links, LearnerGuard::Grpc(server)))
             }
             TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),

@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use anyhow::bail;
 use clap::Args;
+use coadapt_transport::messages::Dims;
 
 use crate::fleet::TransportKind;
 use crate::progress::shutdown_on_ctrl_c;
@@ -103,7 +104,8 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     }
     let spec = make_env(&cfg.env)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
-    let (mut links, guard) = cfg.fleet.learner_links()?;
+    let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
+    let (mut links, guard) = cfg.fleet.learner_links(Some(dims))?;
     eprintln!("learner: {} on {} over {}, into {}", name, cfg.env, cfg.fleet.transport.name(), dir.display());
     let start = Instant::now();
     let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown);
