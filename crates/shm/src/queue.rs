@@ -385,3 +385,26 @@ impl<T: Codec> Receiver<T> for QueueReceiver<T> {
         self.next(timeout, true)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::codec::Credit;
+    use coadapt_transport::ExperienceChunk;
+    use coadapt_transport::conformance::chunk;
+
+    #[test]
+    fn a_malformed_message_is_dropped_and_the_receiver_goes_on() {
+        let name = format!("coadapt-test-{}-malformed/q", std::process::id());
+        let shape = QueueShape { peers: 4, depth: 8 };
+        let mut rx = QueueReceiver::<ExperienceChunk>::open(&name, shape, Limits::default()).expect("receiver");
+        let node = ipc::node("coadapt-test").expect("node");
+        let wait = Duration::from_secs(5);
+        // Eight 0xff bytes are no protobuf message (an unterminated varint).
+        let mut garbage = QueueSender::<Credit>::open(&node, &name, shape, wait, 1024).expect("sender");
+        let mut good = QueueSender::<ExperienceChunk>::open(&node, &name, shape, wait, 1024).expect("sender");
+        garbage.send(Credit(u64::MAX)).expect("send");
+        good.send(chunk(3)).expect("send");
+        assert_eq!(rx.recv_timeout(wait).expect("receive"), Some(chunk(3)));
+    }
+}

@@ -1,0 +1,125 @@
+//! Between processes: the test binary re-runs itself as the child (`child` below, which does
+//! nothing unless the role variable is set).
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::NodeView;
+use iceoryx2::prelude::*;
+
+use coadapt_shm::{ShmConfig, cleanup_stale, queue_receiver, queue_sender, topic_publisher, topic_subscriber};
+use coadapt_transport::conformance::{chunk, weights};
+use coadapt_transport::{ExperienceChunk, Publisher, Receiver, Sender, Subscriber, TransportError, Weights};
+
+const ROLE: &str = "COADAPT_SHM_TEST_ROLE";
+const FLEET: &str = "COADAPT_SHM_TEST_FLEET";
+const LONG: Duration = Duration::from_secs(20);
+/// 1 MiB of f32 policy parameters.
+const MIB: usize = 1 << 18;
+
+fn cfg(fleet: String) -> ShmConfig {
+    ShmConfig { fleet, ..ShmConfig::default() }
+}
+
+#[test]
+fn child() {
+    let (Ok(role), Ok(fleet)) = (std::env::var(ROLE), std::env::var(FLEET)) else { return };
+    let cfg = cfg(fleet);
+    let mut publisher = topic_publisher::<Weights>(&cfg, "w").expect("publisher");
+    let mut tx = queue_sender::<ExperienceChunk>(&cfg, "exp").expect("sender");
+    match role.as_str() {
+        "publish" => {
+            for v in 1..=3 {
+                publisher.publish(weights(v, MIB)).expect("publish");
+            }
+            for i in 0..100 {
+                tx.send(chunk(i)).expect("send");
+            }
+            // Dropping the sender waits until the parent has taken every chunk.
+        }
+        "hang" => {
+            publisher.publish(weights(1, MIB)).expect("publish");
+            tx.send(chunk(0)).expect("send");
+            // libtest has written "test child ... " without a newline: READY ends that line.
+            println!("READY");
+            std::thread::sleep(Duration::from_secs(600));
+        }
+        other => panic!("unknown role {other}"),
+    }
+}
+
+fn spawn(role: &str, fleet: &str) -> std::process::Child {
+    Command::new(std::env::current_exe().expect("test binary"))
+        .args(["child", "--exact", "--nocapture", "--test-threads", "1"])
+        .env(ROLE, role)
+        .env(FLEET, fleet)
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("child process")
+}
+
+fn closes<T: std::fmt::Debug>(mut f: impl FnMut() -> Result<Option<T>, TransportError>) {
+    let t = Instant::now();
+    loop {
+        match f() {
+            Err(TransportError::Closed) => return,
+            Ok(None) if t.elapsed() < LONG => continue,
+            other => panic!("expected Closed, got {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn a_child_process_publishes_weights_and_sends_experience() {
+    let fleet = format!("coadapt-test-{}-xproc", std::process::id());
+    let cfg = cfg(fleet.clone());
+    let mut rx = queue_receiver::<ExperienceChunk>(&cfg, "exp").expect("receiver");
+    let mut sub = topic_subscriber::<Weights>(&cfg, "w").expect("subscriber");
+    let mut child = spawn("publish", &fleet);
+    let w = sub.wait_for(3, LONG).expect("wait").expect("version 3 from the child");
+    assert_eq!(*w, weights(3, MIB));
+    for i in 0..100 {
+        assert_eq!(rx.recv_timeout(LONG).expect("receive"), Some(chunk(i)), "chunk {i}");
+    }
+    closes(|| rx.recv_timeout(Duration::from_millis(50)));
+    assert!(child.wait().expect("child").success());
+    closes(|| sub.wait_for(4, Duration::from_millis(50)));
+}
+
+#[test]
+fn a_killed_child_is_cleaned_up_and_a_new_publisher_takes_over() {
+    let fleet = format!("coadapt-test-{}-killed", std::process::id());
+    let cfg = cfg(fleet.clone());
+    let mut rx = queue_receiver::<ExperienceChunk>(&cfg, "exp").expect("receiver");
+    let mut sub = topic_subscriber::<Weights>(&cfg, "w").expect("subscriber");
+    let mut child = spawn("hang", &fleet);
+    let stdout = child.stdout.take().expect("child stdout");
+    let ready = BufReader::new(stdout).lines().map_while(Result::ok).any(|l| l.contains("READY"));
+    assert!(ready, "the child never got ready");
+    assert_eq!(rx.recv_timeout(LONG).expect("receive"), Some(chunk(0)));
+    assert_eq!(sub.wait_for(1, LONG).expect("wait").expect("weights").version, 1);
+
+    child.kill().expect("SIGKILL");
+    child.wait().expect("reaped");
+    let cleaned = cleanup_stale().expect("cleanup");
+    assert!(cleaned >= 1, "the killed child's node was not cleaned up");
+    closes(|| rx.recv_timeout(Duration::from_millis(50)));
+    closes(|| sub.wait_for(2, Duration::from_millis(50)));
+
+    let mut successor = topic_publisher::<Weights>(&cfg, "w").expect("a new publisher after cleanup");
+    successor.publish(weights(5, 10)).expect("publish");
+    assert_eq!(sub.wait_for(5, LONG).expect("wait").expect("weights").version, 5);
+    let mut left = 0;
+    let listed = Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
+        let pid = match &state {
+            NodeState::Alive(v) => v.details().as_ref().map(|d| d.process_id().value()),
+            NodeState::Dead(v) => v.details().as_ref().map(|d| d.process_id().value()),
+            _ => None,
+        };
+        left += usize::from(pid.is_some_and(|p| u32::try_from(p) == Ok(child.id())));
+        CallbackProgression::Continue
+    });
+    listed.expect("listing nodes");
+    assert_eq!(left, 0, "the killed child's nodes are still registered");
+}
