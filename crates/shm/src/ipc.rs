@@ -41,7 +41,15 @@ pub(crate) fn io(what: &str, e: impl Debug) -> TransportError {
 
 /// A node for one role's (or one test's) ports. Signal handling stays off: iceoryx2 would
 /// otherwise install SIGINT/SIGTERM handlers and the CLI's Ctrl-C would stop working.
+/// iceoryx2 warns on every start that it found no config file; its defaults are ours.
+/// `IOX2_LOG_LEVEL` still lowers the level for debugging.
+fn quiet_logs() {
+    static QUIET: std::sync::Once = std::sync::Once::new();
+    QUIET.call_once(|| set_log_level_from_env_or(LogLevel::Error));
+}
+
 pub(crate) fn node(name: &str) -> Result<Node<Svc>, TransportError> {
+    quiet_logs();
     let name = NodeName::new(name).map_err(|e| io("node name", e))?;
     NodeBuilder::new()
         .name(&name)
@@ -122,12 +130,17 @@ pub(crate) fn notifier(ev: &Event) -> Result<Notifier, TransportError> {
 
 /// Blocks until something is notified or `timeout` passes, consuming every pending event.
 pub(crate) fn wait(listener: &Listener, timeout: Duration) -> Result<(), TransportError> {
-    listener.timed_wait(|_| {}, timeout).map(|_| ()).map_err(|e| io("waiting on an event", e))
+    match listener.timed_wait(|_| {}, timeout) {
+        // A signal (Ctrl-C, SIGTERM) cut the wait short: the caller looks at its stop flag.
+        Ok(_) | Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => Ok(()),
+        Err(e) => Err(io("waiting on an event", e)),
+    }
 }
 
 /// Removes the resources of every dead node (processes killed without cleaning up); returns
 /// how many were removed.
 pub(crate) fn cleanup_dead_nodes() -> Result<usize, TransportError> {
+    quiet_logs();
     let mut cleaned = 0;
     Node::<Svc>::list(Config::global_config(), |state| {
         if let NodeState::Dead(view) = state {
