@@ -156,6 +156,11 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
     }
     if cfg.fleet.transport == TransportKind::Shm {
         clean_stale();
+        match coadapt_shm::fleet_services(&cfg.fleet.name) {
+            Ok(left) if !left.is_empty() => eprintln!("warning: shared memory of the fleet left behind: {left:?}"),
+            Ok(_) => {}
+            Err(e) => eprintln!("warning: listing the fleet's shared memory: {e}"),
+        }
     }
     if !status.success() {
         bail!("the learner ended with {} (its output is above; actor and optimiser logs in {})", describe(status), logs.display());

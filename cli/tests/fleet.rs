@@ -87,6 +87,9 @@ fn a_shared_memory_fleet_survives_killed_actors() {
     let procs = children(child.id());
     let count = |role: &str| procs.iter().filter(|(_, c)| c.contains(&format!(" {role} "))).count();
     assert_eq!((count("learner"), count("optimizer"), count("actor")), (1, 1, 2), "separate processes: {procs:?}");
+    let resolved: RunConfig = toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
+    let live = coadapt_shm::fleet_services(&resolved.fleet.name).unwrap();
+    assert!(live.len() >= 6, "the running fleet's channels are visible: {live:?}");
     for (pid, cmd) in procs.iter().filter(|(_, c)| c.contains(" actor ")) {
         let ok = Command::new("kill").args(["-KILL", &pid.to_string()]).status().unwrap().success();
         assert!(ok, "killing {cmd}");
@@ -99,9 +102,12 @@ fn a_shared_memory_fleet_survives_killed_actors() {
     assert_eq!(s["designs"], 4, "{s}");
     assert!(s["episodes_reissued"].as_u64().unwrap() >= 1, "the killed actors' episodes were issued again: {s}");
     assert_eq!(rows(&out.join("episodes.csv")), 2 * 8 + 2 * 2, "every episode of the run is in episodes.csv");
-    // The restarted actors report; the killed ones' partial episodes never reached the replay.
     let logs: Vec<_> = std::fs::read_dir(out.join("logs")).unwrap().flatten().map(|e| e.file_name()).collect();
     assert_eq!(logs.len(), 3, "{logs:?}");
+    // Nothing of the fleet is left in shared memory, the killed actors' resources included.
+    assert!(resolved.fleet.name.starts_with("coadapt-"));
+    let left = coadapt_shm::fleet_services(&resolved.fleet.name).unwrap();
+    assert!(left.is_empty(), "stale shared memory after the run: {left:?}");
 }
 
 /// `designs.csv`, and `episodes.csv` without its wall-clock and actor columns.

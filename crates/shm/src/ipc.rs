@@ -158,6 +158,21 @@ pub(crate) fn cleanup_dead_nodes() -> Result<usize, TransportError> {
     Ok(cleaned)
 }
 
+/// The names of every service on this machine whose name starts with `prefix`.
+pub(crate) fn services_named(prefix: &str) -> Result<Vec<String>, TransportError> {
+    quiet_logs();
+    let mut names = Vec::new();
+    Svc::list(Config::global_config(), |details| {
+        let name = details.static_details.name().to_string();
+        if name.starts_with(prefix) {
+            names.push(name);
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| io("listing iceoryx2 services", e))?;
+    Ok(names)
+}
+
 /// Runs dead-node cleanup on a service at most every [`CLEANUP_EVERY`].
 #[derive(Debug)]
 pub(crate) struct Janitor(Instant);

@@ -160,6 +160,12 @@ pub fn optimizer_links(cfg: &ShmConfig) -> Result<OptimizerLinks, TransportError
     })
 }
 
+/// The shared-memory services of fleet `fleet` that still exist (none, once every process of
+/// the fleet has ended and the dead ones have been cleaned up).
+pub fn fleet_services(fleet: &str) -> Result<Vec<String>, TransportError> {
+    ipc::services_named(&format!("{fleet}/"))
+}
+
 /// Removes resources left by killed processes (iceoryx2 dead-node cleanup); returns how many
 /// nodes were cleaned. Call it at the start of every role.
 pub fn cleanup_stale() -> Result<usize, TransportError> {
