@@ -200,3 +200,45 @@ fn async_flow_keeps_episodes_in_flight_and_reports_policy_lag() {
     let actors: std::collections::BTreeSet<&str> = csv.lines().skip(1).filter_map(|l| l.split(',').nth(8)).collect();
     assert!(actors.len() >= 2, "episodes spread over the actors: {actors:?}");
 }
+
+#[test]
+fn ctrl_c_stops_the_whole_fleet_and_keeps_the_run() {
+    let dir = tmpdir("sigint");
+    let mut c = tiny();
+    c.actors = 2;
+    c.schedule.initial_episodes = 200;
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let stderr_path = dir.join("stderr.txt");
+    let child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(&stderr_path).unwrap())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while rows(&out.join("episodes.csv")) < 2 {
+        assert!(t.elapsed() < Duration::from_secs(120), "no episodes: {}", std::fs::read_to_string(&stderr_path).unwrap());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let procs = children(child.id());
+    assert_eq!(procs.len(), 4, "{procs:?}");
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let stderr = std::fs::read_to_string(&stderr_path).unwrap();
+    assert!(o.status.success(), "{stderr}");
+    let s = summary(&o.stdout);
+    assert_eq!(s["interrupted"], true, "{s}");
+    let done = rows(&out.join("episodes.csv"));
+    assert!((2..400).contains(&done), "the rows written before Ctrl-C are kept: {done}");
+    assert_eq!(rows(&out.join("designs.csv")), 1, "the interrupted design's row is written");
+    for (pid, cmd) in &procs {
+        assert!(!Path::new(&format!("/proc/{pid}")).exists(), "{cmd} still runs after coadapt run ended");
+    }
+    for log in ["actor-0.log", "actor-1.log", "optimizer.log"] {
+        let text = std::fs::read_to_string(out.join("logs").join(log)).unwrap();
+        assert!(!text.contains("error"), "{log} ends cleanly: {text}");
+    }
+    let resolved: RunConfig = toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
+    assert!(coadapt_shm::fleet_services(&resolved.fleet.name).unwrap().is_empty());
+}
