@@ -38,8 +38,9 @@ pub struct FleetConfig {
     /// `shm` (iceoryx2 shared memory, one machine; the default), `grpc` (across machines) or
     /// `in-process` (threads; `coadapt run` only).
     pub transport: TransportKind,
-    /// Shared memory: the fleet's name; every process of one run uses the same one (empty:
-    /// `coadapt run` picks `coadapt-<its pid>`; the role commands need it set or `--fleet`).
+    /// The fleet's name; every process of one run uses the same one. Shared memory: the prefix
+    /// of its channels (empty: `coadapt run` picks `coadapt-<its pid>`; the role commands need
+    /// it set or `--fleet`). gRPC: checked at registration (empty: `coadapt`).
     pub name: String,
     /// gRPC: the address the learner listens on.
     pub listen: String,
@@ -93,7 +94,12 @@ impl FleetConfig {
             .ok()
             .filter(|d| !d.is_zero())
             .ok_or_else(|| anyhow::anyhow!("fleet.rpc-timeout-secs: {t} is not a positive number of seconds"))?;
-        Ok(coadapt_grpc::GrpcConfig { rpc_timeout, ..coadapt_grpc::GrpcConfig::default() })
+        let mut cfg = coadapt_grpc::GrpcConfig { rpc_timeout, ..coadapt_grpc::GrpcConfig::default() };
+        // Clients of another fleet are refused at registration.
+        if !self.name.is_empty() {
+            cfg.fleet = self.name.clone();
+        }
+        Ok(cfg)
     }
 
     /// The learner's side; for gRPC this starts the server, which then refuses experience of

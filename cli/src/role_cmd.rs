@@ -106,7 +106,7 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     let shutdown = shutdown_on_ctrl_c();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     let (mut links, guard) = cfg.fleet.learner_links(Some(dims))?;
-    eprintln!("learner: {} on {} over {}, into {}", name, cfg.env, cfg.fleet.transport.name(), dir.display());
+    eprintln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
     let start = Instant::now();
     let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown);
     // Closing the channels tells actors and optimiser the run is over.
