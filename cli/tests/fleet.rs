@@ -242,3 +242,59 @@ fn ctrl_c_stops_the_whole_fleet_and_keeps_the_run() {
     let resolved: RunConfig = toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
     assert!(coadapt_shm::fleet_services(&resolved.fleet.name).unwrap().is_empty());
 }
+
+/// `coadapt learner`, `coadapt optimizer` and `coadapt actor` started by hand over gRPC; the
+/// learner is killed mid-run and a new one takes its port: the same actor and optimiser
+/// processes reconnect and serve it to the end.
+#[test]
+fn grpc_actors_reconnect_to_a_learner_that_comes_back() {
+    let dir = tmpdir("reconnect");
+    let mut c = tiny();
+    c.schedule.initial_episodes = 6;
+    c.fleet.transport = TransportKind::Grpc;
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    c.fleet.listen = format!("127.0.0.1:{port}");
+    c.fleet.connect = format!("http://127.0.0.1:{port}");
+    let config = write_config(&dir, &c);
+    let cfg = config.to_str().unwrap();
+    let bin = env!("CARGO_BIN_EXE_coadapt");
+    let log = |name: &str| std::fs::File::create(dir.join(name)).unwrap();
+    let learner = |out: &str, logname: &str| {
+        Command::new(bin)
+            .args(["learner", "--config", cfg, "--out", dir.join(out).to_str().unwrap()])
+            .stdout(Stdio::piped())
+            .stderr(log(logname))
+            .spawn()
+            .unwrap()
+    };
+    let mut first = learner("first", "learner-1.log");
+    let mut actor = Command::new(bin).args(["actor", "--config", cfg, "--id", "42"]).stderr(log("actor.log")).spawn().unwrap();
+    let mut opt = Command::new(bin).args(["optimizer", "--config", cfg]).stderr(log("optimizer.log")).spawn().unwrap();
+    let t = Instant::now();
+    while rows(&dir.join("first/episodes.csv")) < 2 {
+        assert!(t.elapsed() < Duration::from_secs(60), "{}", std::fs::read_to_string(dir.join("learner-1.log")).unwrap());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    first.kill().unwrap();
+    first.wait().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(actor.try_wait().unwrap().is_none(), "the actor waits for the learner to come back");
+    let second = learner("second", "learner-2.log");
+    let o = second.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", std::fs::read_to_string(dir.join("learner-2.log")).unwrap());
+    assert_eq!(summary(&o.stdout)["designs"], 4);
+    let csv = std::fs::read_to_string(dir.join("second/episodes.csv")).unwrap();
+    assert_eq!(csv.lines().skip(1).filter(|l| l.split(',').nth(8) == Some("42")).count(), 16, "actor 42 ran every episode:\n{csv}");
+    // The learner finished: actor and optimiser end on their own, successfully.
+    for (name, p) in [("actor", &mut actor), ("optimizer", &mut opt)] {
+        let t = Instant::now();
+        let status = loop {
+            if let Some(s) = p.try_wait().unwrap() {
+                break s;
+            }
+            assert!(t.elapsed() < Duration::from_secs(30), "{name} did not end after the learner finished");
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        assert!(status.success(), "{name}: {}", std::fs::read_to_string(dir.join(format!("{name}.log"))).unwrap());
+    }
+}
