@@ -28,10 +28,11 @@ struct Proc {
     log: Option<std::path::PathBuf>,
     child: Child,
     started: Instant,
+    /// The process has ended for good (finished, or could not be started again).
+    ended: bool,
 }
 
-fn spawn(name: &str, args: &[String], log: Option<&Path>) -> anyhow::Result<Proc> {
-    let exe = std::env::current_exe().context("finding the coadapt binary")?;
+fn spawn(exe: &Path, name: &str, args: &[String], log: Option<&Path>) -> anyhow::Result<Proc> {
     let mut cmd = Command::new(exe);
     cmd.args(args).stdin(Stdio::null());
     // A process group of its own: a terminal's Ctrl-C reaches only the supervisor, which passes
@@ -42,7 +43,7 @@ fn spawn(name: &str, args: &[String], log: Option<&Path>) -> anyhow::Result<Proc
         cmd.stdout(f.try_clone()?).stderr(f);
     }
     let child = cmd.spawn().with_context(|| format!("starting {name}"))?;
-    Ok(Proc { name: name.into(), args: args.to_vec(), log: log.map(Path::to_path_buf), child, started: Instant::now() })
+    Ok(Proc { name: name.into(), args: args.to_vec(), log: log.map(Path::to_path_buf), child, started: Instant::now(), ended: false })
 }
 
 fn signal(p: &Proc, sig: Signal) {
@@ -88,16 +89,19 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
     let mut learner_args = vec!["learner".to_string()];
     learner_args.extend(common.iter().cloned());
     learner_args.extend(["--out".into(), dir.display().to_string()]);
-    let mut learner = spawn("learner", &learner_args, None)?;
+    // Resolved once: a rebuild during a long run replaces the file, and a restart should still
+    // find a binary at this path.
+    let exe = std::env::current_exe().context("finding the coadapt binary")?;
+    let mut learner = spawn(&exe, "learner", &learner_args, None)?;
     let mut others = Vec::new();
     let mut opt_args = vec!["optimizer".to_string()];
     opt_args.extend(common.iter().cloned());
-    others.push(spawn("optimizer", &opt_args, Some(&logs.join("optimizer.log")))?);
+    others.push(spawn(&exe, "optimizer", &opt_args, Some(&logs.join("optimizer.log")))?);
     for i in 0..cfg.actors {
         let mut a = vec!["actor".to_string()];
         a.extend(common.iter().cloned());
         a.extend(["--id".into(), i.to_string()]);
-        others.push(spawn(&format!("actor {i}"), &a, Some(&logs.join(format!("actor-{i}.log"))))?);
+        others.push(spawn(&exe, &format!("actor {i}"), &a, Some(&logs.join(format!("actor-{i}.log"))))?);
     }
     eprintln!(
         "fleet {}: learner pid {}, {}; logs in {}",
@@ -116,16 +120,20 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
                 signal(p, Signal::SIGINT);
             }
         }
-        if let Some(s) = learner.child.try_wait().context("watching the learner")? {
-            break s;
+        match learner.child.try_wait() {
+            Ok(Some(s)) => break Ok(s),
+            Ok(None) => {}
+            Err(e) => break Err(anyhow::Error::new(e).context("watching the learner")),
         }
         for p in others.iter_mut() {
-            let Some(s) = p.child.try_wait().with_context(|| format!("watching {}", p.name))? else { continue };
-            if interrupted || restarts >= cfg.fleet.max_restarts {
+            let Ok(Some(s)) = p.child.try_wait() else { continue };
+            // A role that ends well has seen the learner finish; one that fails while the
+            // learner still runs has crashed: start it again, after a pause if it failed
+            // straight away.
+            if s.success() || p.ended || interrupted || restarts >= cfg.fleet.max_restarts {
+                p.ended = true;
                 continue;
             }
-            // A role that leaves while the learner still runs has crashed: start it again,
-            // after a pause if it crashed straight away.
             eprintln!(
                 "fleet: {} (pid {}) ended with {}; starting it again (log {})",
                 p.name,
@@ -136,18 +144,26 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
             if p.started.elapsed() < Duration::from_secs(2) {
                 std::thread::sleep(Duration::from_secs(1));
             }
-            *p = spawn(&p.name.clone(), &p.args.clone(), p.log.as_deref())?;
             restarts += 1;
+            match spawn(&exe, &p.name.clone(), &p.args.clone(), p.log.as_deref()) {
+                Ok(new) => *p = new,
+                Err(e) => {
+                    eprintln!("fleet: {e:#}; {} stays down", p.name);
+                    p.ended = true;
+                }
+            }
         }
         std::thread::sleep(Duration::from_millis(100));
     };
-
+    if status.is_err() {
+        others.push(learner);
+    }
     let until = Instant::now() + GRACE;
     for p in others.iter_mut() {
-        while p.child.try_wait()?.is_none() && Instant::now() < until {
+        while matches!(p.child.try_wait(), Ok(None)) && Instant::now() < until {
             std::thread::sleep(Duration::from_millis(50));
         }
-        if p.child.try_wait()?.is_none() {
+        if matches!(p.child.try_wait(), Ok(None)) {
             signal(p, Signal::SIGTERM);
             std::thread::sleep(Duration::from_millis(200));
             let _ = p.child.kill();
@@ -162,6 +178,7 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
             Err(e) => eprintln!("warning: listing the fleet's shared memory: {e}"),
         }
     }
+    let status = status?;
     if !status.success() {
         bail!("the learner ended with {} (its output is above; actor and optimiser logs in {})", describe(status), logs.display());
     }

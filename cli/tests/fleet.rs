@@ -123,6 +123,8 @@ fn the_same_seed_gives_the_same_run_over_every_transport() {
     let dir = tmpdir("same");
     let mut c = tiny();
     c.actors = 2;
+    // A landscape that takes the learner a while after the optimiser and actors have ended.
+    c.landscape_grid = 400;
     let config = write_config(&dir, &c);
     let mut tables = Vec::new();
     for t in ["in-process", "shm", "grpc"] {
@@ -131,7 +133,9 @@ fn the_same_seed_gives_the_same_run_over_every_transport() {
             .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", t])
             .output()
             .unwrap();
-        assert!(o.status.success(), "{t}: {}", String::from_utf8_lossy(&o.stderr));
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{t}: {stderr}");
+        assert!(!stderr.contains("starting it again"), "{t}: roles that end with the run are not restarted: {stderr}");
         let s = summary(&o.stdout);
         assert_eq!((s["designs"].as_u64(), s["transport"].as_str()), (Some(4), Some(t)), "{s}");
         assert_eq!(rows(&out.join("episodes.csv")), 10, "{t}");

@@ -53,6 +53,7 @@ fn the_tiny_config_writes_the_whole_run_directory() {
     assert!(o.status.success(), "stderr: {stderr}");
     assert!(stderr.contains("design 3/4 [exploit pso-q]"), "progress names design, kind and method: {stderr}");
     assert!(stderr.contains("ETA"), "progress shows an ETA: {stderr}");
+    assert!(!stderr.contains("starting it again"), "roles that end with the run are not restarted: {stderr}");
     let summary: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
     assert_eq!(summary["designs"], 4);
     assert_eq!(summary["design_rollouts"], 0, "FEAR spends no design rollouts");
