@@ -128,6 +128,24 @@ pub(crate) fn notifier(ev: &Event) -> Result<Notifier, TransportError> {
     ev.notifier_builder().default_event_id(EventId::new(EV_DATA)).create().map_err(|e| io("creating a notifier", e))
 }
 
+/// A sample loaned from `publisher` with `msg` encoded straight into it (one copy), refusing
+/// messages above `max` bytes.
+pub(crate) fn loan_encoded(
+    publisher: &Publisher,
+    msg: &impl crate::codec::Codec,
+    max: usize,
+) -> Result<iceoryx2::sample_mut::SampleMut<Svc, [u8], u64>, TransportError> {
+    let mut slot = None;
+    msg.write_with(|n| {
+        if n > max {
+            return Err(TransportError::Invalid(format!("{n} bytes exceeds max_message_bytes ({max})")));
+        }
+        let sample = publisher.loan_slice(n).map_err(|e| io("loaning a shared-memory sample", e))?;
+        Ok(slot.insert(sample).payload_mut())
+    })?;
+    slot.ok_or_else(|| TransportError::Io("the encoder wrote no sample".into()))
+}
+
 /// Blocks until something is notified or `timeout` passes, consuming every pending event.
 pub(crate) fn wait(listener: &Listener, timeout: Duration) -> Result<(), TransportError> {
     match listener.timed_wait(|_| {}, timeout) {

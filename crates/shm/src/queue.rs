@@ -176,16 +176,7 @@ impl<T> QueueSender<T> {
     /// Loans a sample, lets `msg` encode itself into it and sends it; the number of receivers
     /// that got it.
     fn send_once(&self, msg: &impl Codec, kind: u64) -> Result<usize, TransportError> {
-        let (publisher, max) = (self.publisher()?, self.max_bytes);
-        let mut slot = None;
-        msg.write_with(|n| {
-            if n > max {
-                return Err(TransportError::Invalid(format!("{n} bytes exceeds max_message_bytes ({max})")));
-            }
-            let sample = publisher.loan_slice(n).map_err(|e| io("loaning a shared-memory sample", e))?;
-            Ok(slot.insert(sample).payload_mut())
-        })?;
-        let mut sample = slot.ok_or_else(|| TransportError::Io("the encoder wrote no sample".into()))?;
+        let mut sample = ipc::loan_encoded(self.publisher()?, msg, self.max_bytes)?;
         *sample.user_header_mut() = kind;
         match sample.send() {
             Ok(n) => Ok(n),

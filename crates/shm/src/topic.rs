@@ -111,16 +111,7 @@ impl<T: Codec + Versioned> Publisher<T> for TopicPublisher<T> {
         {
             return Err(TransportError::Invalid(format!("{}: version {v} after {last}", self.name)));
         }
-        let (publisher, max) = (&self.shared.publisher, self.max_bytes);
-        let mut slot = None;
-        msg.write_with(|n| {
-            if n > max {
-                return Err(TransportError::Invalid(format!("{n} bytes exceeds max_message_bytes ({max})")));
-            }
-            let sample = publisher.loan_slice(n).map_err(|e| io("loaning a shared-memory sample", e))?;
-            Ok(slot.insert(sample).payload_mut())
-        })?;
-        let sample = slot.ok_or_else(|| TransportError::Io("the encoder wrote no sample".into()))?;
+        let sample = ipc::loan_encoded(&self.shared.publisher, &msg, self.max_bytes)?;
         sample.send().map_err(|e| io(&format!("publishing on {}", self.name), e))?;
         self.last_version = Some(v);
         self.shared.wake.notify().map_err(|e| io("waking readers", e))?;
