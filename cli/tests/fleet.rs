@@ -61,15 +61,10 @@ fn summary(stdout: &[u8]) -> serde_json::Value {
     serde_json::from_str(text.lines().last().unwrap_or_default()).unwrap_or_else(|e| panic!("summary line {text:?}: {e}"))
 }
 
-#[test]
-fn a_shared_memory_fleet_survives_killed_actors() {
-    let dir = tmpdir("shm-kill");
-    let mut c = tiny();
-    c.actors = 2;
-    c.schedule.initial_episodes = 8;
-    c.flow.mode = FlowMode::Async;
-    c.flow.assignment_lease_secs = 2.0;
-    let config = write_config(&dir, &c);
+/// `coadapt run` of `c` in the background, once it has written `min_rows` episode rows:
+/// the process, the run directory and the file its stderr goes to.
+fn start_run(dir: &Path, c: &RunConfig, min_rows: usize) -> (std::process::Child, PathBuf, PathBuf) {
+    let config = write_config(dir, c);
     let out = dir.join("run");
     let stderr_path = dir.join("stderr.txt");
     let child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
@@ -78,12 +73,24 @@ fn a_shared_memory_fleet_survives_killed_actors() {
         .stderr(std::fs::File::create(&stderr_path).unwrap())
         .spawn()
         .unwrap();
-    // Both actors are busy in async mode with two in flight: killing both loses an episode.
     let t = Instant::now();
-    while rows(&out.join("episodes.csv")) < 3 {
+    while rows(&out.join("episodes.csv")) < min_rows {
         assert!(t.elapsed() < Duration::from_secs(120), "no episodes after 120 s: {}", std::fs::read_to_string(&stderr_path).unwrap());
         std::thread::sleep(Duration::from_millis(20));
     }
+    (child, out, stderr_path)
+}
+
+#[test]
+fn a_shared_memory_fleet_survives_killed_actors() {
+    let dir = tmpdir("shm-kill");
+    let mut c = tiny();
+    c.actors = 2;
+    c.schedule.initial_episodes = 8;
+    c.flow.mode = FlowMode::Async;
+    c.flow.assignment_lease_secs = 2.0;
+    // Both actors are busy in async mode with two in flight: killing both loses an episode.
+    let (child, out, stderr_path) = start_run(&dir, &c, 3);
     let procs = children(child.id());
     let count = |role: &str| procs.iter().filter(|(_, c)| c.contains(&format!(" {role} "))).count();
     assert_eq!((count("learner"), count("optimizer"), count("actor")), (1, 1, 2), "separate processes: {procs:?}");
@@ -211,20 +218,7 @@ fn ctrl_c_stops_the_whole_fleet_and_keeps_the_run() {
     let mut c = tiny();
     c.actors = 2;
     c.schedule.initial_episodes = 200;
-    let config = write_config(&dir, &c);
-    let out = dir.join("run");
-    let stderr_path = dir.join("stderr.txt");
-    let child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
-        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .stdout(Stdio::piped())
-        .stderr(std::fs::File::create(&stderr_path).unwrap())
-        .spawn()
-        .unwrap();
-    let t = Instant::now();
-    while rows(&out.join("episodes.csv")) < 2 {
-        assert!(t.elapsed() < Duration::from_secs(120), "no episodes: {}", std::fs::read_to_string(&stderr_path).unwrap());
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let (child, out, stderr_path) = start_run(&dir, &c, 2);
     let procs = children(child.id());
     assert_eq!(procs.len(), 4, "{procs:?}");
     assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
