@@ -230,6 +230,8 @@ impl Learner<'_> {
             if self.shutdown.load(Ordering::Relaxed) {
                 return Ok(None);
             }
+            // Every time round, not only when the queue is quiet: with many actors it rarely is.
+            self.reissue_expired(design_index, design)?;
             let t = Instant::now();
             let got = match self.links.experience.recv_timeout(POLL) {
                 Ok(got) => got,
@@ -242,7 +244,6 @@ impl Learner<'_> {
             };
             self.time.waiting += t.elapsed().as_secs_f64();
             let Some(chunk) = got else {
-                self.reissue_expired(design_index, design)?;
                 if heard.elapsed() > self.silence {
                     return Err(CoadaptError::Protocol(format!(
                         "no actor has sent anything for {:?} ({} episodes outstanding): are the actors running?",
