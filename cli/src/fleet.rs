@@ -50,6 +50,9 @@ pub struct FleetConfig {
     pub rpc_timeout_secs: f64,
     /// `coadapt run`: restarts of crashed actors and optimisers allowed in one run.
     pub max_restarts: usize,
+    /// Shared memory: most actors at once (sizes the channels' port tables; every process of
+    /// a fleet must agree, so it lives in the shared config).
+    pub max_actors: usize,
 }
 
 impl Default for FleetConfig {
@@ -61,6 +64,7 @@ impl Default for FleetConfig {
             connect: "http://127.0.0.1:50051".into(),
             rpc_timeout_secs: 10.0,
             max_restarts: 100,
+            max_actors: 64,
         }
     }
 }
@@ -85,7 +89,7 @@ impl FleetConfig {
         if self.name.is_empty() {
             anyhow::bail!("fleet.name: a shared-memory fleet needs a name shared by all its processes (or --fleet NAME)");
         }
-        Ok(coadapt_shm::ShmConfig { fleet: self.name.clone(), ..coadapt_shm::ShmConfig::default() })
+        Ok(coadapt_shm::ShmConfig { fleet: self.name.clone(), max_actors: self.max_actors, ..coadapt_shm::ShmConfig::default() })
     }
 
     fn grpc(&self) -> anyhow::Result<coadapt_grpc::GrpcConfig> {

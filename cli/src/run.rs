@@ -187,6 +187,9 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
         spec.design.check_finite("design", d).map_err(|e| anyhow::anyhow!("schedule.initial-designs[{i}]: {e}"))?;
     }
     cfg.flow.lease().map_err(anyhow::Error::msg)?;
+    if cfg.fleet.transport == TransportKind::Shm && cfg.actors > cfg.fleet.max_actors {
+        bail!("actors: {} is more than fleet.max-actors ({}); raise fleet.max-actors", cfg.actors, cfg.fleet.max_actors);
+    }
     Ok(())
 }
 

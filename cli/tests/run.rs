@@ -196,6 +196,10 @@ fn bad_configs_are_refused_with_the_field_named() {
     c.schedule.episode_timeout_secs = f64::INFINITY;
     let e = format!("{:#}", run_config(&c, &tmpdir("bad-timeout"), &AtomicBool::new(false)).unwrap_err());
     assert!(e.contains("schedule.episode-timeout-secs"), "{e}");
+    let mut c = small(ExploitMethod::PsoQ);
+    c.actors = 65;
+    let e = format!("{:#}", run_config(&c, &tmpdir("bad-actors"), &AtomicBool::new(false)).unwrap_err());
+    assert!(e.contains("fleet.max-actors"), "{e}");
     let e = toml::from_str::<RunConfig>("[schedule]\ndesings = 3\n").unwrap_err().to_string();
     assert!(e.contains("desings"), "{e}");
 }
