@@ -65,6 +65,8 @@ pub fn progress_printer(cfg: &RunConfig) -> impl FnMut(&RunEvent<'_>) + use<> {
     let designs_total = cfg.schedule.designs;
     let start = Instant::now();
     let mut done_episodes = 0usize;
+    // Per design: the actors that ran its episodes, and the policy lag they acted with.
+    let (mut actors, mut lags) = (std::collections::BTreeSet::new(), Vec::new());
     move |e: &RunEvent<'_>| match e {
         RunEvent::DesignStart { index, row } => {
             let pred = row.predicted_objective.map(|p| format!(", predicted objective {p:.3}")).unwrap_or_default();
@@ -79,6 +81,8 @@ pub fn progress_printer(cfg: &RunConfig) -> impl FnMut(&RunEvent<'_>) + use<> {
         }
         RunEvent::Episode { row, episodes_in_design } => {
             done_episodes += 1;
+            actors.insert(row.actor);
+            lags.push(row.policy_lag);
             let el = start.elapsed().as_secs_f64();
             let eta = el / done_episodes as f64 * (total_episodes.saturating_sub(done_episodes)) as f64;
             let eval = row.eval_return.map(|r| format!(" eval {r:8.2}")).unwrap_or_default();
@@ -95,7 +99,21 @@ pub fn progress_printer(cfg: &RunConfig) -> impl FnMut(&RunEvent<'_>) + use<> {
         }
         RunEvent::DesignEnd { row } => {
             let f = |v: Option<f32>| v.map_or("-".into(), |v| format!("{v:.2}"));
-            eprintln!("design {} done: best eval {}, last eval {}", row.index + 1, f(row.best_eval_return), f(row.last_eval_return));
+            let lag = match lags.iter().max() {
+                Some(&max) if max > 0 => {
+                    format!(", policy lag mean {:.1} max {max}", lags.iter().sum::<u64>() as f64 / lags.len() as f64)
+                }
+                _ => String::new(),
+            };
+            eprintln!(
+                "design {} done: best eval {}, last eval {}; {} actor(s){lag}",
+                row.index + 1,
+                f(row.best_eval_return),
+                f(row.last_eval_return),
+                actors.len()
+            );
+            actors.clear();
+            lags.clear();
         }
     }
 }
