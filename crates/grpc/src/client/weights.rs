@@ -79,15 +79,17 @@ impl WeightsSubscriber {
 impl Subscriber<Weights> for WeightsSubscriber {
     fn wait_for(&mut self, min_version: u64, timeout: Duration) -> Result<Option<Arc<Weights>>, TransportError> {
         let deadline = Instant::now() + timeout;
-        // What we hold may trail the learner by what is in flight; if it would satisfy the
-        // reader, ask the learner for its newest version and wait for that one instead.
+        // What we hold (or the first version to arrive) may trail the learner by what is in
+        // flight; unless we already know it is too old, ask the learner for its newest version
+        // and wait for that one instead.
         let held = self.shared.version();
         let mut want = min_version;
-        if let Some(held) = held.filter(|&v| v >= min_version && !timeout.is_zero())
+        if !timeout.is_zero()
+            && held.is_none_or(|v| v >= min_version)
             && let Some(newest) = self.newest_published(timeout.min(self.session.conn.cfg.rpc_timeout))
-            && newest > held
+            && held.is_none_or(|v| newest > v)
         {
-            want = newest;
+            want = want.max(newest);
         }
         let Ok(mut l) = self.shared.latest.lock() else { return Err(TransportError::Io("weights lock poisoned".into())) };
         loop {
