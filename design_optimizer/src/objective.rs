@@ -11,12 +11,24 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 
 /// Which critic value scores a design.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum QMode {
     /// Q1 alone (the reference).
     First,
     /// min(Q1, Q2), as the SAC targets use.
     MinOfTwin,
+    /// Pessimism where the critics disagree: per row, the twin critics' mean minus `k` times
+    /// their standard deviation, `(Q1 + Q2)/2 - k |Q1 - Q2|/2` (`k = 1` is `MinOfTwin`). The
+    /// twins are trained on the same data from different initialisations, so they agree where
+    /// data constrain them and drift apart where the critic extrapolates: far from the
+    /// designs tried, where Q1 alone overestimates.
+    MeanMinusKStd(f32),
+}
+
+impl QMode {
+    fn critics(self) -> usize {
+        if self == QMode::First { 1 } else { 2 }
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -240,7 +252,7 @@ impl DesignObjective {
             *a = m.tanh();
         }
         q.resize(rows, 0.0);
-        let n_critics = if mode == QMode::MinOfTwin { self.critics.len() } else { 1 };
+        let n_critics = mode.critics().min(self.critics.len());
         for (i, split) in self.critics.iter().take(n_critics).enumerate() {
             h_critic.resize(rows * split.width, 0.0);
             // W_a a for every row, then the per-state and per-design parts on top.
@@ -254,11 +266,17 @@ impl DesignObjective {
             );
             self.first_layer(split, designs, h_critic, design_part, true);
             let qi = self.critic_tail.forward(&self.critic_tail_params[i], h_critic, rows, act_q);
-            if i == 0 {
-                q.copy_from_slice(qi);
-            } else {
-                for (a, b) in q.iter_mut().zip(qi) {
-                    *a = a.min(*b);
+            match (i, mode) {
+                (0, _) => q.copy_from_slice(qi),
+                (_, QMode::MeanMinusKStd(k)) => {
+                    for (a, b) in q.iter_mut().zip(qi) {
+                        *a = 0.5 * (*a + b) - k * 0.5 * (*a - b).abs();
+                    }
+                }
+                _ => {
+                    for (a, b) in q.iter_mut().zip(qi) {
+                        *a = a.min(*b);
+                    }
                 }
             }
         }

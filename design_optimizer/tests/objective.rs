@@ -35,12 +35,27 @@ fn batched_objective_equals_the_per_particle_definition() {
             let mut aq = critic.activations(1);
             let v1 = critic.forward(&q1, &x, 1, &mut aq)[0];
             let v2 = critic.forward(&q2, &x, 1, &mut aq)[0];
-            total += if mode == QMode::First { v1 } else { v1.min(v2) };
+            total += match mode {
+                QMode::First => v1,
+                QMode::MinOfTwin => v1.min(v2),
+                QMode::MeanMinusKStd(k) => {
+                    let mean = (v1 + v2) / 2.0;
+                    let std = (((v1 - mean).powi(2) + (v2 - mean).powi(2)) / 2.0).sqrt();
+                    mean - k * std
+                }
+            };
         }
         total / n_states as f32
     };
 
-    for (mode, chunk_rows, cores) in [(QMode::First, 1, 1), (QMode::First, 12, 2), (QMode::MinOfTwin, 64, 2), (QMode::MinOfTwin, 1000, 3)] {
+    for (mode, chunk_rows, cores) in [
+        (QMode::First, 1, 1),
+        (QMode::First, 12, 2),
+        (QMode::MinOfTwin, 64, 2),
+        (QMode::MinOfTwin, 1000, 3),
+        (QMode::MeanMinusKStd(2.0), 12, 2),
+        (QMode::MeanMinusKStd(0.0), 64, 1),
+    ] {
         let mut out = vec![0.0; particles];
         let mut ws = vec![ObjectiveWorkspace::default(); cores];
         f.evaluate(&designs, mode, chunk_rows, &mut out, &mut ws);
@@ -53,6 +68,11 @@ fn batched_objective_equals_the_per_particle_definition() {
             );
         }
     }
+    // k = 1 is the minimum of the twins.
+    let (mut a, mut b) = (vec![0.0; particles], vec![0.0; particles]);
+    f.evaluate(&designs, QMode::MeanMinusKStd(1.0), 64, &mut a, &mut [ObjectiveWorkspace::default()]);
+    f.evaluate(&designs, QMode::MinOfTwin, 64, &mut b, &mut [ObjectiveWorkspace::default()]);
+    assert!(a.iter().zip(&b).all(|(a, b)| (a - b).abs() <= 1e-5 * b.abs().max(1.0)), "{a:?} vs {b:?}");
     // The design columns matter: a different design gives a different score.
     let mut out = vec![0.0; 2];
     f.evaluate(&[0.5, 0.5, 0.5, 1.5, 1.5, 1.5], QMode::First, 64, &mut out, &mut [ObjectiveWorkspace::default()]);
