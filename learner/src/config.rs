@@ -1,5 +1,6 @@
 //! Learner hyper-parameters. Defaults are the reference settings (DESIGN.md section 2).
 
+use coadapt_nn::HiddenInit;
 use serde::{Deserialize, Serialize};
 
 /// Soft Actor-Critic settings.
@@ -30,6 +31,9 @@ pub struct SacConfig {
     pub alpha_lr: f32,
     /// Element-wise gradient clamp; 0 disables it.
     pub grad_clamp: f32,
+    /// How the hidden layers start: `rlkit` (the reference's networks: weights uniform in
+    /// +-1/sqrt(layer output width), biases 0.1) or `pytorch` (nn.Linear's default).
+    pub hidden_init: HiddenInit,
     /// Uniform init range of the policy's last layer.
     pub policy_final_init: f32,
     /// Uniform init range of the critics' last layer.
@@ -51,6 +55,7 @@ impl Default for SacConfig {
             target_entropy: None,
             alpha_lr: 3e-4,
             grad_clamp: 1.0,
+            hidden_init: HiddenInit::Rlkit,
             policy_final_init: 1e-3,
             critic_final_init: 3e-3,
         }

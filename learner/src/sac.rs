@@ -89,9 +89,10 @@ pub struct Sac {
 }
 
 impl Critic {
-    fn new(critic: &Mlp, lr: f32, final_init: f32, rng: &mut Rng64) -> Self {
+    fn new(critic: &Mlp, cfg: &SacConfig, rng: &mut Rng64) -> Self {
+        let (lr, final_init) = (cfg.critic_lr, cfg.critic_final_init);
         let mut theta = critic.zeros();
-        critic.init(&mut theta, final_init, rng);
+        critic.init_with(cfg.hidden_init, &mut theta, final_init, rng);
         Self {
             theta_bar: theta.clone(),
             adam: Adam::new(critic.n_params(), AdamConfig { lr, ..AdamConfig::default() }),
@@ -163,9 +164,9 @@ impl Sac {
         let critic = critic(obs_dim, act_dim, &cfg.hidden)?;
         let mut rng = coadapt_core::rng(seed, 1);
         let mut phi = policy.zeros();
-        policy.init(&mut phi, cfg.policy_final_init, &mut rng);
-        let c1 = Critic::new(&critic, cfg.critic_lr, cfg.critic_final_init, &mut rng);
-        let c2 = Critic::new(&critic, cfg.critic_lr, cfg.critic_final_init, &mut rng);
+        policy.init_with(cfg.hidden_init, &mut phi, cfg.policy_final_init, &mut rng);
+        let c1 = Critic::new(&critic, &cfg, &mut rng);
+        let c2 = Critic::new(&critic, &cfg, &mut rng);
         Ok(Self {
             obs_dim,
             act_dim,
@@ -192,6 +193,12 @@ impl Sac {
 
     pub fn updates(&self) -> u64 {
         self.updates
+    }
+
+    /// Steps taken by each Adam optimiser since its last reset: policy, critic 1, critic 2,
+    /// log-alpha.
+    pub fn optimiser_steps(&self) -> [u32; 4] {
+        [self.phi_adam.steps(), self.critics[0].adam.steps(), self.critics[1].adam.steps(), self.alpha_adam.steps()]
     }
 
     pub fn policy(&self) -> &Mlp {

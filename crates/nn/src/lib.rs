@@ -18,7 +18,7 @@ pub mod optim;
 pub mod squashed;
 
 pub use io::{NamedNetwork, load_networks, save_networks};
-pub use mlp::{Activations, Layer, Mlp};
+pub use mlp::{Activations, HiddenInit, Layer, Mlp};
 pub use optim::{Adam, AdamConfig, clamp_elementwise, polyak};
 
 /// Errors of network construction and weight files.

@@ -11,6 +11,22 @@ use rand::Rng;
 
 use crate::NnError;
 
+/// rlkit's `b_init_value`: every hidden bias starts at this constant.
+pub const RLKIT_HIDDEN_BIAS: f32 = 0.1;
+
+/// How the hidden layers of a network start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HiddenInit {
+    /// rlkit's `Mlp` (the reference FEAR's networks): weights uniform in
+    /// `+-1/sqrt(weight.size(0))`, which for PyTorch's `[n_out, n_in]` weights is the layer's
+    /// output width, and biases 0.1.
+    #[default]
+    Rlkit,
+    /// PyTorch's `nn.Linear` default: weights and biases uniform in `+-1/sqrt(n_in)`.
+    Pytorch,
+}
+
 /// One affine layer: offsets of its weight `[n_out, n_in]` and bias `[n_out]` in the flat buffer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layer {
@@ -106,16 +122,36 @@ impl Mlp {
         vec![0.0; self.n_params]
     }
 
-    /// Initialises `params` as the reference (rlkit) does: hidden layers uniform in
-    /// `+-1/sqrt(fan_in)` (PyTorch's `nn.Linear` default), the last layer's weight and bias
-    /// uniform in `+-final_init` so the initial outputs are near zero.
+    /// Initialises `params` as PyTorch's `nn.Linear` does for the hidden layers (weights and
+    /// biases uniform in `+-1/sqrt(n_in)`), the last layer's weight and bias uniform in
+    /// `+-final_init` so the initial outputs are near zero.
     pub fn init<R: Rng + ?Sized>(&self, params: &mut [f32], final_init: f32, rng: &mut R) {
+        self.init_with(HiddenInit::Pytorch, params, final_init, rng);
+    }
+
+    /// Initialises `params` with `hidden` for the hidden layers and the last layer's weight and
+    /// bias uniform in `+-final_init`.
+    pub fn init_with<R: Rng + ?Sized>(&self, hidden: HiddenInit, params: &mut [f32], final_init: f32, rng: &mut R) {
         assert_eq!(params.len(), self.n_params, "parameter buffer length");
         let last = self.layers.len() - 1;
         for (i, l) in self.layers.iter().enumerate() {
-            let bound = if i == last { final_init } else { 1.0 / (l.n_in as f32).sqrt() };
-            for p in &mut params[l.w..l.b + l.n_out] {
-                *p = rng.random_range(-bound..=bound);
+            let (weights, bias) = params[l.w..l.b + l.n_out].split_at_mut(l.n_in * l.n_out);
+            if i == last {
+                weights.iter_mut().chain(bias.iter_mut()).for_each(|p| *p = rng.random_range(-final_init..=final_init));
+                continue;
+            }
+            match hidden {
+                HiddenInit::Pytorch => {
+                    let bound = 1.0 / (l.n_in as f32).sqrt();
+                    weights.iter_mut().chain(bias.iter_mut()).for_each(|p| *p = rng.random_range(-bound..=bound));
+                }
+                HiddenInit::Rlkit => {
+                    // rlkit's `fanin_init` takes `weight.size(0)` as the fan-in, and a PyTorch
+                    // weight is `[n_out, n_in]`: the bound comes from the layer's OUTPUT width.
+                    let bound = 1.0 / (l.n_out as f32).sqrt();
+                    weights.iter_mut().for_each(|p| *p = rng.random_range(-bound..=bound));
+                    bias.fill(RLKIT_HIDDEN_BIAS);
+                }
             }
         }
     }
