@@ -95,6 +95,8 @@ pub enum CoadaptError {
     Protocol(String),
     #[error("replay: {0}")]
     Replay(#[from] coadapt_core::ReplayError),
+    #[error("training: {0}")]
+    Train(#[from] crate::fear::TrainError),
     #[error("writing the run directory: {0}")]
     Io(#[from] std::io::Error),
     #[error("saving a checkpoint: {0}")]

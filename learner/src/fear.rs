@@ -36,8 +36,10 @@ pub struct FearLearnerConfig {
     /// Population updates after each training episode (batch of `sac.batch-size` from the
     /// population buffer).
     pub population_updates: usize,
-    /// Zero-based index of the first design whose episodes also train the population networks
-    /// (2: from the third design on).
+    /// Zero-based index of the first design whose episodes also train the population networks.
+    /// 3, the reference's `train_pop = design_counter > 3` with a counter from 1: the population
+    /// pair trains from the fourth design on (with the five initial designs, on the last two
+    /// of them before the first design is chosen over its critic).
     pub population_updates_from_design: usize,
     /// Episodes at the start of each design that act with the population policy and train
     /// nothing.
@@ -58,7 +60,7 @@ impl Default for FearLearnerConfig {
             species_batch: 230,
             individual_updates: 1000,
             population_updates: 250,
-            population_updates_from_design: 2,
+            population_updates_from_design: 3,
             warmup_episodes: 3,
             population_capacity: 10_000_000,
             species_capacity: 1_000_000,
@@ -66,6 +68,38 @@ impl Default for FearLearnerConfig {
             population_only: false,
         }
     }
+}
+
+/// Why an episode's training stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+    /// An update produced a NaN or infinite loss or parameter. The networks are left as they
+    /// are, so nothing non-finite is published if the caller stops here.
+    #[error(
+        "the {pair} networks' update {update} (design {design}, episode {episode} of the design) produced a non-finite {what}; \
+         the run stops rather than publish these weights (lower the learning rates or check the rewards)"
+    )]
+    NonFinite { pair: &'static str, update: u64, design: usize, episode: usize, what: String },
+}
+
+/// The first non-finite loss of `l`, named.
+fn non_finite_loss(l: &SacLosses) -> Option<String> {
+    [("critic 1 loss", l.q1), ("critic 2 loss", l.q2), ("policy loss", l.policy), ("alpha loss", l.alpha), ("log pi", l.log_pi)]
+        .into_iter()
+        .find(|(_, v)| !v.is_finite())
+        .map(|(name, v)| format!("{name} ({v})"))
+}
+
+/// The first non-finite parameter of `sac`, named.
+fn non_finite_param(sac: &Sac) -> Option<String> {
+    let (t1, b1) = sac.critic_params(0);
+    let (t2, b2) = sac.critic_params(1);
+    [("policy", sac.policy_params()), ("critic 1", t1), ("critic 2", t2), ("target critic 1", b1), ("target critic 2", b2)]
+        .into_iter()
+        .find_map(|(name, p)| p.iter().position(|v| !v.is_finite()).map(|i| format!("{name} parameter {i} ({})", p[i])))
+        .or_else(|| (!sac.alpha().is_finite()).then(|| format!("alpha ({})", sac.alpha())))
 }
 
 /// Which network pair acts in the current episode.
@@ -185,8 +219,16 @@ impl FearLearner {
         self.pop_replay.len()
     }
 
-    /// Ends an episode of the current design and trains as the schedule says.
-    pub fn end_episode(&mut self) -> Result<EpisodeTraining, ReplayError> {
+    /// Transitions of the current design in the species buffer.
+    pub fn species_transitions(&self) -> usize {
+        self.species_replay.len()
+    }
+
+    /// Ends an episode of the current design and trains as the schedule says. Every update's
+    /// losses, and each pair's parameters after its updates, are checked for NaN and
+    /// infinities ([`TrainError::NonFinite`] names the first and the update that made it).
+    pub fn end_episode(&mut self) -> Result<EpisodeTraining, TrainError> {
+        let episode = self.episode_in_design;
         let warm = self.episode_in_design < self.cfg.warmup_episodes;
         self.episode_in_design += 1;
         let mut out = EpisodeTraining::default();
@@ -198,8 +240,15 @@ impl FearLearner {
             for _ in 0..self.cfg.individual_updates {
                 let parts = [(&self.pop_replay, self.cfg.population_batch), (&self.species_replay, self.cfg.species_batch)];
                 ReplayBuffer::sample_mixed(&parts, &mut self.rng, &mut self.ind_batch)?;
-                out.last = Some(self.individual.update(&self.ind_batch));
+                let l = self.individual.update(&self.ind_batch);
+                if let Some(what) = non_finite_loss(&l) {
+                    return Err(TrainError::NonFinite { pair: "individual", update: self.individual.updates(), design, episode, what });
+                }
+                out.last = Some(l);
                 out.individual_updates += 1;
+            }
+            if let Some(what) = non_finite_param(&self.individual) {
+                return Err(TrainError::NonFinite { pair: "individual", update: self.individual.updates(), design, episode, what });
             }
         }
         if self.cfg.population_only || design >= self.cfg.population_updates_from_design {
@@ -207,10 +256,16 @@ impl FearLearner {
             for _ in 0..n {
                 self.pop_replay.sample(&mut self.rng, &mut self.pop_batch)?;
                 let l = self.population.update(&self.pop_batch);
+                if let Some(what) = non_finite_loss(&l) {
+                    return Err(TrainError::NonFinite { pair: "population", update: self.population.updates(), design, episode, what });
+                }
                 if self.cfg.population_only {
                     out.last = Some(l);
                 }
                 out.population_updates += 1;
+            }
+            if let Some(what) = non_finite_param(&self.population) {
+                return Err(TrainError::NonFinite { pair: "population", update: self.population.updates(), design, episode, what });
             }
         }
         Ok(out)

@@ -32,7 +32,7 @@ fn episode(l: &mut FearLearner, design: f32) {
 fn schedule_follows_algorithm_4() {
     let mut l = FearLearner::new(2, 1, cfg(), 1).unwrap();
     let mut log = vec![];
-    for design in 0..4 {
+    for design in 0..5 {
         l.begin_design(design);
         assert_eq!(
             l.agent(ActingPolicy::Individual).policy_params(),
@@ -50,10 +50,10 @@ fn schedule_follows_algorithm_4() {
     for (design, ep, ind, pop) in log {
         let warm = ep < 3;
         assert_eq!(ind, if warm { 0 } else { 5 }, "design {design} episode {ep}");
-        assert_eq!(pop, if warm || design < 2 { 0 } else { 3 }, "design {design} episode {ep}");
+        assert_eq!(pop, if warm || design < 3 { 0 } else { 3 }, "design {design} episode {ep}");
     }
-    assert_eq!(l.start_states(), 20);
-    assert_eq!(l.population_transitions(), 200);
+    assert_eq!(l.start_states(), 25);
+    assert_eq!(l.population_transitions(), 250);
     let s = l.sample_start_states(4).unwrap();
     assert_eq!(s.len(), 8);
     assert!(s.chunks(2).all(|o| o[0] == 0.1));
@@ -69,4 +69,61 @@ fn population_only_ablation_trains_and_acts_with_the_population() {
     let t = l.end_episode().unwrap();
     assert_eq!((t.individual_updates, t.population_updates), (0, 5));
     assert_ne!(l.agent(ActingPolicy::Population).policy_params(), &before[..]);
+}
+
+/// Algorithm 4's "pi_indvd = pi_pop, Q_indvd = Q_pop" at a new design: after the individual pair
+/// has trained away from the population pair, `begin_design` makes every network (policy, both
+/// critics, both targets) and alpha equal again, restarts all four Adam optimisers and empties
+/// the species buffer, keeping the population buffer.
+#[test]
+fn a_new_design_copies_every_network_and_restarts_the_optimisers() {
+    let sac = SacConfig { hidden: vec![16], batch_size: 8, auto_alpha: true, ..SacConfig::default() };
+    let mut l = FearLearner::new(2, 1, FearLearnerConfig { sac, population_updates_from_design: 0, ..cfg() }, 3).unwrap();
+    l.begin_design(0);
+    for _ in 0..5 {
+        episode(&mut l, 0.0);
+        l.end_episode().unwrap();
+    }
+    let (ind, pop) = (l.agent(ActingPolicy::Individual), l.agent(ActingPolicy::Population));
+    assert_ne!(ind.policy_params(), pop.policy_params(), "the pairs trained apart");
+    assert_ne!(ind.critic_params(0), pop.critic_params(0));
+    assert_ne!(ind.alpha(), pop.alpha(), "auto-alpha moved both alphas differently");
+    assert!(ind.optimiser_steps().iter().all(|&s| s > 0), "{:?}", ind.optimiser_steps());
+    assert_eq!(l.species_transitions(), 50);
+
+    l.begin_design(1);
+    let (ind, pop) = (l.agent(ActingPolicy::Individual), l.agent(ActingPolicy::Population));
+    assert_eq!(ind.policy_params(), pop.policy_params());
+    for i in 0..2 {
+        let ((theta, bar), (pop_theta, pop_bar)) = (ind.critic_params(i), pop.critic_params(i));
+        assert_eq!(theta, pop_theta, "critic {i}");
+        assert_eq!(bar, pop_bar, "target critic {i}");
+        assert_ne!(theta, bar, "target {i} lags its critic (a copy of both, not of one into the other)");
+    }
+    assert_eq!(ind.alpha(), pop.alpha());
+    assert_eq!(ind.optimiser_steps(), [0; 4], "fresh Adam state");
+    assert!(pop.optimiser_steps().iter().all(|&s| s > 0), "the population's optimisers keep their state");
+    assert_eq!(l.species_transitions(), 0, "species buffer emptied");
+    assert_eq!(l.population_transitions(), 50, "population buffer kept");
+}
+
+/// A reward so large that the critic's squared error overflows: the learner stops with an error
+/// naming the pair, the update and the loss, and keeps its previous (finite) weights out of
+/// the non-finite update's reach as far as publishing goes.
+#[test]
+fn a_non_finite_loss_stops_training_with_the_update_named() {
+    let mut l = FearLearner::new(2, 1, FearLearnerConfig { warmup_episodes: 0, ..cfg() }, 4).unwrap();
+    l.begin_design(0);
+    l.add_start_state(&[0.1, 0.0]).unwrap();
+    for k in 0..10 {
+        let (o, n) = ([k as f32 * 0.1, 0.0], [(k + 1) as f32 * 0.1, 0.0]);
+        l.add_transition(&Transition { obs: &o, action: &[0.5], reward: 3e38, next_obs: &n, terminated: false }).unwrap();
+    }
+    let e = l.end_episode().unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(e, coadapt_learner::fear::TrainError::NonFinite { pair: "individual", update: 1, design: 0, episode: 0, .. }),
+        "{msg}"
+    );
+    assert!(msg.contains("critic 1 loss (inf)"), "{msg}");
 }
