@@ -22,29 +22,30 @@ pub fn make_env(name: &str) -> anyhow::Result<Box<dyn Env>> {
 }
 
 /// Simulation rollouts for the baselines: one deterministic episode of the population policy
-/// per design, fitness the mean per-step reward; designs are shared out over the threads.
+/// per design from its reset seed, fitness the mean per-step reward; designs are shared out
+/// over the threads.
 struct SimEvaluator {
     actors: Vec<Actor<Box<dyn Env>>>,
     version: u64,
-    seed: u64,
 }
 
 impl RolloutEvaluator for SimEvaluator {
-    fn evaluate(&mut self, policy: &[f32], designs: &[f32], fitness: &mut [f32]) -> Result<(), String> {
+    fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String> {
         self.version += 1;
         let dim = designs.len() / fitness.len().max(1);
         let per = fitness.len().div_ceil(self.actors.len());
-        let (version, seed) = (self.version, self.seed);
+        let version = self.version;
         std::thread::scope(|s| {
             let jobs: Vec<_> = self
                 .actors
                 .iter_mut()
                 .zip(fitness.chunks_mut(per.max(1)))
                 .zip(designs.chunks(per.max(1) * dim))
-                .map(|((actor, fit), des)| {
+                .zip(seeds.chunks(per.max(1)))
+                .map(|(((actor, fit), des), seeds)| {
                     s.spawn(move || -> Result<(), String> {
                         actor.set_weights(version, policy).map_err(|e| e.to_string())?;
-                        for (f, d) in fit.iter_mut().zip(des.chunks_exact(dim)) {
+                        for ((f, d), &seed) in fit.iter_mut().zip(des.chunks_exact(dim)).zip(seeds) {
                             let st = actor
                                 .run_episode(seed, d, false, &mut |_| std::ops::ControlFlow::Continue(()))
                                 .map_err(|e| e.to_string())?;
@@ -162,7 +163,7 @@ pub fn optimizer(cfg: &RunConfig, spec: &EnvSpec, links: &mut OptimizerLinks, sh
                 Ok(Actor::new(make_env(&cfg.env)?, policy.clone(), PolicyKind::SquashedGaussian, cfg.seed ^ (0x5349_4d00 + i as u64))?)
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
-        Some(SimEvaluator { actors, version: 0, seed: cfg.seed })
+        Some(SimEvaluator { actors, version: 0 })
     } else {
         None
     };

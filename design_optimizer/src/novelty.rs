@@ -11,7 +11,7 @@
 use coadapt_core::BoxSpace;
 use serde::{Deserialize, Serialize};
 
-use crate::pso::{self, PsoConfig};
+use crate::pso::{self, BoundHandling, PsoConfig};
 use crate::swarm::{Progress, SearchError, SearchResult, SwarmObjective, check_bounds};
 
 /// Novelty-search settings.
@@ -22,13 +22,15 @@ pub struct NoveltyConfig {
     pub neighbours: usize,
     /// Measure distances with each dimension divided by its width (false: in design units).
     pub normalise: bool,
-    /// The PSO that maximises the novelty (the reference settings by default).
+    /// The PSO that maximises the novelty: the reference's swarm, with the `clamp` bound rule
+    /// (novelty peaks on the box's faces and corners, far from the chosen designs, and clamping
+    /// reaches them; the public reference has no novelty search to follow).
     pub pso: PsoConfig,
 }
 
 impl Default for NoveltyConfig {
     fn default() -> Self {
-        Self { neighbours: 5, normalise: true, pso: PsoConfig::default() }
+        Self { neighbours: 5, normalise: true, pso: PsoConfig { bounds: BoundHandling::Clamp, ..PsoConfig::default() } }
     }
 }
 

@@ -28,12 +28,18 @@ pub const PSO_STREAM: u64 = 0x0050_534f;
 
 /// What happens to a coordinate that a velocity step takes out of the box.
 ///
-/// The default is [`BoundHandling::Clamp`]. The reference's requirements pin no pyswarms
-/// version, so it ran either pyswarms 0.x's rule ([`BoundHandling::Hold`]; its call passes the
-/// 0.x `print_step` argument) or the `periodic` default of pyswarms 1.0 and later
-/// ([`BoundHandling::Periodic`]); both are here to reproduce it. With the reference settings
-/// (700 x 250, pyswarms' initial velocities) on a weighted quadratic over the HalfCheetah box
-/// `[0.8, 2.0]^6`, measured over 20 seeds (worst coordinate error of the returned design):
+/// The default is [`BoundHandling::Periodic`], the reference's rule as far as it can be told.
+/// Its requirements pin no pyswarms version; its call passes 0.x's `print_step` and `verbose`
+/// arguments, but its objective is written `f_qval(x_input, **kwargs)`, which is what pyswarms
+/// 1.x needs (1.x forwards unknown `optimize` arguments such as `print_step` to the objective,
+/// and an objective without `**kwargs` raises), and the code was published in October 2019,
+/// when `pip install pyswarms` gave 1.1 (0.4.0 was January 2019, 1.1.0 May 2019). So the
+/// reference most likely ran 1.x's default `periodic` wrap. [`BoundHandling::Hold`] is 0.x's
+/// rule; [`BoundHandling::Clamp`] is ours (an option, not the reference).
+///
+/// How the rules differ, with the reference settings (700 x 250, pyswarms' initial velocities)
+/// on a weighted quadratic over the HalfCheetah box `[0.8, 2.0]^6`, over 20 seeds (worst
+/// coordinate error of the returned design):
 ///
 /// | optimum | Clamp | Periodic | Hold |
 /// |---|---|---|---|
@@ -42,29 +48,31 @@ pub const PSO_STREAM: u64 = 0x0050_534f;
 ///
 /// A wrapped particle re-enters at the far side with its velocity still pointing out of the
 /// box and keeps looping, and a held particle is stuck short of the wall until its velocity
-/// turns inwards, so neither settles near a bound, where the critic's optimum often lies (a longer leg scoring better up to the
-/// limit). Clamping puts the particle on the bound and zeroes the offending velocity, so the
-/// swarm can converge there, and it is as good as the others inside the box (Rastrigin, the
-/// sphere). The same run takes particles out of the box often enough for this to matter: the
-/// inertia 0.9 and initial speeds up to one design unit overshoot the 1.2-wide box.
+/// turns inwards, so neither settles near a bound. Clamping puts the particle on the bound and
+/// zeroes the offending velocity, so the swarm converges there: it finds a boundary optimum
+/// exactly, and it also parks particles on faces and corners wherever a learned critic
+/// extrapolates upwards past the data, which is where FEAR's designs ended up under clamping
+/// (docs/EXPERIMENTS.md counts chosen designs on a face or corner under each rule). The
+/// inertia 0.9 and initial speeds up to one design unit overshoot the 1.2-wide box often
+/// enough for the rule to matter.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum BoundHandling {
     /// pyswarms' `nearest`, plus a velocity reset: the coordinate is clamped to the bound it
     /// crossed and its velocity set to zero, so the particle does not keep pushing outwards.
-    #[default]
     Clamp,
     /// pyswarms 1.x's default `periodic`: the box tiles space; `x < low` becomes
     /// `high - (low - x) mod width` and `x > high` becomes `low + (x - high) mod width`.
     /// The velocity is unchanged.
+    #[default]
     Periodic,
     /// pyswarms 0.x's rule: a particle whose step would leave the box in any coordinate stays
     /// where it is (all coordinates), keeping its velocity for the next update.
     Hold,
 }
 
-/// PSO settings; the defaults are the reference's (DESIGN.md section 2), except the bound rule
-/// ([`BoundHandling`] explains why).
+/// PSO settings; the defaults are the reference's (DESIGN.md section 2; the bound rule as
+/// [`BoundHandling`] argues).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct PsoConfig {
@@ -87,7 +95,7 @@ pub struct PsoConfig {
 
 impl Default for PsoConfig {
     fn default() -> Self {
-        Self { particles: 700, iterations: 250, c1: 0.5, c2: 0.3, w: 0.9, init_velocity: [0.0, 1.0], bounds: BoundHandling::Clamp }
+        Self { particles: 700, iterations: 250, c1: 0.5, c2: 0.3, w: 0.9, init_velocity: [0.0, 1.0], bounds: BoundHandling::Periodic }
     }
 }
 

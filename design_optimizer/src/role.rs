@@ -22,6 +22,7 @@ use coadapt_transport::messages::Dims;
 use coadapt_transport::{
     DesignKind, DesignReply, DesignRequest, OptimizerLinks, TransportError, Validate, Weights, newest_or_stop, next_or_stop,
 };
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::es::{AskTell, OpenAiEs, OpenAiEsConfig, one_generation};
@@ -77,6 +78,9 @@ pub enum QModeConfig {
     Q1,
     /// min(Q1, Q2).
     MinOfTwin,
+    /// The twin critics' mean minus `pessimism` times their standard deviation: a design
+    /// objective that distrusts the critic where its two heads disagree (beyond the thesis).
+    Pessimistic,
 }
 
 /// The optimiser's settings; defaults are the reference's.
@@ -87,8 +91,10 @@ pub struct OptimizerConfig {
     pub exploit: ExploitMethod,
     /// `random` or `novelty`.
     pub explore: ExploreMethod,
-    /// `q1` or `min-of-twin`.
+    /// `q1` (the reference), `min-of-twin` or `pessimistic`.
     pub q: QModeConfig,
+    /// k of `q = "pessimistic"`: the objective is mean(Q1, Q2) - k std(Q1, Q2).
+    pub pessimism: f32,
     /// Cores for scoring the swarm over Q.
     pub cores: usize,
     /// PSO over Q (and novelty search's PSO).
@@ -103,6 +109,12 @@ pub struct OptimizerConfig {
     pub openai_es: OpenAiEsConfig,
     /// CMA-ES one generation per design (9 candidates).
     pub cmaes_es: CmaesConfig,
+    /// What the ES baselines train on: `best-seen` (the best candidate of every generation so
+    /// far, the thesis) or `generation-best` (the best of the generation just scored).
+    pub es_train_on: EsTrainOn,
+    /// Reset seeds of the simulation baselines' rollouts: `fresh` (one per rollout, the
+    /// reference) or `fixed` (the same start for every candidate).
+    pub sim_seed: SimSeed,
 }
 
 impl Default for OptimizerConfig {
@@ -111,6 +123,7 @@ impl Default for OptimizerConfig {
             exploit: ExploitMethod::PsoQ,
             explore: ExploreMethod::Random,
             q: QModeConfig::Q1,
+            pessimism: 2.0,
             cores: 2,
             pso: PsoConfig::default(),
             cmaes: CmaesConfig::default(),
@@ -119,14 +132,41 @@ impl Default for OptimizerConfig {
             sim_cmaes: CmaesConfig { population: Some(35), generations: 30, tol_x: 0.0, ..CmaesConfig::default() },
             openai_es: OpenAiEsConfig::default(),
             cmaes_es: CmaesConfig { population: Some(9), ..CmaesConfig::default() },
+            es_train_on: EsTrainOn::BestSeen,
+            sim_seed: SimSeed::Fresh,
         }
     }
 }
 
-/// Scores designs by simulation: one rollout of `policy` per design, fitness the mean
-/// per-step reward (higher is better).
+/// Scores designs by simulation: one rollout of `policy` per design, started from reset seed
+/// `seeds[k]` for design `k`, fitness the mean per-step reward (higher is better).
 pub trait RolloutEvaluator {
-    fn evaluate(&mut self, policy: &[f32], designs: &[f32], fitness: &mut [f32]) -> Result<(), String>;
+    fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String>;
+}
+
+/// Which candidate of the ES baselines is trained on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EsTrainOn {
+    /// The highest-scoring candidate of all generations so far ("the best design seen").
+    #[default]
+    BestSeen,
+    /// The highest-scoring candidate of the generation just scored.
+    GenerationBest,
+}
+
+/// Which reset seed each simulation rollout of the baselines starts from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SimSeed {
+    /// A fresh seed per rollout, as the reference (each `env.reset()` draws a new start state):
+    /// the fitness carries the start-state noise that the thesis names as this baseline's
+    /// weakness.
+    #[default]
+    Fresh,
+    /// The run's seed for every rollout: every candidate starts from the same state, a
+    /// noise-free (and so flattering) comparison.
+    Fixed,
 }
 
 /// The shapes the optimiser scores with.
@@ -157,6 +197,8 @@ pub struct Optimizer<'a> {
     spec: OptimizerSpec,
     evaluator: Option<&'a mut dyn RolloutEvaluator>,
     es: Option<Box<dyn AskTell>>,
+    /// The best ES candidate so far and its score.
+    es_best: Option<SearchResult>,
     rng: Rng64,
     seed: u64,
     requests: u64,
@@ -188,13 +230,13 @@ impl<'a> Optimizer<'a> {
             )),
             _ => None,
         };
-        Ok(Self { rng: rng(seed, 0x4f50_5449), cfg, spec, evaluator, es, seed, requests: 0 })
+        Ok(Self { rng: rng(seed, 0x4f50_5449), cfg, spec, evaluator, es, es_best: None, seed, requests: 0 })
     }
 
     fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, String> {
         let thetas: Vec<&[f32]> = match self.cfg.q {
             QModeConfig::Q1 => vec![&w.q1],
-            QModeConfig::MinOfTwin => vec![&w.q1, &w.q2],
+            QModeConfig::MinOfTwin | QModeConfig::Pessimistic => vec![&w.q1, &w.q2],
         };
         DesignObjective::new(
             &self.spec.policy,
@@ -214,7 +256,11 @@ impl<'a> Optimizer<'a> {
         self.requests += 1;
         let seed = self.seed.wrapping_add(self.requests.wrapping_mul(0x9E37_79B9));
         let objective = self.objective(w, &req.start_states).map_err(err)?;
-        let mode = if self.cfg.q == QModeConfig::Q1 { QMode::First } else { QMode::MinOfTwin };
+        let mode = match self.cfg.q {
+            QModeConfig::Q1 => QMode::First,
+            QModeConfig::MinOfTwin => QMode::MinOfTwin,
+            QModeConfig::Pessimistic => QMode::MeanMinusKStd(self.cfg.pessimism),
+        };
         let mut q = CriticObjective::new(&objective, mode, self.cfg.cores);
         let bounds = self.spec.bounds.clone();
         let (method, result, rollouts): (&str, SearchResult, u64) = match req.kind {
@@ -268,8 +314,15 @@ impl<'a> Optimizer<'a> {
             return Err(crate::SearchError::Config(format!("{} needs simulation rollouts", m.name())));
         };
         let mut failure: Option<String> = None;
+        let (mode, fixed, rng) = (self.cfg.sim_seed, self.seed, &mut self.rng);
+        let mut seeds = Vec::new();
         let mut sim = |designs: &[f32], fitness: &mut [f32]| {
-            if let Err(e) = ev.evaluate(policy, designs, fitness) {
+            seeds.clear();
+            seeds.extend((0..fitness.len()).map(|_| match mode {
+                SimSeed::Fresh => rng.random::<u64>(),
+                SimSeed::Fixed => fixed,
+            }));
+            if let Err(e) = ev.evaluate(policy, designs, &seeds, fitness) {
                 fitness.fill(f32::NAN);
                 failure.get_or_insert(e);
             }
@@ -282,10 +335,20 @@ impl<'a> Optimizer<'a> {
                 None => Err(crate::SearchError::Config("no ES state".into())),
             },
         };
-        match failure {
-            Some(e) => Err(crate::SearchError::Config(format!("rollouts failed: {e}"))),
-            None => r,
+        if let Some(e) = failure {
+            return Err(crate::SearchError::Config(format!("rollouts failed: {e}")));
         }
+        let r = r?;
+        if !matches!(m, ExploitMethod::OpenaiEs | ExploitMethod::CmaesEs) {
+            return Ok(r);
+        }
+        if self.es_best.as_ref().is_none_or(|b| r.score > b.score) {
+            self.es_best = Some(r.clone());
+        }
+        Ok(match (self.cfg.es_train_on, &self.es_best) {
+            (EsTrainOn::BestSeen, Some(best)) => SearchResult { evaluations: r.evaluations, history: r.history, ..best.clone() },
+            _ => r,
+        })
     }
 }
 

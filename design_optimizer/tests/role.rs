@@ -1,0 +1,115 @@
+//! The optimiser role's simulation baselines over a fake rollout evaluator: which reset seeds
+//! the rollouts start from, and which ES candidate is trained on.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use coadapt_core::BoxSpace;
+use coadapt_design_optimizer::role::{EsTrainOn, ExploitMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutEvaluator, SimSeed};
+use coadapt_nn::Mlp;
+use coadapt_transport::{DesignKind, DesignRequest, Weights};
+
+const OBS: usize = 4; // 2 state columns + a 2-D design
+const ACT: usize = 1;
+
+/// Records every rollout (design, seed); its fitness is a function of the design plus noise
+/// drawn from the seed, so a fixed seed gives a noise-free comparison and fresh seeds do not.
+#[derive(Default)]
+struct Fake {
+    rollouts: Vec<(Vec<f32>, u64, f32)>,
+}
+
+impl RolloutEvaluator for Fake {
+    fn evaluate(&mut self, _policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String> {
+        assert_eq!(seeds.len(), fitness.len(), "one seed per rollout");
+        for ((d, &seed), f) in designs.chunks_exact(2).zip(seeds).zip(fitness.iter_mut()) {
+            let noise = (seed % 1000) as f32 / 1000.0;
+            *f = -(d[0] - 1.5).powi(2) - (d[1] - 1.0).powi(2) + noise;
+            self.rollouts.push((d.to_vec(), seed, *f));
+        }
+        Ok(())
+    }
+}
+
+fn spec() -> OptimizerSpec {
+    OptimizerSpec {
+        policy: Mlp::new(&[OBS, 8, 2 * ACT]).unwrap(),
+        critic: Mlp::new(&[OBS + ACT, 8, 1]).unwrap(),
+        bounds: BoxSpace::new(vec![0.8, 0.8], vec![2.0, 2.0]).unwrap(),
+        design_at: 2,
+        obs_dim: OBS,
+        act_dim: ACT,
+    }
+}
+
+fn weights(s: &OptimizerSpec) -> Weights {
+    Weights {
+        version: 1,
+        policy: vec![0.01; s.policy.n_params()],
+        q1: vec![0.01; s.critic.n_params()],
+        q2: vec![0.01; s.critic.n_params()],
+    }
+}
+
+fn request(index: u32) -> DesignRequest {
+    DesignRequest { index, kind: DesignKind::Exploit, weights_version: 1, start_states: vec![0.1; 3 * OBS], chosen: vec![] }
+}
+
+fn sim_pso(sim_seed: SimSeed) -> Vec<(Vec<f32>, u64, f32)> {
+    let mut cfg = OptimizerConfig { exploit: ExploitMethod::SimPso, sim_seed, ..OptimizerConfig::default() };
+    cfg.sim_pso.particles = 5;
+    cfg.sim_pso.iterations = 3;
+    let mut fake = Fake::default();
+    let s = spec();
+    let w = weights(&s);
+    let mut opt = Optimizer::new(cfg, s, Some(&mut fake), 7).unwrap();
+    let reply = opt.choose(&request(3), &w).unwrap();
+    assert_eq!(reply.design_rollouts, 15);
+    drop(opt);
+    fake.rollouts
+}
+
+#[test]
+fn simulation_rollouts_start_from_a_fresh_seed_each_by_default_and_from_one_when_fixed() {
+    assert_eq!(OptimizerConfig::default().sim_seed, SimSeed::Fresh, "the reference resets to a new start state per rollout");
+    let fresh = sim_pso(SimSeed::Fresh);
+    assert_eq!(fresh.len(), 15);
+    let distinct: std::collections::BTreeSet<u64> = fresh.iter().map(|r| r.1).collect();
+    assert_eq!(distinct.len(), 15, "every rollout its own seed");
+    assert_eq!(sim_pso(SimSeed::Fresh), fresh, "the seeds come from the run's seed: reproducible");
+
+    let fixed = sim_pso(SimSeed::Fixed);
+    assert!(fixed.iter().all(|r| r.1 == 7), "every rollout from the run's seed");
+}
+
+#[test]
+fn es_baselines_train_on_the_best_design_seen_over_all_generations() {
+    assert_eq!(OptimizerConfig::default().es_train_on, EsTrainOn::BestSeen);
+    for m in [ExploitMethod::OpenaiEs, ExploitMethod::CmaesEs] {
+        for train_on in [EsTrainOn::BestSeen, EsTrainOn::GenerationBest] {
+            let mut cfg = OptimizerConfig { exploit: m, es_train_on: train_on, ..OptimizerConfig::default() };
+            cfg.openai_es.population = 6;
+            cfg.cmaes_es.population = Some(6);
+            let mut fake = Fake::default();
+            let s = spec();
+            let w = weights(&s);
+            let mut opt = Optimizer::new(cfg, s, Some(&mut fake), 11).unwrap();
+            let mut replies = vec![];
+            for g in 0..8 {
+                replies.push(opt.choose(&request(3 + g), &w).unwrap());
+            }
+            drop(opt);
+            let mut generation_best_differs = false;
+            for (g, reply) in replies.iter().enumerate() {
+                assert_eq!(reply.design_rollouts, 6, "{m:?}: one generation of 6 per design");
+                let seen = &fake.rollouts[..6 * (g + 1)];
+                let this = &fake.rollouts[6 * g..6 * (g + 1)];
+                let best = |rs: &[(Vec<f32>, u64, f32)]| rs.iter().max_by(|a, b| a.2.total_cmp(&b.2)).unwrap().0.clone();
+                let (best_seen, generation_best) = (best(seen), best(this));
+                generation_best_differs |= best_seen != generation_best;
+                let want = if train_on == EsTrainOn::BestSeen { best_seen } else { generation_best };
+                assert_eq!(reply.design, want, "{m:?} {train_on:?}, generation {g}");
+            }
+            assert!(generation_best_differs, "{m:?}: some generation's best was worse than an earlier one (the test tells the two apart)");
+        }
+    }
+}
