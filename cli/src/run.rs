@@ -43,6 +43,8 @@ pub struct RunConfig {
     pub sim_threads: usize,
     /// Points per side of the design-landscape grid drawn at the end (0: no landscape).
     pub landscape_grid: usize,
+    /// Start states of Eq. 5.6 for the landscape (the thesis's figures use 256).
+    pub landscape_start_states: usize,
     pub schedule: ScheduleConfig,
     /// Collection against training: lock-step (the reference) or episodes in flight.
     pub flow: FlowConfig,
@@ -61,6 +63,7 @@ impl Default for RunConfig {
             chunk_len: 250,
             sim_threads: 2,
             landscape_grid: 40,
+            landscape_start_states: 256,
             schedule: ScheduleConfig::default(),
             flow: FlowConfig::default(),
             fleet: FleetConfig::default(),
@@ -253,7 +256,7 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
     let pca = Pca2::fit(&designs, dim)?;
     let grid = landscape::grid(&pca, &designs, &spec.design, n)?;
     let learner: &mut FearLearner = &mut outcome.learner;
-    let Some(states) = learner.sample_start_states(cfg.schedule.start_state_batch.max(1)) else { return Ok(()) };
+    let Some(states) = learner.sample_start_states(cfg.landscape_start_states.max(1)) else { return Ok(()) };
     let pop = learner.agent(ActingPolicy::Population);
     let objective =
         DesignObjective::new(pop.policy(), pop.policy_params(), pop.critic(), &[pop.critic_params(0).0], &states, spec.state_dim, dim)?;

@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::AtomicBool;
 
-use coadapt_cli::run::{RunConfig, resolve_initial_designs, run_config};
+use coadapt_cli::run::{RunConfig, check, resolve_initial_designs, run_config};
 use coadapt_design_optimizer::role::ExploitMethod;
+use coadapt_learner::fear::ActingPolicy;
 
 fn tmpdir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("coadapt-run-{}-{name}", std::process::id()));
@@ -173,16 +174,68 @@ fn es_baselines_take_one_generation_per_design() {
 }
 
 #[test]
-fn random_designs_and_the_ablations_are_configurations() {
+fn random_designs_are_a_configuration() {
     let mut c = small(ExploitMethod::Random);
     c.schedule.alternate = false;
     let r = rollouts_and_methods(&c, "random");
     assert!(r[2..].iter().all(|(k, m, n)| k == "exploit" && m == "random" && *n == 0), "{r:?}");
+}
+
+/// Runs `c` in-process with a recording optimiser in place of the real one: it notes how many
+/// start states each design request carries and answers with the box's centre.
+fn run_recording_requests(c: &RunConfig, name: &str) -> (coadapt_learner::coadapt::RunOutcome, Vec<usize>) {
+    use coadapt_cli::roles;
+    use coadapt_transport::{DesignReply, in_process};
+    let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
+    let (mut learner, mut actors, mut optimizer) = in_process::fleet(1);
+    let shutdown = AtomicBool::new(false);
+    let dir = tmpdir(name);
+    std::thread::scope(|s| {
+        let (c, spec, shutdown) = (c, &spec, &shutdown);
+        let mut actor = actors.pop().unwrap();
+        s.spawn(move || roles::actor(c, spec, 0, &mut actor, shutdown).unwrap());
+        let recorder = s.spawn(move || {
+            let mut states = vec![];
+            while let Ok(Some(req)) = coadapt_transport::next_or_stop(optimizer.requests.as_mut(), shutdown) {
+                states.push(req.start_states.len() / spec.obs_dim());
+                let centre = spec.design.low.iter().zip(&spec.design.high).map(|(l, h)| 0.5 * (l + h)).collect();
+                let reply = DesignReply {
+                    index: req.index,
+                    design: centre,
+                    method: "centre".into(),
+                    predicted_objective: None,
+                    design_rollouts: 0,
+                };
+                optimizer.replies.send(reply).unwrap();
+            }
+            states
+        });
+        let outcome = roles::learner(c, spec, &dir, &mut learner, shutdown).unwrap();
+        drop(learner);
+        (outcome, recorder.join().unwrap())
+    })
+}
+
+/// The thesis's ablations change what they claim to: population-only trains no individual
+/// networks (and acts with the population's), and a start-state batch of 1 gives the design
+/// objective exactly one start state per request, where the default gives the configured batch.
+#[test]
+fn the_ablations_change_what_they_claim_to() {
     let mut c = small(ExploitMethod::PsoQ);
+    c.schedule.start_state_batch = 8;
+    let (outcome, states) = run_recording_requests(&c, "ablation-default");
+    assert_eq!(states, vec![8, 8], "two chosen designs, 8 start states each");
+    assert!(outcome.learner.agent(ActingPolicy::Individual).updates() > 0);
+
     c.learner.population_only = true;
     c.schedule.start_state_batch = 1;
-    let r = rollouts_and_methods(&c, "pop-only");
-    assert_eq!(r[2].1, "pso-q");
+    let (outcome, states) = run_recording_requests(&c, "ablation");
+    assert_eq!(states, vec![1, 1], "the objective sees exactly one start state");
+    assert_eq!(outcome.learner.agent(ActingPolicy::Individual).updates(), 0, "no individual network is trained");
+    let pop = outcome.learner.agent(ActingPolicy::Population).updates();
+    // population-only: `individual-updates` (20) population updates per training episode; the
+    // tiny schedule has 4 designs x (episodes - 1 warm-up) = 2 + 2 + 1 + 1 training episodes.
+    assert_eq!(pop, 20 * 6, "population updates");
 }
 
 #[test]
@@ -202,4 +255,41 @@ fn bad_configs_are_refused_with_the_field_named() {
     assert!(e.contains("fleet.max-actors"), "{e}");
     let e = toml::from_str::<RunConfig>("[schedule]\ndesings = 3\n").unwrap_err().to_string();
     assert!(e.contains("desings"), "{e}");
+}
+
+/// Every shipped config parses, passes the run's checks, and the reference and reduced
+/// protocols start from the robot's five fixed initial designs (the same in every run, as the
+/// thesis fixes them) with the reference's schedule.
+#[test]
+fn every_shipped_config_is_valid_and_the_protocols_fix_their_initial_designs() {
+    let mut seen = 0;
+    for entry in std::fs::read_dir(workspace_file("configs")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let name = path.file_stem().unwrap().to_string_lossy().to_string();
+        let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
+        let fixed = coadapt_robots::reference_initial_designs(&c.env).unwrap();
+        if name.ends_with("-reference") || name.ends_with("-reduced") {
+            assert_eq!(c.schedule.initial_designs, fixed, "{name}: the robot's fixed initial designs");
+            assert_eq!(c.learner.population_updates_from_design, 3, "{name}: population updates from the fourth design");
+            assert_eq!(c.optimizer.pso.bounds, coadapt_design_optimizer::BoundHandling::Periodic, "{name}");
+        }
+        if name.ends_with("-reference") {
+            let per = if c.env == "daisy" { 200 } else { 100 };
+            assert_eq!((c.schedule.initial_episodes, c.schedule.episodes_per_design), (300, per), "{name}");
+        }
+        // Configs without initial designs get the same fixed ones whatever the seed.
+        let mut other = c.clone();
+        other.schedule.initial_designs.clear();
+        other.seed = 99;
+        resolve_initial_designs(&mut other, &spec);
+        assert_eq!(other.schedule.initial_designs, fixed, "{name}");
+        resolve_initial_designs(&mut c, &spec);
+        check(&c, &spec).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        seen += 1;
+    }
+    assert!(seen >= 9, "{seen} configs");
 }

@@ -38,10 +38,13 @@ pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper",
 #[error("unknown environment `{0}` (known: {known})", known = ENV_NAMES.join(", "))]
 pub struct UnknownEnv(pub String);
 
-/// The fixed designs a co-adaptation of robot `name` starts with: the reference's five for
-/// HalfCheetah (DESIGN.md section 2: the original body and four fixed others); for the other
-/// robots, which the reference did not co-adapt, `None` (the caller picks the original design
-/// plus random ones).
+/// The fixed designs a co-adaptation of robot `name` starts with, the same for every seed (the
+/// thesis fixes them across runs: the original body plus four random ones). HalfCheetah's are
+/// the reference implementation's five (DESIGN.md section 2). The reference co-adapted no other
+/// robot, so Walker's, Hopper's and Daisy's four others were drawn once, uniform in each box
+/// and rounded to two decimals (Python's `random.Random(5)`, one `uniform(low, high)` per
+/// coordinate, Walker then Hopper then Daisy), and are fixed here. `None` for robots without a
+/// design (Pendulum).
 pub fn reference_initial_designs(name: &str) -> Option<Vec<Vec<f32>>> {
     match name {
         "half-cheetah" => Some(vec![
@@ -50,6 +53,27 @@ pub fn reference_initial_designs(name: &str) -> Option<Vec<Vec<f32>>> {
             vec![1.52, 1.07, 1.11, 1.97, 1.51, 0.99],
             vec![1.08, 1.18, 1.39, 1.76, 1.85, 0.92],
             vec![0.85, 1.54, 0.97, 1.38, 1.10, 1.49],
+        ]),
+        "walker" => Some(vec![
+            vec![1.0; 6],
+            vec![1.12, 1.24, 1.3, 1.44, 1.24, 1.42],
+            vec![0.53, 0.97, 1.44, 1.15, 1.4, 0.61],
+            vec![0.97, 0.75, 1.04, 1.07, 0.51, 0.72],
+            vec![0.78, 1.42, 1.27, 0.66, 1.3, 0.64],
+        ]),
+        "hopper" => Some(vec![
+            vec![1.0; 5],
+            vec![2.66, 0.69, 0.5, 1.81, 0.81],
+            vec![1.25, 1.97, 1.81, 0.93, 1.94],
+            vec![2.39, 1.52, 0.81, 1.91, 1.54],
+            vec![3.88, 1.84, 0.95, 1.04, 0.75],
+        ]),
+        "daisy" => Some(vec![
+            vec![0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.0, 0.0, 0.0],
+            vec![0.18, 0.14, 0.23, 0.35, 0.12, 0.38, -0.06, -0.08, 0.13],
+            vec![0.3, 0.24, 0.3, 0.39, 0.14, 0.49, -0.19, 0.1, 0.14],
+            vec![0.13, 0.42, 0.26, 0.34, 0.12, 0.14, -0.13, 0.18, -0.12],
+            vec![0.41, 0.47, 0.48, 0.25, 0.25, 0.32, 0.11, -0.16, 0.1],
         ]),
         _ => None,
     }
