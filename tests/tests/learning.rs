@@ -19,19 +19,26 @@ fn learns(algo: Algo, seed: u64) {
     let cfg = TrainConfig {
         algo,
         seed,
-        steps: 20_000,
+        steps: BUDGET,
         target_return: Some(-200.0),
-        stop_at_target: true,
+        stop_at_target: false,
         ddpg: DdpgConfig { exploration: Exploration::Gaussian, sigma: 0.1, ..DdpgConfig::default() },
         ..TrainConfig::default()
     };
     let mut env = coadapt_robots::make("pendulum").unwrap();
     let s = train::run(&cfg, env.as_mut(), &dir, &AtomicBool::new(false), &mut |_| {}).unwrap();
     eprintln!("{algo} seed {seed}: {s:?}");
-    let step = s.first_step_reaching_target.unwrap_or_else(|| panic!("{algo} did not reach -200 in 20k steps: {s:?}"));
-    assert!(step <= 20_000);
-    assert!(s.mean_return_last_10 > -200.0);
+    let step = s.first_step_reaching_target.unwrap_or_else(|| panic!("{algo} did not reach -200 in {BUDGET} steps: {s:?}"));
+    assert!(step < BUDGET, "{algo}: first reached -200 at step {step}");
+    // Still learned at the end, not a lucky stretch of episodes: the last 10 episodes (run
+    // past the first success rather than stopping at it) are above -200 too.
+    assert!(s.mean_return_last_10 > -200.0, "{algo}: mean of the last 10 episodes at {BUDGET}: {}", s.mean_return_last_10);
 }
+
+/// Steps of each test run: the bar is 20,000; the five-seed studies (docs/EXPERIMENTS.md
+/// section 1) first pass -200 at 4,800-7,200 steps, so 12,000 leaves room for a slower seed
+/// and still fails a learner that needs the whole bar.
+const BUDGET: u64 = 12_000;
 
 #[test]
 fn sac_learns_pendulum() {
