@@ -18,6 +18,7 @@ PAIRS = [
     ("forward_actor_critic", "22400rows", "22400rows-batched", "s/pass", False),
     ("forward_actor_critic", "179200rows", "179200rows-chunk1024", "s/pass", False),
     ("env_steps", "half-cheetah", "half-cheetah", "steps/s", True),
+    ("sim_seconds", "half-cheetah", "half-cheetah", "sim-s/s", True),
     ("pso_over_q", "700x250x32", "700x250x32", "s", False),
     ("pso_over_q", "700x250x256", "700x250x256", "s", False),
 ]

@@ -101,6 +101,11 @@ fn sim(a: &SimArgs) -> anyhow::Result<()> {
     for name in names {
         let rate = coadapt_robots::bench::env_steps_per_second(&name, a.seconds)?;
         emit("env_steps", &name, rate, "steps/s");
+        if let Some(dt) = coadapt_robots::bench::control_dt(&name) {
+            // Simulated time per wall second: a fair figure across control steps of
+            // different lengths (MuJoCo HalfCheetah-v5's is 0.05 s, ours 0.0165 s).
+            emit("sim_seconds", &name, rate * dt, "sim-s/s");
+        }
     }
     Ok(())
 }
