@@ -9,8 +9,10 @@
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
 # finished run (summary.json) is skipped, so the same queue can be started again after a stop:
 # an unfinished directory is moved aside to NAME-seedSEED.partial-<time> and the run starts
-# over. Special config names: `random-only:CONFIG` runs CONFIG with `alternate = false`
-# (every later design uniform random, the thesis's random-designs baseline).
+# over. CONFIG may carry overrides, `CONFIG+key.path=value+...` (TOML values, e.g.
+# `configs/half-cheetah-reduced.toml+learner.population-only=true+optimizer.q="pessimistic"`),
+# applied by scripts/config_with.py. `random-only:CONFIG` is CONFIG with `alternate = false`
+# (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
 # Each run's stdout (the JSON summary line) goes to RUN/summary.json, stderr to RUN.log.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -31,13 +33,16 @@ run_one() {
   if [ -s "$dir/summary.json" ]; then echo "campaign: $dir done already, skipped"; return 0; fi
   if [ -e "$dir" ]; then mv "$dir" "$dir.partial-$(date +%s)"; fi
   case $config in
-    random-only:*)
-      local base=${config#random-only:}
-      local c=$root/configs/$(basename "$base" .toml)-random-only.toml
-      sed 's/^alternate = true/alternate = false/' "$base" > "$c"
-      grep -q '^alternate = false' "$c" || { echo "campaign: $base has no 'alternate = true' line" >&2; return 1; }
-      config=$c ;;
+    random-only:*) config="${config#random-only:}+schedule.alternate=false" ;;
   esac
+  if [[ $config == *+* ]]; then
+    local base=${config%%+*} c=$root/configs/$name-seed$seed.toml
+    local IFS=+
+    # shellcheck disable=SC2086 # split the overrides on +
+    python3 scripts/config_with.py "$base" ${config#*+} > "$c" || { echo "campaign: bad config $config" >&2; return 1; }
+    unset IFS
+    config=$c
+  fi
   echo "campaign: start $dir ($(date -u +%H:%M:%S))"
   local t0=$SECONDS
   if RAYON_NUM_THREADS=1 "$bin" run --config "$config" --seed "$seed" --out "$dir" --transport in-process "$@" \
