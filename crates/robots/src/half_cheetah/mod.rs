@@ -27,10 +27,14 @@
 //! state (1000-step episodes are cut by [`coadapt_core::TimeLimit`]).
 //!
 //! # Simulation setting, from measurements
-//! The bar is MuJoCo HalfCheetah-v5 through gymnasium: about 10,300 env steps/s on one core of
-//! this machine in `peers.md`, 13,200-13,600 when timed beside ours on an idle machine (gymnasium
-//! 1.4, mujoco 4.0), where the default setting below ran 15,000 (`cheetah_speed`, uniform random
-//! actions, resets with their settling included).
+//! The bar is MuJoCo HalfCheetah-v5 through gymnasium per env step. Those figures (10,300 in
+//! `peers.md`, 13,200-13,600 beside ours) timed gymnasium's `action_space.sample()` inside the
+//! loop, about 40 us a step; with actions drawn before the loop, as `coadapt bench sim` and
+//! `bench/peers/sim_mujoco.py` now do, MuJoCo runs 31,800 env steps/s on the machine where the
+//! default setting below runs 18,400-19,600: we are at 0.6x per env step and 0.2x per simulated
+//! second (MuJoCo's control step is 0.05 s, ours 0.0165 s). BENCHMARKS.md has the run and what
+//! passing MuJoCo would take. The speed column below was timed with per-step random draws on an
+//! older, slower machine: compare its rows with each other, not with MuJoCo.
 //!
 //! `cargo run --release -p coadapt-robots --example cheetah_speed -- --sweep` measures each
 //! setting over 10,000 steps of random full-torque actions (each held for 1-20 steps, new episode
