@@ -293,3 +293,26 @@ fn every_shipped_config_is_valid_and_the_protocols_fix_their_initial_designs() {
     }
     assert!(seen >= 9, "{seen} configs");
 }
+
+/// Learning rates that blow the networks up: the run stops with an error that names the
+/// non-finite update (the pair, the update, the design and the episode), exits non-zero, and
+/// keeps the rows already written; no NaN weights reach an actor.
+#[test]
+fn a_diverging_learner_stops_the_run_with_the_update_named() {
+    let out = tmpdir("nan");
+    let cfg = out.with_extension("toml");
+    let mut text = std::fs::read_to_string(workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
+    text = text.replace("[learner.sac]\n", "[learner.sac]\ncritic-lr = 1e30\npolicy-lr = 1e30\n");
+    assert!(text.contains("critic-lr = 1e30"));
+    std::fs::write(&cfg, text).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{stderr}");
+    assert!(stderr.contains("individual networks' update") && stderr.contains("non-finite"), "{stderr}");
+    assert_eq!(stderr.matches("non-finite").count(), 1, "said once: {stderr}");
+    let (_, rows) = csv(&out.join("episodes.csv"));
+    assert!(!rows.is_empty(), "the episodes before the failure are kept");
+}

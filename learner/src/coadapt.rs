@@ -95,7 +95,8 @@ pub enum CoadaptError {
     Protocol(String),
     #[error("replay: {0}")]
     Replay(#[from] coadapt_core::ReplayError),
-    #[error("training: {0}")]
+    /// A non-finite update (the message names the pair, the update, the design and episode).
+    #[error(transparent)]
     Train(#[from] crate::fear::TrainError),
     #[error("writing the run directory: {0}")]
     Io(#[from] std::io::Error),
