@@ -217,6 +217,9 @@ impl<'a> Optimizer<'a> {
         evaluator: Option<&'a mut dyn RolloutEvaluator>,
         seed: u64,
     ) -> Result<Self, OptimizerError> {
+        if !(cfg.pessimism.is_finite() && cfg.pessimism >= 0.0) {
+            return Err(OptimizerError::Config(format!("optimizer.pessimism: {} is not a finite number >= 0", cfg.pessimism)));
+        }
         if cfg.exploit.needs_rollouts() && evaluator.is_none() {
             return Err(OptimizerError::Config(format!("optimizer.exploit = {} needs simulation rollouts", cfg.exploit.name())));
         }

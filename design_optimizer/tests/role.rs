@@ -113,3 +113,12 @@ fn es_baselines_train_on_the_best_design_seen_over_all_generations() {
         }
     }
 }
+
+#[test]
+fn a_bad_pessimism_is_refused_naming_the_field() {
+    for k in [f32::NAN, -1.0, f32::INFINITY] {
+        let cfg = OptimizerConfig { pessimism: k, ..OptimizerConfig::default() };
+        let e = Optimizer::new(cfg, spec(), None, 1).unwrap_err().to_string();
+        assert!(e.contains("optimizer.pessimism"), "{e}");
+    }
+}
