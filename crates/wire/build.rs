@@ -22,8 +22,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let fds = protox::compile(&files, [&root])?;
     let out = std::path::PathBuf::from(std::env::var("OUT_DIR")?);
-    // The descriptor set feeds gRPC reflection, so standard tools can list the services.
-    std::fs::write(out.join("coadapt_descriptor.bin"), prost::Message::encode_to_vec(&fds))?;
+    // The descriptor set feeds the learner's gRPC reflection, so standard tools can list its
+    // services: only coadapt's own files (dm_env_rpc is served by `coadapt env-serve`, not there).
+    let mut own = fds.clone();
+    own.file.retain(|f| f.package().starts_with("coadapt."));
+    std::fs::write(out.join("coadapt_descriptor.bin"), prost::Message::encode_to_vec(&own))?;
     tonic_prost_build::configure().bytes(".coadapt").compile_fds(fds)?;
     Ok(())
 }

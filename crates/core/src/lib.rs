@@ -7,10 +7,12 @@
 //!   episodes.
 //! - [`replay`]: [`ReplayBuffer`] of flat transitions and [`Batch`], including batches drawn from
 //!   several buffers in fixed proportions (FEAR's 26 population + 230 species samples).
+//! - [`conformance`]: the suite every `Env` implementation runs in its tests.
 //!
 //! Randomness everywhere is [`Rng64`] (PCG-64 MCG): fast, seedable, and the same stream on every
 //! platform, so a seed reproduces a run.
 
+pub mod conformance;
 pub mod env;
 pub mod replay;
 pub mod space;

@@ -9,6 +9,11 @@
 //! - [`WireError`]: names the offending field; it becomes `Status::invalid_argument` at a gRPC
 //!   edge.
 //!
+//! - [`dm_env_rpc`], [`google`]: the generated code of DeepMind's dm_env_rpc v1 (package
+//!   `dm_env_rpc.v1`) and of `google.rpc.Status`, which it carries errors in.
+//! - [`tensor`]: dm_env_rpc tensors and specs to and from f32 vectors, validating shape, type,
+//!   broadcast and finiteness, naming the tensor.
+//!
 //! Dimension checks against the receiver's robot (obs, action and design widths) happen after
 //! decoding, with [`coadapt_transport::Validate`].
 
@@ -22,7 +27,25 @@ pub mod pb {
     tonic::include_proto!("coadapt.v1");
 }
 
-/// The encoded file descriptors of every service, for gRPC reflection.
+/// dm_env_rpc v1, DeepMind's protocol for environments (`proto/dm_env_rpc/v1`).
+#[allow(clippy::all, missing_debug_implementations)]
+pub mod dm_env_rpc {
+    pub mod v1 {
+        tonic::include_proto!("dm_env_rpc.v1");
+    }
+}
+
+/// `google.rpc.Status`, the error inside a dm_env_rpc stream.
+#[allow(clippy::all, missing_debug_implementations)]
+pub mod google {
+    pub mod rpc {
+        tonic::include_proto!("google.rpc");
+    }
+}
+
+pub mod tensor;
+
+/// The encoded file descriptors of every coadapt service, for gRPC reflection.
 pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/coadapt_descriptor.bin"));
 
 /// A message that could not be accepted.

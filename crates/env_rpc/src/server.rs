@@ -1,0 +1,402 @@
+//! A dm_env_rpc server for any coadapt [`Env`]: `coadapt env-serve`.
+//!
+//! Worlds are created by CreateWorld (settings `design` and `seed`, both optional), one agent
+//! joins each, and a world lives as long as the connection that created it (a client that goes
+//! away without DestroyWorld leaks nothing). Every request gets one response in order; a bad
+//! request gets an `error` (google.rpc.Status) and the stream goes on.
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use coadapt_core::{Env, EnvSpec};
+use coadapt_wire::dm_env_rpc::v1::environment_request::Payload as Req;
+use coadapt_wire::dm_env_rpc::v1::environment_response::Payload as Resp;
+use coadapt_wire::dm_env_rpc::v1::environment_server::{Environment, EnvironmentServer};
+use coadapt_wire::dm_env_rpc::v1::{self as pb, EnvironmentRequest, EnvironmentResponse, EnvironmentStateType, Tensor};
+use coadapt_wire::google::rpc::Status;
+use coadapt_wire::tensor::{self, Accept};
+use tokio_stream::{Stream, StreamExt};
+use tonic::{Code, Request, Response, Streaming};
+
+use crate::profile::{self, Profile};
+
+/// Builds one environment per world.
+pub type EnvFactory = Arc<dyn Fn() -> Result<Box<dyn Env>, String> + Send + Sync>;
+
+/// A google.rpc.Status for an error response.
+fn status(code: Code, message: impl Into<String>) -> Status {
+    Status { code: code as i32, message: message.into(), details: vec![] }
+}
+
+type Failure = Status;
+
+struct World {
+    env: Box<dyn Env>,
+    spec: EnvSpec,
+    design: Vec<f32>,
+    /// Seed of the next episode (set by a `seed` setting), else a counter from the last one.
+    next_seed: u64,
+    /// Changes at every ResetWorld: an agent whose episode began before sees INTERRUPTED.
+    epoch: u64,
+    joined: bool,
+    /// The connection that created the world (worlds die with it).
+    owner: u64,
+}
+
+#[derive(Default)]
+struct Worlds {
+    map: HashMap<String, Arc<Mutex<World>>>,
+    next: u64,
+}
+
+/// What one connection holds.
+struct Session {
+    id: u64,
+    joined: Option<(String, Arc<Mutex<World>>)>,
+    /// The world epoch the running episode began in; `None` when not running.
+    running: Option<u64>,
+    obs: Vec<f32>,
+    reward: f32,
+    discount: f32,
+    scratch: Vec<f32>,
+}
+
+/// The dm_env_rpc service over an environment factory.
+#[derive(Clone)]
+pub struct EnvService {
+    factory: EnvFactory,
+    worlds: Arc<Mutex<Worlds>>,
+    sessions: Arc<AtomicU64>,
+}
+
+impl std::fmt::Debug for EnvService {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EnvService").finish_non_exhaustive()
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A panic while holding a world's lock leaves a world that can still be destroyed.
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+fn profile_of(spec: &EnvSpec) -> Profile {
+    Profile { state_dim: spec.state_dim, action: spec.action.clone(), design: spec.design.clone() }
+}
+
+impl EnvService {
+    pub fn new(factory: EnvFactory) -> Self {
+        Self { factory, worlds: Arc::default(), sessions: Arc::new(AtomicU64::new(0)) }
+    }
+
+    /// Worlds currently alive (for tests and logs).
+    pub fn world_count(&self) -> usize {
+        lock(&self.worlds).map.len()
+    }
+
+    /// Applies world settings (`design`, `seed`) to `world`, refusing any other.
+    fn apply_settings(world: &mut World, settings: &HashMap<String, Tensor>) -> Result<(), Failure> {
+        let mut design = None;
+        let mut seed = None;
+        for (name, t) in settings {
+            match name.as_str() {
+                profile::SETTING_DESIGN => {
+                    let mut d = Vec::new();
+                    tensor::read_f32(name, t, &[world.spec.design_dim()], Accept::AnyFloat, &mut d)
+                        .map_err(|e| status(Code::InvalidArgument, e.to_string()))?;
+                    world.spec.design.check("design", &d).map_err(|e| status(Code::InvalidArgument, format!("setting `design`: {e}")))?;
+                    design = Some(d);
+                }
+                profile::SETTING_SEED => {
+                    seed = Some(tensor::read_u64(name, t).map_err(|e| status(Code::InvalidArgument, e.to_string()))?);
+                }
+                other => {
+                    return Err(status(
+                        Code::InvalidArgument,
+                        format!("unknown world setting `{other}` (the coadapt profile has `design` and `seed`)"),
+                    ));
+                }
+            }
+        }
+        if let Some(d) = design {
+            world.design = d;
+        }
+        if let Some(s) = seed {
+            world.next_seed = s;
+        }
+        Ok(())
+    }
+
+    fn create_world(&self, session: &Session, r: pb::CreateWorldRequest) -> Result<Resp, Failure> {
+        let env = (self.factory)().map_err(|e| status(Code::Internal, format!("building the environment: {e}")))?;
+        let spec = env.spec().clone();
+        let mut world = World { design: spec.default_design.clone(), env, spec, next_seed: 0, epoch: 0, joined: false, owner: session.id };
+        Self::apply_settings(&mut world, &r.settings)?;
+        let mut worlds = lock(&self.worlds);
+        worlds.next += 1;
+        let name = format!("world-{}", worlds.next);
+        worlds.map.insert(name.clone(), Arc::new(Mutex::new(world)));
+        Ok(Resp::CreateWorld(pb::CreateWorldResponse { world_name: name }))
+    }
+
+    fn find(&self, name: &str) -> Result<Arc<Mutex<World>>, Failure> {
+        lock(&self.worlds).map.get(name).cloned().ok_or_else(|| status(Code::NotFound, format!("no world named `{name}`")))
+    }
+
+    fn join_world(&self, session: &mut Session, r: pb::JoinWorldRequest) -> Result<Resp, Failure> {
+        if let Some((name, _)) = &session.joined {
+            return Err(status(Code::FailedPrecondition, format!("already joined to world `{name}`: leave it first")));
+        }
+        let world = self.find(&r.world_name)?;
+        if let Some(k) = r.settings.keys().next() {
+            return Err(status(Code::InvalidArgument, format!("unknown join setting `{k}` (joining takes no settings)")));
+        }
+        let specs = {
+            let mut w = lock(&world);
+            if w.joined {
+                return Err(status(Code::FailedPrecondition, format!("world `{}` already has its agent", r.world_name)));
+            }
+            w.joined = true;
+            profile_of(&w.spec).specs()
+        };
+        session.joined = Some((r.world_name, world));
+        session.running = None;
+        Ok(Resp::JoinWorld(pb::JoinWorldResponse { specs: Some(specs) }))
+    }
+
+    fn leave(session: &mut Session) {
+        if let Some((_, world)) = session.joined.take() {
+            lock(&world).joined = false;
+        }
+        session.running = None;
+    }
+
+    fn reset(session: &mut Session, r: pb::ResetRequest) -> Result<Resp, Failure> {
+        let Some((_, world)) = &session.joined else {
+            return Err(status(Code::FailedPrecondition, "reset before joining a world"));
+        };
+        if let Some(k) = r.settings.keys().next() {
+            return Err(status(Code::InvalidArgument, format!("unknown reset setting `{k}` (reset takes no settings)")));
+        }
+        let specs = profile_of(&lock(world).spec).specs();
+        session.running = None;
+        Ok(Resp::Reset(pb::ResetResponse { specs: Some(specs) }))
+    }
+
+    fn reset_world(&self, session: &mut Session, r: pb::ResetWorldRequest) -> Result<Resp, Failure> {
+        let world = self.find(&r.world_name)?;
+        {
+            let mut w = lock(&world);
+            Self::apply_settings(&mut w, &r.settings)?;
+            w.epoch += 1;
+        }
+        // The issuer, if joined to it, starts the next episode at once (no INTERRUPTED step).
+        if session.joined.as_ref().is_some_and(|(n, _)| *n == r.world_name) {
+            session.running = None;
+        }
+        Ok(Resp::ResetWorld(pb::ResetWorldResponse {}))
+    }
+
+    fn destroy_world(&self, session: &Session, r: pb::DestroyWorldRequest) -> Result<Resp, Failure> {
+        if session.joined.as_ref().is_some_and(|(n, _)| *n == r.world_name) {
+            return Err(status(Code::FailedPrecondition, format!("leave world `{}` before destroying it", r.world_name)));
+        }
+        let mut worlds = lock(&self.worlds);
+        let Some(w) = worlds.map.get(&r.world_name) else {
+            return Err(status(Code::NotFound, format!("no world named `{}`", r.world_name)));
+        };
+        if lock(w).joined {
+            return Err(status(Code::FailedPrecondition, format!("world `{}` has an agent joined", r.world_name)));
+        }
+        worlds.map.remove(&r.world_name);
+        Ok(Resp::DestroyWorld(pb::DestroyWorldResponse {}))
+    }
+
+    fn step(session: &mut Session, r: pb::StepRequest) -> Result<Resp, Failure> {
+        let Some((_, world)) = &session.joined else {
+            return Err(status(Code::FailedPrecondition, "step before joining a world"));
+        };
+        if let Some(uid) = r.requested_observations.iter().find(|u| !profile::ALL_OBSERVATIONS.contains(u)) {
+            return Err(status(Code::InvalidArgument, format!("requested observation uid {uid} does not exist (uids 1-4)")));
+        }
+        let mut w = lock(world);
+        let state = match session.running {
+            Some(epoch) if epoch != w.epoch => {
+                // Someone reset the world under this agent: tell it once, start afresh next.
+                session.running = None;
+                EnvironmentStateType::Interrupted
+            }
+            Some(_) => {
+                if let Some(uid) = r.actions.keys().find(|&&u| u != profile::ACTION) {
+                    return Err(status(Code::InvalidArgument, format!("action uid {uid} does not exist (uid 1 is `action`)")));
+                }
+                let t = r
+                    .actions
+                    .get(&profile::ACTION)
+                    .ok_or_else(|| status(Code::InvalidArgument, "action `action` (uid 1) is required on every running step"))?;
+                tensor::read_f32("action", t, &[w.spec.act_dim()], Accept::FloatOnly, &mut session.scratch)
+                    .map_err(|e| status(Code::InvalidArgument, e.to_string()))?;
+                w.spec.action.check("action", &session.scratch).map_err(|e| status(Code::InvalidArgument, e.to_string()))?;
+                let state_dim = w.spec.state_dim;
+                let step = w.env.step(&session.scratch).map_err(|e| status(Code::Internal, format!("environment step: {e}")))?;
+                session.obs.clear();
+                session.obs.extend_from_slice(&step.observation[..state_dim]);
+                session.reward = step.reward;
+                session.discount = if step.terminated { 0.0 } else { 1.0 };
+                if step.terminated || step.truncated {
+                    session.running = None;
+                    EnvironmentStateType::Terminated
+                } else {
+                    EnvironmentStateType::Running
+                }
+            }
+            None => {
+                // The first step of an episode: actions are ignored.
+                let w = &mut *w;
+                let seed = w.next_seed;
+                w.next_seed = w.next_seed.wrapping_add(1);
+                let state_dim = w.spec.state_dim;
+                let first = w.env.reset(seed, &w.design).map_err(|e| status(Code::Internal, format!("environment reset: {e}")))?;
+                session.obs.clear();
+                session.obs.extend_from_slice(&first[..state_dim]);
+                session.reward = 0.0;
+                session.discount = 1.0;
+                session.running = Some(w.epoch);
+                EnvironmentStateType::Running
+            }
+        };
+        let mut observations = HashMap::new();
+        for &uid in &r.requested_observations {
+            let t = match uid {
+                profile::OBSERVATION => tensor::floats(&session.obs, &[session.obs.len()]),
+                profile::REWARD => tensor::scalar(session.reward),
+                profile::DISCOUNT => tensor::scalar(session.discount),
+                _ => tensor::floats(&w.design, &[w.design.len()]),
+            };
+            observations.insert(uid, t);
+        }
+        Ok(Resp::Step(pb::StepResponse { state: state as i32, observations }))
+    }
+
+    fn handle(&self, session: &mut Session, req: EnvironmentRequest) -> Resp {
+        let result = match req.payload {
+            Some(Req::CreateWorld(r)) => self.create_world(session, r),
+            Some(Req::JoinWorld(r)) => self.join_world(session, r),
+            Some(Req::Step(r)) => Self::step(session, r),
+            Some(Req::Reset(r)) => Self::reset(session, r),
+            Some(Req::ResetWorld(r)) => self.reset_world(session, r),
+            Some(Req::LeaveWorld(_)) => {
+                Self::leave(session);
+                Ok(Resp::LeaveWorld(pb::LeaveWorldResponse {}))
+            }
+            Some(Req::DestroyWorld(r)) => self.destroy_world(session, r),
+            Some(Req::Extension(a)) => Err(status(Code::Unimplemented, format!("no extensions are supported (got `{}`)", a.type_url))),
+            None => Err(status(Code::InvalidArgument, "empty request")),
+        };
+        result.unwrap_or_else(Resp::Error)
+    }
+
+    /// The connection is gone: leave its world and destroy the worlds it created.
+    fn end_session(&self, session: &mut Session) {
+        Self::leave(session);
+        lock(&self.worlds).map.retain(|_, w| lock(w).owner != session.id);
+    }
+}
+
+type ResponseStream = Pin<Box<dyn Stream<Item = Result<EnvironmentResponse, tonic::Status>> + Send>>;
+
+#[tonic::async_trait]
+impl Environment for EnvService {
+    type ProcessStream = ResponseStream;
+
+    async fn process(&self, request: Request<Streaming<EnvironmentRequest>>) -> Result<Response<Self::ProcessStream>, tonic::Status> {
+        let mut inbound = request.into_inner();
+        let (tx, rx) = tokio::sync::mpsc::channel(16);
+        let service = self.clone();
+        let id = self.sessions.fetch_add(1, Ordering::Relaxed) + 1;
+        tokio::spawn(async move {
+            let mut session = Session { id, joined: None, running: None, obs: Vec::new(), reward: 0.0, discount: 1.0, scratch: Vec::new() };
+            while let Some(msg) = inbound.next().await {
+                let Ok(req) = msg else { break };
+                // Environment steps are short (tens of microseconds for our robots): inline.
+                let payload = service.handle(&mut session, req);
+                if tx.send(Ok(EnvironmentResponse { payload: Some(payload) })).await.is_err() {
+                    break;
+                }
+            }
+            service.end_session(&mut session);
+        });
+        Ok(Response::new(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx))))
+    }
+}
+
+/// Serves `factory` over dm_env_rpc on `listener` until `shutdown` resolves.
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    factory: EnvFactory,
+    shutdown: impl std::future::Future<Output = ()> + Send,
+) -> Result<(), tonic::transport::Error> {
+    serve_service(listener, EnvService::new(factory), shutdown).await
+}
+
+async fn serve_service(
+    listener: tokio::net::TcpListener,
+    service: EnvService,
+    shutdown: impl std::future::Future<Output = ()> + Send,
+) -> Result<(), tonic::transport::Error> {
+    tonic::transport::Server::builder()
+        .http2_keepalive_interval(Some(Duration::from_secs(10)))
+        .http2_keepalive_timeout(Some(Duration::from_secs(20)))
+        .tcp_nodelay(true)
+        .add_service(EnvironmentServer::new(service))
+        .serve_with_incoming_shutdown(tokio_stream::wrappers::TcpListenerStream::new(listener), shutdown)
+        .await
+}
+
+/// A server running on its own runtime (tests, benchmarks): dropping it stops it at once,
+/// cutting open streams as a killed process would.
+#[derive(Debug)]
+pub struct BackgroundServer {
+    pub addr: SocketAddr,
+    service: EnvService,
+    rt: Option<tokio::runtime::Runtime>,
+}
+
+impl BackgroundServer {
+    /// Binds `addr` (port 0 picks one) and serves `factory`.
+    pub fn start(addr: &str, factory: EnvFactory) -> std::io::Result<Self> {
+        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).thread_name("env-serve").enable_all().build()?;
+        let listener = rt.block_on(tokio::net::TcpListener::bind(addr))?;
+        let addr = listener.local_addr()?;
+        let service = EnvService::new(factory);
+        let s = service.clone();
+        rt.spawn(async move {
+            if let Err(e) = serve_service(listener, s, std::future::pending()).await {
+                eprintln!("env-serve: {e}");
+            }
+        });
+        Ok(Self { addr, service, rt: Some(rt) })
+    }
+
+    /// Worlds alive on the server.
+    pub fn world_count(&self) -> usize {
+        self.service.world_count()
+    }
+
+    /// The URL a coadapt client takes: `dm-env-rpc://HOST:PORT`.
+    pub fn url(&self) -> String {
+        format!("dm-env-rpc://{}", self.addr)
+    }
+}
+
+impl Drop for BackgroundServer {
+    fn drop(&mut self) {
+        if let Some(rt) = self.rt.take() {
+            rt.shutdown_timeout(Duration::from_millis(100));
+        }
+    }
+}
