@@ -22,17 +22,25 @@ pub enum ActorRoleError {
 pub struct ActorSummary {
     pub episodes: u64,
     pub steps: u64,
+    /// Episodes that failed in the environment and were dropped (and run again).
+    pub failed_episodes: u64,
 }
 
 /// Runs assignments until the queue closes (`Ok`) or `shutdown` is set. Training episodes send
 /// every transition in chunks of `chunk_len`; evaluation episodes send an empty chunk every
 /// `chunk_len` steps (so the learner knows the actor is alive) and their end. Chunks carry
 /// `actor_id`.
+///
+/// An episode that fails in the environment (a remote robot gone, a non-finite observation) is
+/// dropped and run again from its first step, up to `env_retries` times in a row; its first
+/// chunk is marked `first` again, which tells the learner to forget what the failed attempt
+/// sent, so only whole episodes reach a replay buffer.
 pub fn run<E: Env>(
     actor: &mut Actor<E>,
     actor_id: u64,
     links: &mut ActorLinks,
     chunk_len: usize,
+    env_retries: u32,
     shutdown: &AtomicBool,
 ) -> Result<ActorSummary, ActorRoleError> {
     let chunk_len = chunk_len.max(1);
@@ -44,37 +52,52 @@ pub fn run<E: Env>(
             actor.set_weights(weights.version, &weights.policy)?;
         }
         let train = a.mode == EpisodeMode::Train;
-        actor.reseed_noise(a.seed);
-        chunk.clear();
-        chunk.actor = actor_id;
-        chunk.assignment = a.id;
-        chunk.design_index = a.design_index;
-        chunk.weights_version = actor.weights_version();
-        chunk.first = train;
-        let mut sent: Result<(), TransportError> = Ok(());
-        let mut steps = 0usize;
-        let stats = actor.run_episode(a.seed, &a.design, train, &mut |t| {
-            steps += 1;
-            if train {
-                chunk.obs.extend_from_slice(t.obs);
-                chunk.actions.extend_from_slice(t.action);
-                chunk.rewards.push(t.reward);
-                chunk.next_obs.extend_from_slice(t.next_obs);
-                chunk.terminated.push(t.terminated);
-            }
-            if steps.is_multiple_of(chunk_len) {
-                let full = std::mem::take(&mut chunk);
-                chunk.actor = full.actor;
-                chunk.assignment = full.assignment;
-                chunk.design_index = full.design_index;
-                chunk.weights_version = full.weights_version;
-                if let Err(e) = links.experience.send(full) {
-                    sent = Err(e);
-                    return ControlFlow::Break(());
+        let mut failures = 0u32;
+        let (stats, sent) = loop {
+            actor.reseed_noise(a.seed);
+            chunk.clear();
+            chunk.actor = actor_id;
+            chunk.assignment = a.id;
+            chunk.design_index = a.design_index;
+            chunk.weights_version = actor.weights_version();
+            chunk.first = train;
+            let mut sent: Result<(), TransportError> = Ok(());
+            let mut steps = 0usize;
+            let result = actor.run_episode(a.seed, &a.design, train, &mut |t| {
+                steps += 1;
+                if train {
+                    chunk.obs.extend_from_slice(t.obs);
+                    chunk.actions.extend_from_slice(t.action);
+                    chunk.rewards.push(t.reward);
+                    chunk.next_obs.extend_from_slice(t.next_obs);
+                    chunk.terminated.push(t.terminated);
                 }
+                if steps.is_multiple_of(chunk_len) {
+                    let full = std::mem::take(&mut chunk);
+                    chunk.actor = full.actor;
+                    chunk.assignment = full.assignment;
+                    chunk.design_index = full.design_index;
+                    chunk.weights_version = full.weights_version;
+                    if let Err(e) = links.experience.send(full) {
+                        sent = Err(e);
+                        return ControlFlow::Break(());
+                    }
+                }
+                ControlFlow::Continue(())
+            });
+            match result {
+                Ok(stats) => break (stats, sent),
+                Err(ActorError::Env(e)) if failures < env_retries && !shutdown.load(std::sync::atomic::Ordering::Relaxed) => {
+                    failures += 1;
+                    summary.failed_episodes += 1;
+                    eprintln!(
+                        "actor {actor_id}: episode of assignment {} dropped after {steps} steps ({failures} in a row), running it again: {e}",
+                        a.id
+                    );
+                }
+                Err(e) => return Err(e.into()),
             }
-            ControlFlow::Continue(())
-        })?;
+        };
         chunk.end = Some(EpisodeEnd { episode_return: stats.episode_return, length: stats.length });
         match sent.and_then(|()| links.experience.send(std::mem::take(&mut chunk))) {
             Ok(()) => {}

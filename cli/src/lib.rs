@@ -13,10 +13,12 @@
 //! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure
 //!   ([`bench_transport`]: the fleet's transports between processes).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
+//! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
 pub mod bench_transport;
+pub mod env_serve;
 pub mod fleet;
 pub mod launch;
 pub mod plot;
@@ -46,6 +48,7 @@ pub enum Command {
     Plot(plot::PlotArgs),
     Train(train::TrainArgs),
     Render(render::RenderArgs),
+    EnvServe(env_serve::EnvServeArgs),
     /// Run benchmarks; each prints one JSON line per figure.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -61,6 +64,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Plot(args) => plot::run(args),
         Command::Train(args) => train::run(args),
         Command::Render(args) => render::run(args),
+        Command::EnvServe(args) => env_serve::run(args),
         Command::Bench(cmd) => bench::run(cmd),
     }
 }

@@ -31,7 +31,8 @@ pub const DEFAULT_CONFIG: &str = include_str!("../../configs/half-cheetah-refere
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct RunConfig {
-    /// The robot (pendulum, half-cheetah, walker, hopper, daisy).
+    /// The robot (pendulum, half-cheetah, walker, hopper, daisy), or a remote one served over
+    /// dm_env_rpc: `dm-env-rpc://HOST:PORT` (dimensions and boxes come from its specs).
     pub env: String,
     /// Seed of every random stream: the same seed and config give the same run.
     pub seed: u64,
@@ -52,6 +53,8 @@ pub struct RunConfig {
     pub fleet: FleetConfig,
     pub learner: FearLearnerConfig,
     pub optimizer: OptimizerConfig,
+    /// Deadlines and retries of a remote environment.
+    pub remote: crate::roles::RemoteEnvConfig,
 }
 
 impl Default for RunConfig {
@@ -69,6 +72,7 @@ impl Default for RunConfig {
             fleet: FleetConfig::default(),
             learner: FearLearnerConfig::default(),
             optimizer: OptimizerConfig::default(),
+            remote: crate::roles::RemoteEnvConfig::default(),
         }
     }
 }
@@ -190,6 +194,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
         spec.design.check_finite("design", d).map_err(|e| anyhow::anyhow!("schedule.initial-designs[{i}]: {e}"))?;
     }
     cfg.flow.lease().map_err(anyhow::Error::msg)?;
+    cfg.remote.options()?;
     if cfg.fleet.transport == TransportKind::Shm && cfg.actors > cfg.fleet.max_actors {
         bail!("actors: {} is more than fleet.max-actors ({}); raise fleet.max-actors", cfg.actors, cfg.fleet.max_actors);
     }
@@ -318,6 +323,7 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         "learner_sending_seconds": t.sending,
         "learner_training_seconds": t.training,
         "episodes_reissued": t.reissued,
+        "episodes_restarted": t.restarted,
         "max_policy_lag": t.max_policy_lag,
     });
     print_stdout_line(&summary.to_string());

@@ -32,7 +32,9 @@ pub struct TrainArgs {
     /// [ddpg] tables; the resolved config.toml of a run directory is a valid example.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Environment to train on (known: pendulum).
+    /// Environment to train on: pendulum, half-cheetah, walker, hopper, daisy, or a remote one
+    /// served over dm_env_rpc, dm-env-rpc://HOST:PORT (e.g. `coadapt-gym-serve --env
+    /// Pendulum-v1` or `coadapt env-serve`).
     #[arg(long)]
     pub env: Option<String>,
     /// Learning algorithm.
@@ -157,7 +159,7 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let cfg = resolve(&args)?;
-    let mut env = coadapt_robots::make(&cfg.env)?;
+    let mut env = crate::roles::make_env(&cfg.env)?;
     // Refuse a bad design before anything is written.
     if let Some(d) = &cfg.design {
         env.spec().design.check("design", d).map_err(coadapt_core::EnvError::Design)?;
@@ -166,7 +168,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         Some(d) => d.clone(),
         None => {
             let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
-            PathBuf::from("runs").join(format!("{}-{}-seed{}-{t}", cfg.env, cfg.algo, cfg.seed))
+            // A remote env's name is an address: keep only what is safe in a file name.
+            let env: String = cfg.env.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '.' { c } else { '-' }).collect();
+            PathBuf::from("runs").join(format!("{env}-{}-seed{}-{t}", cfg.algo, cfg.seed))
         }
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating run directory {}", dir.display()))?;

@@ -270,6 +270,18 @@ impl Learner<'_> {
             let p = &mut self.pending[i];
             p.last_heard = Instant::now();
             let end = chunk.end;
+            if chunk.first && !p.chunks.is_empty() {
+                // The actor ran the episode again from its start (the first attempt failed in
+                // its environment): what that attempt sent is forgotten.
+                eprintln!(
+                    "learner: actor {} restarted assignment {}: dropping {} chunk(s) of its failed attempt",
+                    chunk.actor,
+                    p.id,
+                    p.chunks.len()
+                );
+                p.chunks.clear();
+                self.time.restarted += 1;
+            }
             if !chunk.is_empty() || chunk.end.is_some() {
                 p.chunks.push(chunk);
             }

@@ -112,6 +112,9 @@ pub struct LearnerTime {
     pub training: f64,
     /// Episodes issued again after their actor fell silent.
     pub reissued: u64,
+    /// Episodes an actor ran again from the start after its environment failed (the failed
+    /// attempt's experience was dropped).
+    pub restarted: u64,
     /// Largest policy lag seen (weights versions between acting and the newest).
     pub max_policy_lag: u64,
 }

@@ -44,6 +44,10 @@ pub struct TrainConfig {
     /// Start from the networks in this checkpoint (a `checkpoint.safetensors` of an earlier run
     /// with the same algorithm and shapes) instead of a fresh initialisation.
     pub init_weights: Option<PathBuf>,
+    /// Episodes in a row that may fail in the environment (a remote robot that went away, a
+    /// non-finite observation) before training stops; a failed episode's transitions are
+    /// taken back out of the replay buffer and the episode is run again.
+    pub env_retries: u32,
     pub sac: SacConfig,
     pub ddpg: DdpgConfig,
 }
@@ -63,6 +67,7 @@ impl Default for TrainConfig {
             target_return: None,
             stop_at_target: false,
             init_weights: None,
+            env_retries: 5,
             sac: SacConfig::default(),
             ddpg: DdpgConfig::default(),
         }
@@ -198,17 +203,28 @@ pub fn run(
     let mut returns: Vec<f32> = Vec::new();
     let (mut step, mut updates, mut episode) = (0u64, 0u64, 0u64);
     let mut reached = None;
+    let mut failures = 0u32;
     while step < cfg.steps && !shutdown.load(Ordering::Relaxed) {
-        obs.copy_from_slice(env.reset(cfg.seed.wrapping_mul(1_000_003).wrapping_add(episode), &design)?);
-        agent.begin_episode();
         let (mut ret, mut len) = (0.0f32, 0u64);
-        loop {
+        let mut failed = None;
+        match env.reset(cfg.seed.wrapping_mul(1_000_003).wrapping_add(episode), &design) {
+            Ok(first) => obs.copy_from_slice(first),
+            Err(e) => failed = Some(e),
+        }
+        agent.begin_episode();
+        while failed.is_none() {
             if step < cfg.learning_starts {
                 spec.action.sample(&mut rng, &mut action);
             } else {
                 agent.act(&obs, true, &mut action);
             }
-            let s = env.step(&action)?;
+            let s = match env.step(&action) {
+                Ok(s) => s,
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            };
             replay.push(&Transition { obs: &obs, action: &action, reward: s.reward, next_obs: s.observation, terminated: s.terminated })?;
             obs.copy_from_slice(s.observation);
             let done = s.terminated || s.truncated;
@@ -226,6 +242,18 @@ pub fn run(
                 break;
             }
         }
+        if let Some(e) = failed {
+            // Never half an episode in the replay buffer: take it back and run it again.
+            replay.pop_newest(len as usize);
+            step -= len;
+            failures += 1;
+            eprintln!("episode {} failed after {len} steps and was dropped ({failures} in a row): {e}", episode + 1);
+            if failures > cfg.env_retries {
+                return Err(TrainError::Env(e));
+            }
+            continue;
+        }
+        failures = 0;
         episode += 1;
         returns.push(ret);
         let last = &returns[returns.len().saturating_sub(10)..];

@@ -125,6 +125,34 @@ impl ReplayBuffer {
         Ok(())
     }
 
+    /// Removes the `k` newest transitions (an episode that failed half-way must leave nothing
+    /// behind). A buffer that had wrapped keeps its other transitions, moved into the freed
+    /// slots: uniform sampling does not care about order, only eviction order changes a little.
+    pub fn pop_newest(&mut self, k: usize) {
+        let (cap, k) = (self.capacity, k.min(self.len()));
+        let mut slots: Vec<usize> = (0..k).map(|i| (self.next + cap * 2 - 1 - i) % cap).collect();
+        // Highest slot first: the row moved into a freed slot is never one still to remove.
+        slots.sort_unstable_by(|a, b| b.cmp(a));
+        let (o, a) = (self.obs_dim, self.act_dim);
+        for s in slots {
+            let last = self.len() - 1;
+            if s != last {
+                self.obs.copy_within(last * o..(last + 1) * o, s * o);
+                self.act.copy_within(last * a..(last + 1) * a, s * a);
+                self.rew[s] = self.rew[last];
+                self.next_obs.copy_within(last * o..(last + 1) * o, s * o);
+                self.done[s] = self.done[last];
+            }
+            self.obs.truncate(last * o);
+            self.act.truncate(last * a);
+            self.rew.truncate(last);
+            self.next_obs.truncate(last * o);
+            self.done.truncate(last);
+        }
+        // Not full any more: the next push appends.
+        self.next = self.len() % cap;
+    }
+
     /// Transition `i` (0 is the oldest still stored when not yet wrapped).
     pub fn get(&self, i: usize) -> Transition<'_> {
         let (o, a) = (self.obs_dim, self.act_dim);

@@ -62,3 +62,41 @@ fn malformed_transitions_are_rejected_and_nothing_is_stored() {
     buf.clear();
     assert!(buf.is_empty());
 }
+
+fn rewards(b: &ReplayBuffer) -> Vec<f32> {
+    let mut r: Vec<f32> = (0..b.len()).map(|i| b.get(i).reward).collect();
+    r.sort_by(f32::total_cmp);
+    r
+}
+
+fn push_reward(b: &mut ReplayBuffer, r: f32) {
+    b.push(&Transition { obs: &[r, -r], action: &[r], reward: r, next_obs: &[r + 0.5, 0.0], terminated: false }).unwrap();
+}
+
+#[test]
+fn pop_newest_removes_exactly_the_newest_rows_before_and_after_wrapping() {
+    // Not wrapped: rows 0..6, drop the 3 newest.
+    let mut b = ReplayBuffer::new(2, 1, 10);
+    (0..6).for_each(|i| push_reward(&mut b, i as f32));
+    b.pop_newest(3);
+    assert_eq!(rewards(&b), [0.0, 1.0, 2.0]);
+    push_reward(&mut b, 9.0);
+    assert_eq!(rewards(&b), [0.0, 1.0, 2.0, 9.0], "the next push appends");
+    // Wrapped: capacity 5, rows 0..8 leave 3..8 with 5, 6, 7 newest; drop 3 (crosses the seam).
+    let mut b = ReplayBuffer::new(2, 1, 5);
+    (0..8).for_each(|i| push_reward(&mut b, i as f32));
+    b.pop_newest(3);
+    assert_eq!(rewards(&b), [3.0, 4.0]);
+    // Every field of each kept row moved together.
+    for i in 0..b.len() {
+        let t = b.get(i);
+        assert_eq!((t.obs, t.action, t.next_obs[0]), (&[t.reward, -t.reward][..], &[t.reward][..], t.reward + 0.5));
+    }
+    (10..14).for_each(|i| push_reward(&mut b, i as f32));
+    assert_eq!(b.len(), 5);
+    let r = rewards(&b);
+    assert_eq!(&r[1..], [10.0, 11.0, 12.0, 13.0], "full again: one of the two old rows is evicted, no new one");
+    assert!(r[0] == 3.0 || r[0] == 4.0, "{r:?}");
+    b.pop_newest(100);
+    assert!(b.is_empty());
+}

@@ -1,0 +1,55 @@
+//! `coadapt env-serve`: serves a built-in robot over dm_env_rpc v1, so any dm_env_rpc client
+//! (DeepMind's Python `Connection` and `DmEnvAdaptor`, another coadapt fleet's actors) drives it.
+
+use anyhow::Context;
+use clap::Args;
+
+/// Serve a built-in robot over dm_env_rpc v1 (gRPC), following the coadapt profile
+/// (proto/README.md): action `action` in the robot's action box; observations `observation`
+/// (the state), `reward`, `discount` (0 only at a true end), `design`; world settings `design`
+/// and `seed`. Each client connection creates its own worlds; they end with it.
+#[derive(Debug, Args)]
+pub struct EnvServeArgs {
+    /// The robot: pendulum, half-cheetah, walker, hopper, daisy.
+    #[arg(long)]
+    pub env: String,
+    /// Address to listen on (port 0 picks a free port; the address is printed on stdout).
+    #[arg(long, default_value = "127.0.0.1:0")]
+    pub listen: String,
+}
+
+/// Serves until Ctrl-C or SIGTERM.
+pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
+    let name = args.env.clone();
+    // Fail now, not at the first CreateWorld, on an unknown robot.
+    coadapt_robots::make(&name)?;
+    let factory: coadapt_env_rpc::EnvFactory = std::sync::Arc::new(move || coadapt_robots::make(&name).map_err(|e| e.to_string()));
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the runtime")?;
+    rt.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(&args.listen).await.with_context(|| format!("listening on {}", args.listen))?;
+        let addr = listener.local_addr()?;
+        eprintln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);
+        crate::progress::print_stdout_line(&format!("dm-env-rpc://{addr}"));
+        let stop = async {
+            let ctrl_c = tokio::signal::ctrl_c();
+            #[cfg(unix)]
+            {
+                let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).ok();
+                let term = async {
+                    match term.as_mut() {
+                        Some(t) => {
+                            t.recv().await;
+                        }
+                        None => std::future::pending().await,
+                    }
+                };
+                tokio::select! { _ = ctrl_c => {}, _ = term => {} }
+            }
+            #[cfg(not(unix))]
+            let _ = ctrl_c.await;
+            eprintln!("env-serve: stopping");
+        };
+        coadapt_env_rpc::server::serve(listener, factory, stop).await.context("serving dm_env_rpc")
+    })?;
+    Ok(())
+}
