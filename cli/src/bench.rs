@@ -23,6 +23,9 @@ pub enum BenchCommand {
     /// Transports between processes: weight broadcast latency to 1, 4 and 16 actor processes,
     /// experience throughput, over shared memory and gRPC.
     Transport(crate::bench_transport::TransportArgs),
+    /// Environments over dm_env_rpc: steps/s and step latency (median, p99) of our robots
+    /// served on loopback against the same in process, and of any server given by --url.
+    Env(crate::bench_env::EnvArgs),
 }
 
 #[derive(Debug, Args)]
@@ -71,6 +74,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Sim(a) => sim(&a),
         BenchCommand::Pso(a) => pso(&a),
         BenchCommand::Transport(a) => crate::bench_transport::run(&a),
+        BenchCommand::Env(a) => crate::bench_env::run(&a),
     }
 }
 

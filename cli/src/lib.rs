@@ -11,12 +11,14 @@
 //! - [`plot`]: `coadapt plot`, the run directory's SVG plots (also drawn at the end of a run).
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
 //! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure
-//!   ([`bench_transport`]: the fleet's transports between processes).
+//!   ([`bench_transport`]: the fleet's transports between processes; [`bench_env`]:
+//!   environments over dm_env_rpc).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
+pub mod bench_env;
 pub mod bench_transport;
 pub mod env_serve;
 pub mod fleet;

@@ -325,6 +325,9 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         "episodes_reissued": t.reissued,
         "episodes_restarted": t.restarted,
         "max_policy_lag": t.max_policy_lag,
+        // Every transition in the replay, and every episode start: only whole episodes get in.
+        "replay_transitions": outcome.learner.population_transitions(),
+        "start_states": outcome.learner.start_states(),
     });
     print_stdout_line(&summary.to_string());
     Ok(())
