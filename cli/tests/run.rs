@@ -270,6 +270,16 @@ fn every_shipped_config_is_valid_and_the_protocols_fix_their_initial_designs() {
         }
         let name = path.file_stem().unwrap().to_string_lossy().to_string();
         let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        if coadapt_env_rpc::is_remote(&c.env) {
+            // A robot served over dm_env_rpc: the same protocol as the built-in robot it mirrors.
+            let built_in = name.strip_prefix("mujoco-").unwrap_or_else(|| panic!("{name}: which robot does it mirror?"));
+            let mut same: RunConfig =
+                toml::from_str(&std::fs::read_to_string(workspace_file(&format!("configs/{built_in}.toml"))).unwrap()).unwrap();
+            same.env = c.env.clone();
+            assert_eq!(c, same, "{name}: the protocol of configs/{built_in}.toml");
+            seen += 1;
+            continue;
+        }
         let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
         let fixed = coadapt_robots::reference_initial_designs(&c.env).unwrap();
         if name.ends_with("-reference") || name.ends_with("-reduced") {

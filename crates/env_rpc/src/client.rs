@@ -79,17 +79,22 @@ struct Conn {
 
 /// Sends `req` on `conn` and waits for its response (or an error) within `timeout`.
 async fn call(conn: &mut Conn, url: &str, request: &'static str, req: Req, timeout: Duration) -> Result<Resp, RemoteError> {
+    let sent = tokio::time::timeout(timeout, conn.tx.send(EnvironmentRequest { payload: Some(req) }))
+        .await
+        .map_err(|_| RemoteError::Deadline { url: url.to_string(), request, timeout })?;
+    sent.map_err(|_| RemoteError::Broken { url: url.to_string(), request, what: "the request stream is closed".into() })?;
+    receive(conn, url, request, timeout).await
+}
+
+/// Waits for the response to a request already sent.
+async fn receive(conn: &mut Conn, url: &str, request: &'static str, timeout: Duration) -> Result<Resp, RemoteError> {
     let broken = |what: String| RemoteError::Broken { url: url.to_string(), request, what };
-    let exchange = async {
-        conn.tx.send(EnvironmentRequest { payload: Some(req) }).await.map_err(|_| broken("the request stream is closed".into()))?;
-        match conn.rx.message().await {
-            Ok(Some(r)) => Ok(r),
-            Ok(None) => Err(broken("the server closed the stream".into())),
-            Err(s) => Err(broken(format!("{} ({:?})", s.message(), s.code()))),
-        }
+    let resp = match tokio::time::timeout(timeout, conn.rx.message()).await {
+        Err(_) => return Err(RemoteError::Deadline { url: url.to_string(), request, timeout }),
+        Ok(Ok(Some(r))) => r,
+        Ok(Ok(None)) => return Err(broken("the server closed the stream".into())),
+        Ok(Err(s)) => return Err(broken(format!("{} ({:?})", s.message(), s.code()))),
     };
-    let resp =
-        tokio::time::timeout(timeout, exchange).await.map_err(|_| RemoteError::Deadline { url: url.to_string(), request, timeout })??;
     match resp.payload {
         Some(Resp::Error(s)) => Err(RemoteError::Server { url: url.to_string(), request, code: s.code, message: s.message }),
         Some(p) => Ok(p),
@@ -113,6 +118,12 @@ async fn open(url: String, endpoint: String, opts: RemoteOptions) -> Result<(Con
         .map_err(|e| connect_err(format!("cannot connect: {e}")))?;
     let mut client = EnvironmentClient::new(channel);
     let (tx, requests) = mpsc::channel(4);
+    // The first request goes in before the call: some servers (grpcio's) send their response
+    // headers only with their first message, so waiting for the call to open first would wait
+    // for ever.
+    tx.send(EnvironmentRequest { payload: Some(Req::CreateWorld(pb::CreateWorldRequest::default())) })
+        .await
+        .map_err(|_| connect_err("the request stream closed at once".into()))?;
     let stream = tokio::time::timeout(opts.connect_timeout, client.process(tokio_stream::wrappers::ReceiverStream::new(requests)))
         .await
         .map_err(|_| connect_err(format!("the stream did not open within {:?}", opts.connect_timeout)))?
@@ -120,7 +131,7 @@ async fn open(url: String, endpoint: String, opts: RemoteOptions) -> Result<(Con
     let mut conn = Conn { tx, rx: stream.into_inner(), world: String::new() };
     let t = opts.request_timeout;
     let unexpected = |request: &'static str| RemoteError::Protocol { url: url.clone(), request, what: "a response of another kind".into() };
-    let Resp::CreateWorld(c) = call(&mut conn, &url, "CreateWorld", Req::CreateWorld(pb::CreateWorldRequest::default()), t).await? else {
+    let Resp::CreateWorld(c) = receive(&mut conn, &url, "CreateWorld", t).await? else {
         return Err(unexpected("CreateWorld"));
     };
     conn.world = c.world_name.clone();

@@ -1,0 +1,205 @@
+"""``coadapt-gym-serve``: serve a gymnasium environment, a body factory or a robot driver over
+DeepMind's dm_env_rpc v1 gRPC protocol, following the coadapt profile."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import signal
+import sys
+import threading
+from typing import Optional, Sequence
+
+from .backends import Backend, BackendError, DriverBackend, GymBackend
+
+PROG = "coadapt-gym-serve"
+
+DESCRIPTION = """\
+Serve one environment over DeepMind's dm_env_rpc v1 gRPC protocol (service
+dm_env_rpc.v1.Environment, one bidirectional Process stream per connection),
+following the coadapt profile of proto/README.md. Any dm_env_rpc client can
+drive it; coadapt drives it with the environment name dm-env-rpc://HOST:PORT.
+
+What is served (exactly one of):
+  --env ID                 gymnasium.make(ID); no design (the design has 0
+                           elements). Continuous Box action spaces only.
+  --factory module:func    func(design: np.ndarray[float32]) -> gymnasium.Env
+                           builds the body for a design. The design box is read
+                           from the function's attributes design_low,
+                           design_high and default_design, which the decorator
+                           @coadapt_bridge.design_space(low, high, default)
+                           sets. The env is rebuilt when an episode starts with
+                           a different design.
+  --driver module:Class    a coadapt_bridge.RobotDriver subclass for a real
+                           robot, instantiated once with no arguments; one
+                           world at a time. The bridge enforces the safety
+                           rules (see below).
+
+The profile (uids):
+  action       1  FLOAT [A] with min/max (the action box). Required on every
+                  running step; out-of-box, non-finite, wrongly typed (doubles)
+                  or wrongly shaped actions are refused with an error.
+  observation  1  FLOAT [S], the state (bounds only when all finite)
+  reward       2  FLOAT scalar (0 on an episode's first observation)
+  discount     3  FLOAT scalar: 0 at a true end (gymnasium `terminated`),
+                  1 otherwise, also when an episode is truncated
+  design       4  FLOAT [D], min/max = the design box: the body in use
+  World settings (CreateWorld, ResetWorld), both optional: `design` (floats
+  or doubles, shape [D], inside the box) and `seed` (integer scalar; the next
+  episode calls env.reset(seed=seed), later ones env.reset()). Other settings
+  are refused; JoinWorld and Reset take none. Worlds are named world-1,
+  world-2, ...; one agent per world; a world is destroyed by DestroyWorld or
+  when the connection that created it closes. The first Step after JoinWorld,
+  Reset, ResetWorld or a TERMINATED step ignores its actions and starts an
+  episode.
+
+Robot safety (--driver), enforced by the bridge: actions clipped to the
+declared box (and to max_action_change of the previous one), at most
+max_action_rate_hz actions per second (faster requests wait), and
+safe_stop() when no StepRequest arrives within --step-timeout seconds of a
+step, when the connection is lost, the world is left or destroyed, and when
+the server stops (SIGINT/SIGTERM). safe_stop() failures are logged only.
+
+On start the server prints one line to stdout,
+  coadapt-gym-serve listening on HOST:PORT
+(the bound port when --port 0), then logs to stderr only. SIGINT or SIGTERM
+stop it cleanly, closing every world.
+"""
+
+EPILOG = """\
+examples:
+  coadapt-gym-serve --env Pendulum-v1 --port 50051
+  coadapt-gym-serve --factory coadapt_bridge.mujoco_half_cheetah:make --port 0
+  coadapt-gym-serve --driver my_robot:MyArm --step-timeout 0.5
+"""
+
+
+def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--env", metavar="ID", help="a registered gymnasium environment id, e.g. Pendulum-v1")
+    what.add_argument(
+        "--factory",
+        metavar="MODULE:FUNCTION",
+        help="a body factory: FUNCTION(design) -> gymnasium.Env, with its design box declared by "
+        "@coadapt_bridge.design_space",
+    )
+    what.add_argument("--driver", metavar="MODULE:CLASS", help="a coadapt_bridge.RobotDriver subclass (a real robot)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: %(default)s; 0.0.0.0 for all)")
+    p.add_argument("--port", type=int, default=0, help="port to listen on; 0 picks a free one (default: %(default)s)")
+    p.add_argument(
+        "--max-episode-steps",
+        type=int,
+        metavar="N",
+        help="truncate episodes after N steps (discount 1). With --env it replaces the registered time limit",
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        metavar="S",
+        help="seed of the first episode of every world created without a `seed` setting (default: "
+        "gymnasium seeds from the OS)",
+    )
+    p.add_argument(
+        "--step-timeout",
+        type=float,
+        default=1.0,
+        metavar="SECONDS",
+        help="--driver only: safe_stop() the robot when no StepRequest arrives within this long after a step "
+        "(default: %(default)s)",
+    )
+    p.add_argument(
+        "--max-connections",
+        type=int,
+        default=32,
+        metavar="N",
+        help="simultaneous connections served; more are refused with RESOURCE_EXHAUSTED (default: %(default)s)",
+    )
+    p.add_argument(
+        "--log-level",
+        default="INFO",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="stderr log level (default: %(default)s)",
+    )
+    args = p.parse_args(argv)
+    if not 0 <= args.port <= 65535:
+        p.error(f"--port {args.port} is not in 0-65535")
+    if args.max_episode_steps is not None and args.max_episode_steps < 1:
+        p.error("--max-episode-steps must be at least 1")
+    if args.seed is not None and args.seed < 0:
+        p.error("--seed must be non-negative")
+    if not (args.step_timeout > 0 and math.isfinite(args.step_timeout)):
+        p.error("--step-timeout must be a positive number of seconds")
+    if args.max_connections < 1:
+        p.error("--max-connections must be at least 1")
+    return args
+
+
+def make_backend(args: argparse.Namespace) -> Backend:
+    if args.env is not None:
+        return GymBackend.from_env_id(args.env, args.max_episode_steps)
+    if args.factory is not None:
+        return GymBackend.from_factory(args.factory)
+    return DriverBackend.from_spec(args.driver)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = parse_args(argv)
+    logging.basicConfig(
+        stream=sys.stderr,
+        level=getattr(logging, args.log_level),
+        format=f"{PROG}: %(asctime)s %(levelname)s %(message)s",
+    )
+    log = logging.getLogger("coadapt_bridge")
+
+    # Ask to stop from the first signal on (also while the backend is being built).
+    stop = threading.Event()
+
+    def on_signal(signum, _frame):
+        log.info("received %s: stopping", signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+
+    from .server import BridgeServer
+
+    try:
+        backend = make_backend(args)
+    except BackendError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+    server = BridgeServer(
+        backend,
+        host=args.host,
+        port=args.port,
+        max_episode_steps=args.max_episode_steps,
+        seed=args.seed,
+        step_timeout=args.step_timeout,
+        max_connections=args.max_connections,
+    )
+    try:
+        server.start()
+    except OSError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        server.stop(grace=0)
+        return 1
+    log.info("serving %s: %s", getattr(backend, "what", type(backend).__name__), backend.profile.describe())
+    print(f"{PROG} listening on {server.address}", flush=True)
+    try:
+        while not stop.wait(0.5):
+            pass
+    finally:
+        server.stop()
+        log.info("stopped")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

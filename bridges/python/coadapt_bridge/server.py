@@ -1,0 +1,629 @@
+"""The dm_env_rpc v1 ``Environment`` service of the coadapt profile, over a ``Backend``.
+
+Worlds are created by CreateWorld (settings ``design`` and ``seed``, both optional) and named
+``world-1``, ``world-2``...; one agent joins each. A world lives until DestroyWorld or until
+the connection that created it closes (a client that goes away without DestroyWorld leaks
+nothing; a world another agent is still joined to lives until that agent leaves). Every
+request gets one response, in order; a bad request gets an ``error`` (google.rpc.Status) and
+the stream goes on.
+
+For a robot driver the server adds the safety rules described in ``driver.py``: a step
+deadline watched by a watchdog thread, and ``safe_stop`` on leave, destroy, lost connection
+and shutdown.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import threading
+import time
+from concurrent import futures
+from typing import Any, Dict, Iterable, Iterator, Optional
+
+import grpc
+import numpy as np
+from dm_env_rpc.v1 import dm_env_rpc_pb2 as pb
+from dm_env_rpc.v1 import dm_env_rpc_pb2_grpc
+from google.rpc import status_pb2
+
+from . import tensors as T
+from .backends import Backend, BackendError, Body, DriverBackend, DriverBody, Profile, RobotBusy, ShuttingDown
+
+log = logging.getLogger("coadapt_bridge")
+
+RUNNING = pb.EnvironmentStateType.RUNNING
+TERMINATED = pb.EnvironmentStateType.TERMINATED
+INTERRUPTED = pb.EnvironmentStateType.INTERRUPTED
+
+
+class RequestError(Exception):
+    """A request refused with a gRPC status code (sent back in the stream)."""
+
+    def __init__(self, code: grpc.StatusCode, message: str):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+def build_specs(profile: Profile) -> pb.ActionObservationSpecs:
+    """The specs of the coadapt profile (proto/README.md)."""
+    specs = pb.ActionObservationSpecs()
+    specs.actions[T.ACTION_UID].CopyFrom(
+        T.float_spec("action", [profile.action_dim], profile.action_low, profile.action_high)
+    )
+    specs.observations[T.OBSERVATION_UID].CopyFrom(
+        T.float_spec("observation", [profile.obs_dim], profile.obs_low, profile.obs_high)
+    )
+    specs.observations[T.REWARD_UID].CopyFrom(T.float_spec("reward", []))
+    specs.observations[T.DISCOUNT_UID].CopyFrom(
+        T.float_spec("discount", [], np.float32(0.0), np.float32(1.0))
+    )
+    d = profile.design
+    if d.dim > 0:
+        design_spec = T.float_spec("design", [d.dim], d.low, d.high)
+    else:
+        design_spec = T.float_spec("design", [0])
+    specs.observations[T.DESIGN_UID].CopyFrom(design_spec)
+    return specs
+
+
+class World:
+    """A world: its body, the design and seed of the next episode, the running episode."""
+
+    def __init__(self, name: str, body: Body, design: np.ndarray, seed: Optional[int], owner: int):
+        self.name = name
+        self.body = body
+        self.design = design
+        self.pending_seed = seed
+        self.owner: Optional[int] = owner
+        self.lock = threading.RLock()
+        self.agent: Optional["Session"] = None
+        self.running = False
+        # The next step answers INTERRUPTED (a ResetWorld from another connection, a safety stop).
+        self.interrupted = False
+        self.steps = 0
+        self.obs = np.zeros(body.profile.obs_dim, dtype=np.float32)
+        self.reward = 0.0
+        self.discount = 1.0
+        # Robots: the robot may be moving (commanded since the last safe_stop), and the time
+        # by which the next StepRequest must arrive.
+        self.robot_active = False
+        self.deadline: Optional[float] = None
+        self.closed = False
+
+
+class Session:
+    """One connection (one Process stream). Its lock is held while one of its requests is
+    handled and while it ends (lock order: session, then world, then the driver)."""
+
+    def __init__(self, sid: int, peer: str):
+        self.id = sid
+        self.peer = peer
+        self.world: Optional[World] = None
+        self.closed = False
+        self.lock = threading.Lock()
+
+
+class Watchdog:
+    """Calls ``on_expire(world, deadline)`` when a world's step deadline passes."""
+
+    def __init__(self, on_expire):
+        self._on_expire = on_expire
+        self._cond = threading.Condition()
+        self._deadlines: Dict[World, float] = {}
+        self._stopped = False
+        self._thread = threading.Thread(target=self._run, name="coadapt-step-watchdog", daemon=True)
+        self._thread.start()
+
+    def arm(self, world: World, deadline: float) -> None:
+        with self._cond:
+            self._deadlines[world] = deadline
+            self._cond.notify()
+
+    def disarm(self, world: World) -> None:
+        with self._cond:
+            self._deadlines.pop(world, None)
+
+    def stop(self) -> None:
+        with self._cond:
+            self._stopped = True
+            self._cond.notify()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        with self._cond:
+            while not self._stopped:
+                if not self._deadlines:
+                    self._cond.wait()
+                    continue
+                world, deadline = min(self._deadlines.items(), key=lambda kv: kv[1])
+                now = time.monotonic()
+                if deadline > now:
+                    self._cond.wait(deadline - now)
+                    continue
+                del self._deadlines[world]
+                self._cond.release()
+                try:
+                    self._on_expire(world, deadline)
+                except Exception:  # noqa: BLE001
+                    log.exception("step watchdog")
+                finally:
+                    self._cond.acquire()
+
+
+class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
+    """The dm_env_rpc ``Environment`` service over a backend."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        max_episode_steps: Optional[int] = None,
+        seed: Optional[int] = None,
+        step_timeout: float = 1.0,
+    ):
+        self.backend = backend
+        self.profile = backend.profile
+        self.specs = build_specs(backend.profile)
+        self.max_episode_steps = max_episode_steps
+        self.default_seed = seed
+        self.step_timeout = float(step_timeout)
+        self.worlds: Dict[str, World] = {}
+        self._lock = threading.Lock()
+        self._world_numbers = itertools.count(1)
+        self._session_numbers = itertools.count(1)
+        self.stopping = False
+        self.watchdog = Watchdog(self._deadline_expired) if backend.is_robot else None
+
+    # -- the stream -----------------------------------------------------------------------
+
+    def Process(self, request_iterator: Iterable[pb.EnvironmentRequest], context: grpc.ServicerContext) -> Iterator[pb.EnvironmentResponse]:  # noqa: N802
+        session = Session(next(self._session_numbers), context.peer())
+        log.debug("connection %d from %s", session.id, session.peer)
+
+        def on_rpc_done() -> None:
+            # gRPC calls this on its own thread when the stream ends or is cancelled; the
+            # clean-up may wait for a driver call in progress, so it runs on a thread of its own.
+            threading.Thread(
+                target=self.end_session, args=(session, "the connection closed"), name="coadapt-session-end", daemon=True
+            ).start()
+
+        if not context.add_callback(on_rpc_done):
+            self.end_session(session, "the connection closed")
+            return
+        try:
+            for request in request_iterator:
+                # A request is handled whole or not at all once the connection is gone.
+                with session.lock:
+                    if session.closed:
+                        break
+                    response = self.handle(session, request)
+                yield response
+        except Exception as e:  # noqa: BLE001 - a cancelled stream raises from the iterator
+            log.debug("connection %d: %s: %s", session.id, type(e).__name__, e)
+        finally:
+            self.end_session(session, "the connection closed")
+
+    def handle(self, session: Session, request: pb.EnvironmentRequest) -> pb.EnvironmentResponse:
+        kind = request.WhichOneof("payload")
+        try:
+            if self.stopping:
+                raise RequestError(grpc.StatusCode.UNAVAILABLE, "the server is stopping")
+            if kind == "create_world":
+                return pb.EnvironmentResponse(create_world=self.create_world(session, request.create_world))
+            if kind == "join_world":
+                return pb.EnvironmentResponse(join_world=self.join_world(session, request.join_world))
+            if kind == "step":
+                return pb.EnvironmentResponse(step=self.step(session, request.step))
+            if kind == "reset":
+                return pb.EnvironmentResponse(reset=self.reset(session, request.reset))
+            if kind == "reset_world":
+                return pb.EnvironmentResponse(reset_world=self.reset_world(session, request.reset_world))
+            if kind == "leave_world":
+                self.leave_world(session, "the agent left the world")
+                return pb.EnvironmentResponse(leave_world=pb.LeaveWorldResponse())
+            if kind == "destroy_world":
+                return pb.EnvironmentResponse(destroy_world=self.destroy_world(session, request.destroy_world))
+            if kind == "extension":
+                raise RequestError(
+                    grpc.StatusCode.UNIMPLEMENTED, f"no extensions are supported (got `{request.extension.type_url}`)"
+                )
+            raise RequestError(grpc.StatusCode.INVALID_ARGUMENT, "empty request (no payload)")
+        except RequestError as e:
+            return _error(e.code, e.message)
+        except Exception as e:  # noqa: BLE001 - never let a request kill the stream
+            log.exception("%s request failed", kind)
+            return _error(grpc.StatusCode.INTERNAL, f"{kind}: {type(e).__name__}: {e}")
+
+    # -- settings ---------------------------------------------------------------------------
+
+    def _world_settings(self, settings) -> tuple:
+        design = None
+        seed = None
+        for name in sorted(settings.keys()):
+            t = settings[name]
+            try:
+                if name == T.SETTING_DESIGN:
+                    d = self.profile.design
+                    design = T.read_floats(name, t, d.dim, allow_doubles=True)
+                    T.check_in_box(name, design, d.low, d.high, "design box")
+                elif name == T.SETTING_SEED:
+                    seed = T.read_seed(name, t)
+                else:
+                    raise RequestError(
+                        grpc.StatusCode.INVALID_ARGUMENT,
+                        f"unknown world setting `{name}` (the coadapt profile has `design` and `seed`)",
+                    )
+            except T.TensorError as e:
+                raise RequestError(grpc.StatusCode.INVALID_ARGUMENT, f"setting `{name}`: {e}") from None
+        return design, seed
+
+    @staticmethod
+    def _no_settings(settings, request: str) -> None:
+        for name in sorted(settings.keys()):
+            raise RequestError(
+                grpc.StatusCode.INVALID_ARGUMENT, f"unknown {request} setting `{name}` ({request} takes no settings)"
+            )
+
+    # -- requests ---------------------------------------------------------------------------
+
+    def _find(self, name: str) -> World:
+        with self._lock:
+            world = self.worlds.get(name)
+        if world is None:
+            raise RequestError(grpc.StatusCode.NOT_FOUND, f"no world named `{name}`")
+        return world
+
+    def create_world(self, session: Session, req: pb.CreateWorldRequest) -> pb.CreateWorldResponse:
+        design, seed = self._world_settings(req.settings)
+        if design is None:
+            design = self.profile.design.default.copy()
+        if seed is None:
+            seed = self.default_seed
+        try:
+            body = self.backend.new_body(design)
+        except RobotBusy as e:
+            raise RequestError(grpc.StatusCode.FAILED_PRECONDITION, str(e)) from None
+        except ShuttingDown as e:
+            raise RequestError(grpc.StatusCode.UNAVAILABLE, str(e)) from None
+        except BackendError as e:
+            raise RequestError(grpc.StatusCode.INTERNAL, f"building the environment: {e}") from None
+        with self._lock:
+            name = f"world-{next(self._world_numbers)}"
+            self.worlds[name] = World(name, body, design, seed, session.id)
+        log.info("created %s (design %s) for connection %d", name, design.tolist(), session.id)
+        return pb.CreateWorldResponse(world_name=name)
+
+    def join_world(self, session: Session, req: pb.JoinWorldRequest) -> pb.JoinWorldResponse:
+        if session.world is not None:
+            raise RequestError(
+                grpc.StatusCode.FAILED_PRECONDITION, f"already joined to world `{session.world.name}`: leave it first"
+            )
+        world = self._find(req.world_name)
+        self._no_settings(req.settings, "join")
+        with world.lock:
+            if world.closed:
+                raise RequestError(grpc.StatusCode.NOT_FOUND, f"no world named `{req.world_name}`")
+            if world.agent is not None:
+                raise RequestError(grpc.StatusCode.FAILED_PRECONDITION, f"world `{world.name}` already has its agent")
+            world.agent = session
+            world.running = False
+            world.interrupted = False
+        session.world = world
+        log.info("connection %d joined %s", session.id, world.name)
+        return pb.JoinWorldResponse(specs=self.specs)
+
+    def leave_world(self, session: Session, reason: str) -> None:
+        world = session.world
+        if world is None:
+            return
+        session.world = None
+        destroy = False
+        with world.lock:
+            if world.body.is_robot:
+                self._safety_stop(world, reason)
+            world.agent = None
+            world.running = False
+            world.interrupted = False
+            destroy = world.owner is None and not world.closed
+        log.info("connection %d left %s (%s)", session.id, world.name, reason)
+        if destroy:
+            self._remove(world, "its creator and its agent are gone")
+
+    def reset(self, session: Session, req: pb.ResetRequest) -> pb.ResetResponse:
+        world = session.world
+        if world is None:
+            raise RequestError(grpc.StatusCode.FAILED_PRECONDITION, "reset before joining a world")
+        self._no_settings(req.settings, "reset")
+        with world.lock:
+            world.running = False
+            world.interrupted = False
+        return pb.ResetResponse(specs=self.specs)
+
+    def reset_world(self, session: Session, req: pb.ResetWorldRequest) -> pb.ResetWorldResponse:
+        world = self._find(req.world_name)
+        design, seed = self._world_settings(req.settings)
+        with world.lock:
+            if design is not None:
+                world.design = design
+            if seed is not None:
+                world.pending_seed = seed
+            if world.agent is session:
+                # The issuer starts the next episode at once (no INTERRUPTED step).
+                world.running = False
+                world.interrupted = False
+            elif world.running:
+                # Another connection's agent is told once, then starts afresh.
+                world.running = False
+                world.interrupted = True
+        return pb.ResetWorldResponse()
+
+    def destroy_world(self, session: Session, req: pb.DestroyWorldRequest) -> pb.DestroyWorldResponse:
+        world = self._find(req.world_name)
+        if session.world is world:
+            raise RequestError(grpc.StatusCode.FAILED_PRECONDITION, f"leave world `{world.name}` before destroying it")
+        with world.lock:
+            if world.agent is not None:
+                raise RequestError(grpc.StatusCode.FAILED_PRECONDITION, f"world `{world.name}` has an agent joined")
+        self._remove(world, "DestroyWorld")
+        return pb.DestroyWorldResponse()
+
+    def step(self, session: Session, req: pb.StepRequest) -> pb.StepResponse:
+        world = session.world
+        if world is None:
+            raise RequestError(grpc.StatusCode.FAILED_PRECONDITION, "step before joining a world")
+        requested = list(dict.fromkeys(req.requested_observations))
+        for uid in requested:
+            if uid not in T.OBSERVATION_UIDS:
+                raise RequestError(
+                    grpc.StatusCode.INVALID_ARGUMENT,
+                    f"requested observation uid {uid} does not exist (uids: 1 observation, 2 reward, 3 discount, 4 design)",
+                )
+        with world.lock:
+            robot = world.body.is_robot
+            if robot:
+                self._step_arrived(world)
+            try:
+                state = self._advance(world, req)
+            finally:
+                if robot and world.robot_active and not self.stopping:
+                    world.deadline = time.monotonic() + self.step_timeout
+                    self.watchdog.arm(world, world.deadline)
+            response = pb.StepResponse(state=state)
+            for uid in requested:
+                if uid == T.OBSERVATION_UID:
+                    t = T.floats_tensor(world.obs, [world.obs.size])
+                elif uid == T.REWARD_UID:
+                    t = T.scalar_tensor(world.reward)
+                elif uid == T.DISCOUNT_UID:
+                    t = T.scalar_tensor(world.discount)
+                else:
+                    t = T.floats_tensor(world.design, [world.design.size])
+                response.observations[uid].CopyFrom(t)
+        return response
+
+    def _advance(self, world: World, req: pb.StepRequest) -> int:
+        """The state machine (called with the world's lock held)."""
+        if world.interrupted:
+            world.interrupted = False
+            world.reward = 0.0
+            world.discount = 1.0
+            return INTERRUPTED
+        if not world.running:
+            # First step of an episode: its actions are ignored.
+            seed, world.pending_seed = world.pending_seed, None
+            world.reward = 0.0
+            world.discount = 1.0
+            world.steps = 0
+            try:
+                world.robot_active = world.body.is_robot
+                world.obs = world.body.start_episode(world.design, seed)
+            except ShuttingDown as e:
+                raise RequestError(grpc.StatusCode.UNAVAILABLE, str(e)) from None
+            except Exception as e:
+                log.exception("%s: starting an episode failed", world.name)
+                if world.body.is_robot:
+                    self._safety_stop(world, "the driver's reset() raised")
+                raise RequestError(grpc.StatusCode.INTERNAL, f"starting an episode: {type(e).__name__}: {e}") from None
+            world.running = True
+            return RUNNING
+
+        for uid in req.actions.keys():
+            if uid != T.ACTION_UID:
+                raise RequestError(grpc.StatusCode.INVALID_ARGUMENT, f"action uid {uid} does not exist (uid 1 is `action`)")
+        if T.ACTION_UID not in req.actions:
+            raise RequestError(grpc.StatusCode.INVALID_ARGUMENT, "action `action` (uid 1) is required on every running step")
+        p = self.profile
+        try:
+            action = T.read_floats("action", req.actions[T.ACTION_UID], p.action_dim, allow_doubles=False)
+            T.check_in_box("action", action, p.action_low, p.action_high, "action box")
+        except T.TensorError as e:
+            raise RequestError(grpc.StatusCode.INVALID_ARGUMENT, str(e)) from None
+        try:
+            obs, reward, terminated, truncated = world.body.step(action)
+        except ShuttingDown as e:
+            world.running = False
+            raise RequestError(grpc.StatusCode.UNAVAILABLE, str(e)) from None
+        except Exception as e:
+            world.running = False
+            log.exception("%s: step failed", world.name)
+            if world.body.is_robot:
+                self._safety_stop(world, "the driver's step() raised")
+            raise RequestError(grpc.StatusCode.INTERNAL, f"environment step: {type(e).__name__}: {e}") from None
+        world.steps += 1
+        if self.max_episode_steps is not None and world.steps >= self.max_episode_steps and not terminated:
+            truncated = True
+        world.obs = obs
+        world.reward = reward
+        world.discount = 0.0 if terminated else 1.0
+        if terminated or truncated:
+            world.running = False
+            return TERMINATED
+        return RUNNING
+
+    # -- robot safety -----------------------------------------------------------------------
+
+    def _step_arrived(self, world: World) -> None:
+        """A StepRequest reached a robot's world (lock held): a deadline that passed already
+        counts as missed even if the watchdog has not fired yet."""
+        if world.deadline is not None and time.monotonic() > world.deadline:
+            self._safety_stop(world, f"no StepRequest within the step timeout ({self.step_timeout:g} s)", deadline=True)
+        world.deadline = None
+        self.watchdog.disarm(world)
+
+    def _deadline_expired(self, world: World, deadline: float) -> None:
+        with world.lock:
+            if world.deadline == deadline and not world.closed:
+                self._safety_stop(world, f"no StepRequest within the step timeout ({self.step_timeout:g} s)", deadline=True)
+
+    def _safety_stop(self, world: World, reason: str, deadline: bool = False) -> None:
+        """``safe_stop`` the robot of ``world`` (lock held); a running episode is cut and its
+        agent's next step answers INTERRUPTED."""
+        body = world.body
+        assert isinstance(body, DriverBody)
+        if world.running:
+            world.running = False
+            world.interrupted = True
+            log.log(logging.WARNING if deadline else logging.INFO, "%s: episode cut: %s", world.name, reason)
+        body.safe_stop(f"{world.name}: {reason}")
+        world.robot_active = False
+        world.deadline = None
+        if self.watchdog is not None:
+            self.watchdog.disarm(world)
+
+    # -- ends -------------------------------------------------------------------------------
+
+    def _remove(self, world: World, reason: str) -> None:
+        with self._lock:
+            if self.worlds.get(world.name) is world:
+                del self.worlds[world.name]
+        with world.lock:
+            if world.closed:
+                return
+            if world.body.is_robot:
+                self._safety_stop(world, f"world destroyed ({reason})")
+            world.closed = True
+            try:
+                world.body.close()
+            except Exception:  # noqa: BLE001
+                log.exception("%s: closing failed", world.name)
+        log.info("destroyed %s (%s)", world.name, reason)
+
+    def end_session(self, session: Session, reason: str) -> None:
+        """The connection is gone: leave its world, destroy the worlds it created."""
+        with session.lock:
+            if session.closed:
+                return
+            session.closed = True
+            try:
+                self.leave_world(session, reason)
+            except Exception:  # noqa: BLE001
+                log.exception("leaving the world of connection %d", session.id)
+            with self._lock:
+                owned = [w for w in self.worlds.values() if w.owner == session.id]
+            for world in owned:
+                with world.lock:
+                    keep = world.agent is not None
+                    if keep:
+                        world.owner = None  # destroyed when its agent leaves
+                if not keep:
+                    self._remove(world, "its connection closed")
+        log.debug("connection %d ended", session.id)
+
+    def close_all(self) -> None:
+        """Server shutdown: destroy every world."""
+        self.stopping = True
+        with self._lock:
+            worlds = list(self.worlds.values())
+        for world in worlds:
+            self._remove(world, "server shutdown")
+        if self.watchdog is not None:
+            self.watchdog.stop()
+
+
+def _error(code: grpc.StatusCode, message: str) -> pb.EnvironmentResponse:
+    return pb.EnvironmentResponse(error=status_pb2.Status(code=code.value[0], message=message))
+
+
+def _grpc_options() -> list:
+    return [
+        # Keep-alive: ping idle clients (a vanished client is noticed), and accept clients'
+        # pings (coadapt's client pings every 10 s) without counting strikes against them.
+        ("grpc.keepalive_time_ms", 10_000),
+        ("grpc.keepalive_timeout_ms", 20_000),
+        ("grpc.keepalive_permit_without_calls", 1),
+        ("grpc.http2.max_pings_without_data", 0),
+        ("grpc.http2.min_recv_ping_interval_without_data_ms", 1_000),
+        ("grpc.http2.max_ping_strikes", 0),
+        # A port another server listens on is an error, not a silent share (gRPC's default
+        # SO_REUSEPORT would split the connections between the two).
+        ("grpc.so_reuseport", 0),
+    ]
+
+
+class BridgeServer:
+    """A gRPC server for one backend. ``start()`` returns the bound port; ``stop()`` closes
+    every world and, for a robot, calls ``safe_stop`` then the driver's ``close``."""
+
+    def __init__(
+        self,
+        backend: Backend,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        max_episode_steps: Optional[int] = None,
+        seed: Optional[int] = None,
+        step_timeout: float = 1.0,
+        max_connections: int = 32,
+    ):
+        self.backend = backend
+        self.host = host
+        self.requested_port = port
+        self.service = EnvironmentService(backend, max_episode_steps, seed, step_timeout)
+        self._server = grpc.server(
+            futures.ThreadPoolExecutor(max_workers=max_connections + 2, thread_name_prefix="coadapt-rpc"),
+            options=_grpc_options(),
+            maximum_concurrent_rpcs=max_connections,
+        )
+        dm_env_rpc_pb2_grpc.add_EnvironmentServicer_to_server(self.service, self._server)
+        self.port: Optional[int] = None
+        self._stopped = False
+        self._stop_lock = threading.Lock()
+
+    @property
+    def address(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host and not self.host.startswith("[") else self.host
+        return f"{host}:{self.port if self.port is not None else self.requested_port}"
+
+    def start(self) -> int:
+        host = f"[{self.host}]" if ":" in self.host and not self.host.startswith("[") else self.host
+        try:
+            port = self._server.add_insecure_port(f"{host}:{self.requested_port}")
+        except RuntimeError as e:
+            raise OSError(f"cannot listen on {host}:{self.requested_port}: {e}") from None
+        if not port:
+            raise OSError(f"cannot listen on {host}:{self.requested_port}")
+        self.port = port
+        self._server.start()
+        return port
+
+    def stop(self, grace: float = 0.5) -> None:
+        with self._stop_lock:
+            if self._stopped:
+                return
+            self._stopped = True
+        backend = self.backend
+        if isinstance(backend, DriverBackend):
+            # The robot first: stop it now, refuse further driver calls.
+            backend.begin_shutdown()
+        self.service.stopping = True
+        self._server.stop(grace).wait()
+        self.service.close_all()
+        backend.close()
+
+    def __enter__(self) -> "BridgeServer":
+        if self.port is None:
+            self.start()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()

@@ -1,0 +1,269 @@
+//! Remote environments through the binary: DeepMind's compliance suites against `coadapt
+//! env-serve`, learning Pendulum-v1 served by the Python gymnasium bridge, a tiny FEAR run on
+//! the design-parameterised MuJoCo HalfCheetah, and servers that die, lie or go silent.
+//!
+//! The Python side (dm-env-rpc, gymnasium, MuJoCo and the bridge package) lives in a virtualenv
+//! that `bridges/python/setup_venv.sh` creates once under the target directory and reuses.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+fn workspace_file(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coadapt-envrpc-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The bridge's virtualenv (created on first use, then reused: the script checks a stamp).
+fn venv() -> &'static Path {
+    static VENV: OnceLock<PathBuf> = OnceLock::new();
+    VENV.get_or_init(|| {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("py-bridge-venv");
+        let t = Instant::now();
+        let status = Command::new("bash").arg(workspace_file("bridges/python/setup_venv.sh")).arg(&dir).status().unwrap();
+        assert!(status.success(), "bridges/python/setup_venv.sh failed");
+        if t.elapsed() > Duration::from_secs(2) {
+            eprintln!("python bridge venv ready in {:?}", t.elapsed());
+        }
+        dir
+    })
+}
+
+/// A server process, killed when dropped.
+struct Server {
+    child: Child,
+    url: String,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Starts `cmd` and reads the address it prints on its first stdout line (`dm-env-rpc://...`
+/// from env-serve, `coadapt-gym-serve listening on HOST:PORT` from the bridge).
+fn start(mut cmd: Command) -> Server {
+    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::inherit()).spawn().unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let addr = line.trim().rsplit(' ').next().unwrap().trim_start_matches("dm-env-rpc://").to_string();
+    assert!(addr.contains(':'), "no address in the server's first line: {line:?}");
+    Server { child, url: format!("dm-env-rpc://{addr}") }
+}
+
+fn env_serve(robot: &str) -> Server {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_coadapt"));
+    c.args(["env-serve", "--env", robot, "--listen", "127.0.0.1:0"]);
+    start(c)
+}
+
+fn gym_serve(args: &[&str]) -> Server {
+    let mut c = Command::new(venv().join("bin/coadapt-gym-serve"));
+    c.args(args);
+    // MuJoCo writes warnings to MUJOCO_LOG.TXT in the working directory.
+    c.current_dir(std::env::temp_dir());
+    start(c)
+}
+
+fn coadapt(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_coadapt")).args(args).output().unwrap()
+}
+
+#[test]
+fn deepminds_compliance_suites_and_dm_env_adaptor_pass_against_env_serve() {
+    for (robot, design_dim) in [("half-cheetah", "6"), ("pendulum", "2")] {
+        let server = env_serve(robot);
+        let o = Command::new(venv().join("bin/python"))
+            .arg(workspace_file("cli/tests/python/env_serve_compliance.py"))
+            .args([&server.url, design_dim])
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{robot}: compliance failed:\n{out}\n{err}");
+        assert!(err.contains("Ran 41 tests") && err.contains("OK"), "{robot}: every suite ran: {err}");
+        assert!(out.contains("DmEnvAdaptor: one episode of"), "{robot}: {out}");
+    }
+}
+
+#[test]
+fn sac_learns_gymnasium_pendulum_served_by_the_python_bridge() {
+    let server = gym_serve(&["--env", "Pendulum-v1", "--port", "0"]);
+    let out = tmpdir("pendulum");
+    let o = coadapt(&[
+        "train",
+        "--env",
+        &server.url,
+        "--steps",
+        "20000",
+        "--seed",
+        "1",
+        "--target-return",
+        "-200",
+        "--stop-at-target",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
+    eprintln!("Pendulum-v1 over dm_env_rpc: {s}");
+    let reached = s["first_step_reaching_target"].as_u64().unwrap_or_else(|| panic!("never above -200: {s}"));
+    assert!(reached <= 20_000 && s["mean_return_last_10"].as_f64().unwrap() > -200.0, "{s}");
+    // gymnasium's Pendulum-v1 truncates at 200 steps: every episode is whole.
+    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert!(csv.lines().skip(1).all(|l| l.split(',').nth(3) == Some("200")), "{csv}");
+}
+
+/// The tiny protocol on a remote env: `configs/half-cheetah-tiny.toml` with `env` replaced.
+fn tiny_config(dir: &Path, url: &str, top: &str, tables: &str) -> PathBuf {
+    let text = std::fs::read_to_string(workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
+    let text = text.replace("env = \"half-cheetah\"", &format!("env = \"{url}\"\n{top}")) + tables;
+    let p = dir.join("tiny-remote.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn run_tiny(config: &Path, out: &Path) -> (serde_json::Value, String) {
+    let o = coadapt(&["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"]);
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{stderr}");
+    (serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap(), stderr)
+}
+
+/// Steps of every episodes.csv row (cumulative `steps` column) and the number of training
+/// episodes.
+fn episode_lengths(run: &Path) -> Vec<u64> {
+    let csv = std::fs::read_to_string(run.join("episodes.csv")).unwrap();
+    let steps: Vec<u64> = csv.lines().skip(1).map(|l| l.split(',').nth(3).unwrap().parse().unwrap()).collect();
+    steps.iter().scan(0, |prev, &s| Some(s - std::mem::replace(prev, s))).collect()
+}
+
+#[test]
+fn a_tiny_fear_run_co_designs_the_mujoco_half_cheetah_through_the_bridge() {
+    let server = gym_serve(&["--factory", "coadapt_bridge.mujoco_half_cheetah:make", "--port", "0"]);
+    let dir = tmpdir("mujoco");
+    let (s, stderr) = run_tiny(&tiny_config(&dir, &server.url, "", ""), &dir.join("run"));
+    assert_eq!(s["designs"], 4, "{s}");
+    assert!(stderr.contains("design 3/4 [exploit pso-q]"), "{stderr}");
+    let lengths = episode_lengths(&dir.join("run"));
+    assert_eq!(lengths.len(), 10, "3 + 3 + 2 + 2 training episodes");
+    assert!(lengths.iter().all(|&l| l == 1000), "HalfCheetah-v5's time limit ends every episode: {lengths:?}");
+    assert_eq!(s["replay_transitions"], 10_000, "{s}");
+    let designs = std::fs::read_to_string(dir.join("run/designs.csv")).unwrap();
+    assert!(designs.contains("exploit"), "{designs}");
+}
+
+#[test]
+fn a_bridge_killed_mid_episode_costs_only_that_episode() {
+    // A fixed port, so the restarted server is found at the same address.
+    let port = {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        l.local_addr().unwrap().port().to_string()
+    };
+    let args = ["--factory", "coadapt_bridge.mujoco_half_cheetah:make", "--port", &port];
+    let server = gym_serve(&args);
+    let dir = tmpdir("killed");
+    let config = tiny_config(&dir, &server.url, "chunk-len = 100", "\n[remote]\nreconnect-secs = 30.0\n");
+    let out = dir.join("run");
+    let run = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Kill the server once the first episode is under way (some chunks already sent), then
+    // bring it back on the same port.
+    std::thread::sleep(Duration::from_millis(2500));
+    drop(server);
+    std::thread::sleep(Duration::from_millis(1000));
+    let _server = gym_serve(&args);
+    let o = run.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout.clone()).unwrap().trim()).unwrap();
+    assert!(stderr.contains("dropped after"), "the actor dropped the broken episode: {stderr}");
+    assert!(stderr.contains("reconnected"), "the actor reconnected: {stderr}");
+    let lengths = episode_lengths(&out);
+    assert_eq!(lengths.len(), 10, "{lengths:?}");
+    assert!(lengths.iter().all(|&l| l == 1000), "only whole episodes in episodes.csv: {lengths:?}");
+    assert_eq!(s["replay_transitions"], 10_000, "only whole episodes in the replay: {s}");
+    assert_eq!(s["start_states"], 10, "{s}");
+}
+
+#[test]
+fn the_bridges_own_python_tests_pass() {
+    let o = Command::new(venv().join("bin/python"))
+        .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
+        .current_dir(workspace_file("bridges/python"))
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.contains(" passed"), "{out}");
+}
+
+/// A tiny co-adaptation on one of cli/tests/python/faulty_envs.py's robots.
+fn run_faulty(factory: &str, name: &str, tables: &str) -> (std::process::Output, PathBuf) {
+    let mut c = Command::new(venv().join("bin/coadapt-gym-serve"));
+    c.args(["--factory", &format!("faulty_envs:{factory}"), "--port", "0"]).env("PYTHONPATH", workspace_file("cli/tests/python"));
+    let server = start(c);
+    let dir = tmpdir(name);
+    let config = tiny_config(&dir, &server.url, "", tables);
+    let out = dir.join("run");
+    let o = coadapt(&["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"]);
+    (o, out)
+}
+
+#[test]
+fn a_nan_observation_costs_its_episode_which_runs_again_and_the_run_goes_on() {
+    let (o, run) = run_faulty("nan_once", "nan", "");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("tensor `observation`: element 0 is NaN"), "the error names the tensor: {stderr}");
+    assert_eq!(stderr.matches("dropped after").count(), 1, "{stderr}");
+    let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
+    let lengths = episode_lengths(&run);
+    assert_eq!(lengths.len(), 10);
+    assert!(lengths.iter().all(|&l| l == 50), "{lengths:?}");
+    assert_eq!(s["replay_transitions"], 500, "nothing of the NaN episode reached the replay: {s}");
+}
+
+#[test]
+fn a_server_that_stalls_misses_the_deadline_and_the_episode_runs_again() {
+    let (o, run) = run_faulty("stall_once", "stall", "\n[remote]\nrequest-timeout-secs = 1.0\n");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("no answer to Step within 1s"), "{stderr}");
+    assert!(stderr.contains("reconnected"), "{stderr}");
+    let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
+    assert!(episode_lengths(&run).iter().all(|&l| l == 50));
+    assert_eq!(s["replay_transitions"], 500, "{s}");
+}
+
+#[test]
+fn an_environment_that_always_breaks_its_spec_stops_the_run_with_a_clear_error() {
+    let (o, run) = run_faulty("wrong_shape", "shape", "\n[remote]\nenv-retries = 2\n");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{stderr}");
+    // The bridge checks its environment's observations against the spec it published and
+    // refuses the step; the actor shows the server's message (RemoteEnv's own shape check on
+    // what a server sends is tested in crates/wire/tests/tensor.rs).
+    assert!(stderr.contains("the server refused Step") && stderr.contains("4 observation values, 3 expected"), "{stderr}");
+    assert_eq!(stderr.matches("dropped after").count(), 2, "two retries, then the actor stops: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let csv = std::fs::read_to_string(run.join("episodes.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1, "no episode was recorded: {csv}");
+}
