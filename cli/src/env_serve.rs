@@ -30,26 +30,44 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
         let addr = listener.local_addr()?;
         eprintln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);
         crate::progress::print_stdout_line(&format!("dm-env-rpc://{addr}"));
-        let stop = async {
-            let ctrl_c = tokio::signal::ctrl_c();
-            #[cfg(unix)]
-            {
-                let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).ok();
-                let term = async {
-                    match term.as_mut() {
-                        Some(t) => {
-                            t.recv().await;
-                        }
-                        None => std::future::pending().await,
-                    }
-                };
-                tokio::select! { _ = ctrl_c => {}, _ = term => {} }
+        let (stopped_tx, stopped_rx) = tokio::sync::oneshot::channel::<()>();
+        let server = tokio::spawn(coadapt_env_rpc::server::serve(listener, factory, async {
+            let _ = stopped_rx.await;
+        }));
+        wait_for_signal().await;
+        eprintln!("env-serve: stopping (open streams get {GRACE:?} to finish)");
+        let _ = stopped_tx.send(());
+        // Clients that keep their stream open would hold a graceful shutdown for ever.
+        match tokio::time::timeout(GRACE, server).await {
+            Ok(Ok(r)) => r.context("serving dm_env_rpc"),
+            Ok(Err(e)) => Err(anyhow::anyhow!("the server task failed: {e}")),
+            Err(_) => {
+                eprintln!("env-serve: clients still connected after {GRACE:?}; closing their streams");
+                Ok(())
             }
-            #[cfg(not(unix))]
-            let _ = ctrl_c.await;
-            eprintln!("env-serve: stopping");
-        };
-        coadapt_env_rpc::server::serve(listener, factory, stop).await.context("serving dm_env_rpc")
+        }
     })?;
     Ok(())
+}
+
+/// How long open streams may take to finish after Ctrl-C or SIGTERM.
+const GRACE: std::time::Duration = std::time::Duration::from_secs(2);
+
+async fn wait_for_signal() {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).ok();
+        let term = async {
+            match term.as_mut() {
+                Some(t) => {
+                    t.recv().await;
+                }
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! { _ = ctrl_c => {}, _ = term => {} }
+    }
+    #[cfg(not(unix))]
+    let _ = ctrl_c.await;
 }

@@ -267,3 +267,21 @@ fn an_environment_that_always_breaks_its_spec_stops_the_run_with_a_clear_error()
     let csv = std::fs::read_to_string(run.join("episodes.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1, "no episode was recorded: {csv}");
 }
+
+#[test]
+fn env_serve_stops_on_sigterm_even_with_a_client_connected() {
+    let mut server = env_serve("pendulum");
+    let _client = coadapt_env_rpc::RemoteEnv::connect(&server.url, coadapt_env_rpc::RemoteOptions::default()).unwrap();
+    let t = Instant::now();
+    let status = Command::new("kill").args(["-TERM", &server.child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    loop {
+        if let Some(s) = server.child.try_wait().unwrap() {
+            assert!(s.success(), "a clean exit: {s:?}");
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(10), "env-serve did not stop within 10 s of SIGTERM");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(t.elapsed() >= Duration::from_secs(1), "the open stream got its grace period");
+}
