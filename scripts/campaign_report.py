@@ -39,7 +39,9 @@ BOUNDS = {
 
 def read_run(path):
     with open(os.path.join(path, "designs.csv")) as f:
-        rows = list(csv.DictReader(f))
+        # A proposal rejected at the prototype step (schedule.confirm-designs) was never trained
+        # on: the row after it holds the design built for that index.
+        rows = [r for r in csv.DictReader(f) if r.get("prototype") != "rejected"]
     env = "half-cheetah"
     cfg = os.path.join(path, "config.toml")
     if os.path.exists(cfg):

@@ -27,8 +27,10 @@ def main(out, root, methods):
             run = os.path.dirname(path)
             if not re.search(r"-seed\d+$", run) or not os.path.exists(os.path.join(run, "summary.json")):
                 continue  # only finished runs
-            rows = list(csv.DictReader(open(path)))
-            best = [float(r["best_eval_return"]) for r in rows]
+            # Rejected prototypes (schedule.confirm-designs) were never trained on; a design not
+            # evaluated yet has an empty return.
+            rows = [r for r in csv.DictReader(open(path)) if r.get("prototype") != "rejected"]
+            best = [float(r["best_eval_return"]) if r["best_eval_return"] else float("nan") for r in rows]
             kinds = [r["kind"] for r in rows]
             per_seed.append(best)
             ax.plot(range(len(best)), best, color=colour, alpha=0.3, lw=1)

@@ -8,6 +8,8 @@
 //! - [`role_cmd`]: `coadapt learner|actor|optimizer`, one role per process.
 //! - [`fleet`]: the `[fleet]` config and each role's links over shared memory or gRPC.
 //! - [`launch`]: the local fleet of `coadapt run`: starts, supervises and stops the processes.
+//! - [`confirm`]: `coadapt confirm`, the operator's answer to a run waiting for a prototype or
+//!   a reset.
 //! - [`plot`]: `coadapt plot`, the run directory's SVG plots (also drawn at the end of a run).
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
 //! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure
@@ -20,6 +22,7 @@
 pub mod bench;
 pub mod bench_env;
 pub mod bench_transport;
+pub mod confirm;
 pub mod env_serve;
 pub mod fleet;
 pub mod launch;
@@ -47,6 +50,7 @@ pub enum Command {
     Learner(role_cmd::LearnerArgs),
     Actor(role_cmd::ActorArgs),
     Optimizer(role_cmd::OptimizerArgs),
+    Confirm(confirm::ConfirmArgs),
     Plot(plot::PlotArgs),
     Train(train::TrainArgs),
     Render(render::RenderArgs),
@@ -63,6 +67,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Learner(args) => role_cmd::learner(args),
         Command::Actor(args) => role_cmd::actor(args),
         Command::Optimizer(args) => role_cmd::optimizer(args),
+        Command::Confirm(args) => confirm::run(args),
         Command::Plot(args) => plot::run(args),
         Command::Train(args) => train::run(args),
         Command::Render(args) => render::run(args),

@@ -11,8 +11,10 @@
 //! may be empty where it is optional (unknown), and a non-finite one (`nan`, `inf`) is treated as
 //! unknown too.
 //! - `designs.csv`: `index` (integer), `kind` (free text, optional column) and `best_eval_return`
-//!   (optional number) of each design; the run also writes `design`, `episodes`,
-//!   `last_eval_return`, `predicted_objective` and `design_rollouts`, which no plot needs.
+//!   (optional number) of each design, and `prototype` (optional column): a row whose
+//!   `prototype` is `rejected` (a proposal the operator would not build) is left out; the run
+//!   also writes `design`, `episodes`, `last_eval_return`, `predicted_objective`,
+//!   `design_rollouts` and `method`, which no plot needs.
 //! - `episodes.csv`: `design` (integer index), `episode` (integer, within the design), `return`
 //!   (number) and, if the column exists, `eval_return` (optional number).
 //! - `landscape.csv` (optional): `pc1`, `pc2`, `objective` (optional number) of the points of a
@@ -220,14 +222,17 @@ pub struct LandscapeDesign {
 pub fn read_designs(path: &Path) -> anyhow::Result<Option<Vec<DesignRow>>> {
     let Some(t) = Table::read(path)? else { return Ok(None) };
     let (index, kind, best) = (t.col("index")?, t.opt_col("kind"), t.col("best_eval_return")?);
-    t.rows(|r| {
-        Ok(DesignRow {
+    let prototype = t.opt_col("prototype");
+    let rows = t.rows(|r| {
+        let row = DesignRow {
             index: r.int(index)?,
             kind: kind.map(|k| r.text(k).to_string()).unwrap_or_default(),
             best_eval_return: r.num(best)?,
-        })
-    })
-    .map(Some)
+        };
+        Ok((row, prototype.is_some_and(|p| r.text(p) == "rejected")))
+    })?;
+    // A rejected proposal was never trained on; the design of that index is the next row.
+    Ok(Some(rows.into_iter().filter(|(_, rejected)| !rejected).map(|(row, _)| row).collect()))
 }
 
 /// `episodes.csv`, or `None` when the file does not exist.

@@ -13,6 +13,7 @@ use coadapt_design_optimizer::role::{self as optimizer, Optimizer, OptimizerSpec
 use coadapt_env_rpc::{RemoteEnv, RemoteOptions};
 use coadapt_learner::coadapt::{self, RunEvent};
 use coadapt_learner::networks;
+use coadapt_learner::prototype::{self, Outcome, ResetMode};
 use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 
 use crate::progress::duration;
@@ -122,14 +123,24 @@ impl RolloutEvaluator for SimEvaluator {
     }
 }
 
-/// The progress lines of a run: one per design start and end, one per episode with an ETA.
-pub fn progress_printer(cfg: &RunConfig) -> impl FnMut(&RunEvent<'_>) + use<> {
+/// The progress lines of a run into `dir`: one per design start and end, one per episode with
+/// an ETA (time spent waiting for an operator left out), and what an operator is asked to do.
+pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>) + use<> {
     let total_episodes = cfg.schedule.total_episodes();
     let designs_total = cfg.schedule.designs;
     let start = Instant::now();
     let mut done_episodes = 0usize;
     // Per design: the actors that ran its episodes, and the policy lag they acted with.
     let (mut actors, mut lags) = (std::collections::BTreeSet::new(), Vec::new());
+    let confirm = format!("coadapt confirm {}", dir.display());
+    // Waiting for an operator says nothing about how long the rest takes.
+    let (mut paused, mut waiting_since) = (0.0f64, None::<Instant>);
+    let mut resume = move |since: &mut Option<Instant>| {
+        if let Some(t) = since.take() {
+            paused += t.elapsed().as_secs_f64();
+        }
+        paused
+    };
     move |e: &RunEvent<'_>| match e {
         RunEvent::DesignStart { index, row } => {
             let pred = row.predicted_objective.map(|p| format!(", predicted objective {p:.3}")).unwrap_or_default();
@@ -147,7 +158,8 @@ pub fn progress_printer(cfg: &RunConfig) -> impl FnMut(&RunEvent<'_>) + use<> {
             actors.insert(row.actor);
             lags.push(row.policy_lag);
             let el = start.elapsed().as_secs_f64();
-            let eta = el / done_episodes as f64 * (total_episodes.saturating_sub(done_episodes)) as f64;
+            let busy = (el - resume(&mut waiting_since)).max(0.0);
+            let eta = busy / done_episodes as f64 * (total_episodes.saturating_sub(done_episodes)) as f64;
             let eval = row.eval_return.map(|r| format!(" eval {r:8.2}")).unwrap_or_default();
             let lag = if row.policy_lag > 0 { format!(" lag {}", row.policy_lag) } else { String::new() };
             eprintln!(
@@ -178,7 +190,40 @@ pub fn progress_printer(cfg: &RunConfig) -> impl FnMut(&RunEvent<'_>) + use<> {
             actors.clear();
             lags.clear();
         }
+        RunEvent::AwaitingPrototype { index, row, names } => {
+            waiting_since.get_or_insert_with(Instant::now);
+            let dims = prototype::describe(&prototype::named_dimensions(names, &row.design));
+            let flags = if row.kind == "initial" { "[--as-built ...]" } else { "[--as-built ...|--reject]" };
+            eprintln!(
+                "design {}/{designs_total} [{} {}] awaits a prototype: {dims}; build it, then: {confirm} {flags}",
+                index + 1,
+                row.kind,
+                row.method
+            );
+        }
+        RunEvent::PrototypeDecided { row, outcome, requested } => {
+            resume(&mut waiting_since);
+            let what = match outcome {
+                Outcome::Confirmed => "prototype confirmed".to_string(),
+                Outcome::AsBuilt(v) => format!("built as {} (requested {})", rounded(v), rounded(requested)),
+                Outcome::Rejected => "prototype rejected; asking the optimiser for its next-best design".to_string(),
+            };
+            eprintln!("design {}/{designs_total}: {what}", row.index + 1);
+        }
+        RunEvent::AwaitingReset { design_index, episode, episodes_in_design, mode } => {
+            waiting_since.get_or_insert_with(Instant::now);
+            let what = if *mode == ResetMode::Eval { "the evaluation after episode" } else { "episode" };
+            eprintln!("{what} {}/{episodes_in_design} of design {} awaits a reset: {confirm} --reset", episode + 1, design_index + 1);
+        }
+        RunEvent::ResetConfirmed { design_index, episode, mode } => {
+            resume(&mut waiting_since);
+            eprintln!("{}: reset confirmed", prototype::reset_name(*mode, *episode, *design_index));
+        }
     }
+}
+
+fn rounded(v: &[f32]) -> String {
+    format!("{:?}", v.iter().map(|v| (v * 1000.0).round() / 1000.0).collect::<Vec<_>>())
 }
 
 /// The learner: runs the schedule over `links` and writes the run directory `dir` (created
@@ -193,7 +238,8 @@ pub fn learner(
     let mut writer =
         coadapt_learner::run_dir::RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?;
     std::fs::write(dir.join("config.toml"), toml::to_string(cfg)?).context("writing config.toml")?;
-    let mut on_event = progress_printer(cfg);
+    // The operator may answer from another directory: name the run directory in full.
+    let mut on_event = progress_printer(cfg, &std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()));
     Ok(coadapt::run(&cfg.schedule, &cfg.learner, spec, cfg.seed, &cfg.flow, cfg.actors, links, &mut writer, shutdown, &mut on_event)?)
 }
 

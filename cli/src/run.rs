@@ -81,10 +81,15 @@ impl Default for RunConfig {
 ///
 /// The run directory gets the resolved `config.toml`, `designs.csv` (one row per design: kind,
 /// design vector, episodes, best and last evaluation return, the design objective predicted for
-/// it, design rollouts spent), `episodes.csv`, `checkpoints/` (population and individual
-/// networks after each design), `landscape.csv` and `plots/*.svg` (learning curves, best return
-/// over designs, design landscape). Rows are flushed as they are written: Ctrl-C stops after
-/// the current episode and keeps everything.
+/// it, design rollouts spent, prototype), `episodes.csv`, `checkpoints/` (population and
+/// individual networks after each design), `landscape.csv` and `plots/*.svg` (learning curves,
+/// best return over designs, design landscape). Rows are flushed as they are written: Ctrl-C
+/// stops after the current episode and keeps everything.
+///
+/// Real hardware: `schedule.confirm-designs = true` stops at each design until its prototype is
+/// built (answer with `coadapt confirm RUN_DIR [--as-built V1,V2,...|--reject]`), and
+/// `schedule.reset-needs-confirmation = true` before each episode until the robot is reset
+/// (`coadapt confirm RUN_DIR --reset`).
 ///
 /// Settings: the embedded reference protocol (`configs/half-cheetah-reference.toml`), replaced
 /// by `--config`, then the flags. Example configs: `configs/*.toml` (the reference, a reduced
@@ -194,6 +199,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
         spec.design.check_finite("design", d).map_err(|e| anyhow::anyhow!("schedule.initial-designs[{i}]: {e}"))?;
     }
     cfg.flow.lease().map_err(anyhow::Error::msg)?;
+    cfg.schedule.poll_interval().map_err(anyhow::Error::msg)?;
     cfg.remote.options()?;
     if cfg.fleet.transport == TransportKind::Shm && cfg.actors > cfg.fleet.max_actors {
         bail!("actors: {} is more than fleet.max-actors ({}); raise fleet.max-actors", cfg.actors, cfg.fleet.max_actors);
@@ -302,7 +308,17 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
     if let Err(e) = write_landscape(cfg, dir, outcome) {
         eprintln!("warning: design landscape not written: {e:#}");
     }
-    let plots = crate::plot::draw_run(dir).context("drawing the plots")?;
+    let interrupted = outcome.interrupted || shutdown.load(Ordering::Relaxed);
+    let plots = match crate::plot::draw_run(dir) {
+        Ok(p) => p,
+        // Stopped before anything was learned (say, Ctrl-C while the first prototype was
+        // awaited): the summary still says where the run got to.
+        Err(e) if interrupted => {
+            eprintln!("warning: no plots: {e:#}");
+            Vec::new()
+        }
+        Err(e) => return Err(e.context("drawing the plots")),
+    };
     for p in &plots {
         eprintln!("wrote {}", p.display());
     }
@@ -314,7 +330,7 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         "exploit": cfg.optimizer.exploit.name(),
         "transport": cfg.fleet.transport.name(),
         "designs": outcome.designs.len(),
-        "interrupted": outcome.interrupted || shutdown.load(Ordering::Relaxed),
+        "interrupted": interrupted,
         "best_eval_return": best.map(|b| b.0),
         "best_design": best.map(|b| b.1.design.clone()),
         "design_rollouts": outcome.designs.iter().map(|d| d.design_rollouts).sum::<u64>(),
@@ -325,6 +341,11 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         "episodes_reissued": t.reissued,
         "episodes_restarted": t.restarted,
         "max_policy_lag": t.max_policy_lag,
+        // The prototype step (schedule.confirm-designs, schedule.reset-needs-confirmation).
+        "prototype_waiting_seconds": t.waiting_for_prototype,
+        "reset_waiting_seconds": t.waiting_for_reset,
+        "prototypes_rejected": outcome.rejected.len(),
+        "population_updates_while_waiting": t.updates_while_waiting,
         // Every transition in the replay, and every episode start: only whole episodes get in.
         "replay_transitions": outcome.learner.population_transitions(),
         "start_states": outcome.learner.start_states(),

@@ -197,3 +197,28 @@ fn one_of_everything_is_drawn_without_panicking() {
     assert_eq!(plot::draw_run(&dir).unwrap().len(), 2);
     fs::remove_dir_all(&dir).unwrap();
 }
+
+/// With the prototype step a design may have been rejected (a row of its own, no episodes,
+/// followed by the row of the design built instead) or still await its prototype (no episodes,
+/// no returns): the plots leave the rejected one out and draw the rest.
+#[test]
+fn rejected_and_awaiting_prototypes_leave_the_plots_intact() {
+    let dir = tmpdir("prototype");
+    let designs = "index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts,method,prototype
+0,initial,1;1;1,2,-50.5,-60,,0,fixed,confirmed
+1,exploit,1.2;0.9;1.1,0,,,33.1,0,pso-q,rejected
+1,exploit,1.3;0.9;1.1,2,12.25,10,30,0,pso-q,as-built (requested 1.25;0.9;1.1)
+2,explore,0.7;1.4;0.95,0,,,,0,novelty,awaiting
+";
+    fs::write(dir.join("designs.csv"), designs).unwrap();
+    fs::write(dir.join("episodes.csv"), "design,episode,return,eval_return\n0,0,-70,\n0,1,-60,-50.5\n1,0,5,\n1,1,10,12.25\n").unwrap();
+    let rows = plot::read_designs(&dir.join("designs.csv")).unwrap().unwrap();
+    assert_eq!(rows.iter().map(|r| (r.index, r.best_eval_return)).collect::<Vec<_>>(), [(0, Some(-50.5)), (1, Some(12.25)), (2, None)]);
+    let best = plot::best_per_design(&rows, &plot::read_episodes(&dir.join("episodes.csv")).unwrap().unwrap());
+    assert_eq!(
+        best.iter().map(|b| (b.index, b.kind.as_str(), b.best)).collect::<Vec<_>>(),
+        [(0, "initial", Some(-50.5)), (1, "exploit", Some(12.25)), (2, "explore", None)]
+    );
+    assert_eq!(plot::draw_run(&dir).unwrap().len(), 2, "learning curves and best return; no landscape yet");
+    fs::remove_dir_all(&dir).unwrap();
+}

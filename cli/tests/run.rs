@@ -58,6 +58,7 @@ fn the_tiny_config_writes_the_whole_run_directory() {
     let summary: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
     assert_eq!(summary["designs"], 4);
     assert_eq!(summary["design_rollouts"], 0, "FEAR spends no design rollouts");
+    assert_eq!((summary["prototype_waiting_seconds"].as_f64(), summary["prototypes_rejected"].as_u64()), (Some(0.0), Some(0)));
 
     // The resolved config reads back as the config that ran.
     let mut resolved: RunConfig = toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
@@ -70,8 +71,20 @@ fn the_tiny_config_writes_the_whole_run_directory() {
     let (h, rows) = csv(&out.join("designs.csv"));
     assert_eq!(
         h,
-        ["index", "kind", "design", "episodes", "best_eval_return", "last_eval_return", "predicted_objective", "design_rollouts", "method"]
+        [
+            "index",
+            "kind",
+            "design",
+            "episodes",
+            "best_eval_return",
+            "last_eval_return",
+            "predicted_objective",
+            "design_rollouts",
+            "method",
+            "prototype"
+        ]
     );
+    assert_eq!(col(&h, &rows, "prototype"), ["", "", "", ""], "no prototype step unless schedule.confirm-designs");
     assert_eq!(col(&h, &rows, "index"), ["0", "1", "2", "3"]);
     assert_eq!(col(&h, &rows, "kind"), ["initial", "initial", "exploit", "explore"]);
     assert_eq!(col(&h, &rows, "method"), ["fixed", "fixed", "pso-q", "novelty"]);

@@ -19,6 +19,8 @@
 //! - [`landscape`]: the design landscape of thesis Fig. 5.9: [`landscape::Pca2`], the plane of the
 //!   first two principal components of the designs tried, and [`landscape::grid`], a grid over
 //!   it mapped back to (clipped) designs for the objective to score.
+//! - [`reject`]: designs an operator rejected as prototypes, and the radius around each that
+//!   no proposal may enter (an objective wrapper scoring it minus infinity).
 //! - [`role`]: the optimiser role: design requests in, designs out, by PSO/CMA-ES over Q,
 //!   the simulation baselines (through a [`role::RolloutEvaluator`]), ES or random; and
 //!   exploration by random designs or novelty.
@@ -32,6 +34,7 @@ pub mod landscape;
 pub mod novelty;
 pub mod objective;
 pub mod pso;
+pub mod reject;
 pub mod role;
 pub mod swarm;
 

@@ -13,6 +13,11 @@
 //!
 //! Exploration requests use `explore`: `random` or `novelty` (Eq. 5.7). Every reply carries
 //! the Eq. 5.6 score of the chosen design under the current population networks.
+//!
+//! A request may list designs an operator rejected as prototypes ([`crate::reject`]): the
+//! searches over Q and over rollouts score their neighbourhood (`reject-radius`) minus
+//! infinity, `random` draws again, the ES baselines stop training on a rejected best, and
+//! novelty search counts them as chosen designs to move away from.
 
 use std::sync::atomic::AtomicBool;
 
@@ -26,6 +31,7 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::es::{AskTell, OpenAiEs, OpenAiEsConfig, one_generation};
+use crate::reject::Rejected;
 use crate::{Cmaes, CmaesConfig, CriticObjective, DesignObjective, NoveltyConfig, PsoConfig, QMode, SearchResult, cmaes, novelty, pso};
 
 /// How exploitation designs are chosen.
@@ -115,6 +121,10 @@ pub struct OptimizerConfig {
     /// Reset seeds of the simulation baselines' rollouts: `fresh` (one per rollout, the
     /// reference) or `fixed` (the same start for every candidate).
     pub sim_seed: SimSeed,
+    /// How far (box-normalised Euclidean distance: each dimension divided by its width) a
+    /// proposal must be from every design an operator rejected as a prototype; 0.05 = 5 % of
+    /// the box.
+    pub reject_radius: f32,
 }
 
 impl Default for OptimizerConfig {
@@ -134,6 +144,7 @@ impl Default for OptimizerConfig {
             cmaes_es: CmaesConfig { population: Some(9), ..CmaesConfig::default() },
             es_train_on: EsTrainOn::BestSeen,
             sim_seed: SimSeed::Fresh,
+            reject_radius: 0.05,
         }
     }
 }
@@ -220,6 +231,9 @@ impl<'a> Optimizer<'a> {
         if !(cfg.pessimism.is_finite() && cfg.pessimism >= 0.0) {
             return Err(OptimizerError::Config(format!("optimizer.pessimism: {} is not a finite number >= 0", cfg.pessimism)));
         }
+        if !(cfg.reject_radius.is_finite() && cfg.reject_radius >= 0.0) {
+            return Err(OptimizerError::Config(format!("optimizer.reject-radius: {} is not a finite number >= 0", cfg.reject_radius)));
+        }
         if cfg.exploit.needs_rollouts() && evaluator.is_none() {
             return Err(OptimizerError::Config(format!("optimizer.exploit = {} needs simulation rollouts", cfg.exploit.name())));
         }
@@ -266,25 +280,36 @@ impl<'a> Optimizer<'a> {
         };
         let mut q = CriticObjective::new(&objective, mode, self.cfg.cores);
         let bounds = self.spec.bounds.clone();
+        let rejected = Rejected::new(&req.rejected, &bounds, self.cfg.reject_radius);
         let (method, result, rollouts): (&str, SearchResult, u64) = match req.kind {
             DesignKind::Explore => match self.cfg.explore {
-                ExploreMethod::Random => ("random", self.random(), 0),
+                ExploreMethod::Random => ("random", self.random(&rejected).map_err(err)?, 0),
                 ExploreMethod::Novelty => {
-                    let r = novelty::most_novel(&req.chosen, &bounds, &self.cfg.novelty, seed).map_err(|e| err(e.to_string()))?;
+                    // A rejected body is one to move away from, like a chosen one.
+                    let seen = [req.chosen.as_slice(), req.rejected.as_slice()].concat();
+                    let r = novelty::most_novel(&seen, &bounds, &self.cfg.novelty, seed).map_err(|e| err(e.to_string()))?;
                     ("novelty", r, 0)
                 }
             },
             DesignKind::Exploit => {
                 let m = self.cfg.exploit;
                 let r = match m {
-                    ExploitMethod::PsoQ => pso::maximise(&mut q, &bounds, &self.cfg.pso, seed),
-                    ExploitMethod::CmaesQ => cmaes::maximise(&mut q, &bounds, &self.cfg.cmaes, seed),
-                    ExploitMethod::Random => Ok(self.random()),
+                    ExploitMethod::PsoQ => pso::maximise(&mut rejected.guard(&mut q), &bounds, &self.cfg.pso, seed),
+                    ExploitMethod::CmaesQ => cmaes::maximise(&mut rejected.guard(&mut q), &bounds, &self.cfg.cmaes, seed),
+                    ExploitMethod::Random => self.random(&rejected).map_err(crate::SearchError::Config),
                     ExploitMethod::SimPso | ExploitMethod::SimCmaes | ExploitMethod::OpenaiEs | ExploitMethod::CmaesEs => {
-                        self.by_simulation(m, &w.policy, &bounds, seed)
+                        self.by_simulation(m, &w.policy, &bounds, &rejected, seed)
                     }
                 }
                 .map_err(|e| err(e.to_string()))?;
+                if rejected.near(&r.design) {
+                    return Err(err(format!(
+                        "{} found nothing outside optimizer.reject-radius ({}) of the {} rejected design(s); lower the radius",
+                        m.name(),
+                        self.cfg.reject_radius,
+                        req.rejected.len() / bounds.dim().max(1)
+                    )));
+                }
                 let rollouts = if m.needs_rollouts() { r.evaluations as u64 } else { 0 };
                 (m.name(), r, rollouts)
             }
@@ -300,10 +325,20 @@ impl<'a> Optimizer<'a> {
         })
     }
 
-    fn random(&mut self) -> SearchResult {
+    /// Uniform in the box, drawn again while it falls near a rejected design (at most
+    /// [`RANDOM_DRAWS`] times).
+    fn random(&mut self, rejected: &Rejected) -> Result<SearchResult, String> {
         let mut d = vec![0.0; self.spec.bounds.dim()];
-        self.spec.bounds.sample(&mut self.rng, &mut d);
-        SearchResult { design: d, score: f32::NAN, history: vec![], evaluations: 0 }
+        for _ in 0..RANDOM_DRAWS {
+            self.spec.bounds.sample(&mut self.rng, &mut d);
+            if !rejected.near(&d) {
+                return Ok(SearchResult { design: d, score: f32::NAN, history: vec![], evaluations: 0 });
+            }
+        }
+        Err(format!(
+            "{RANDOM_DRAWS} random designs all fell within optimizer.reject-radius ({}) of a rejected design; lower the radius",
+            self.cfg.reject_radius
+        ))
     }
 
     fn by_simulation(
@@ -311,6 +346,7 @@ impl<'a> Optimizer<'a> {
         m: ExploitMethod,
         policy: &[f32],
         bounds: &BoxSpace,
+        rejected: &Rejected,
         seed: u64,
     ) -> Result<SearchResult, crate::SearchError> {
         let Some(ev) = self.evaluator.as_deref_mut() else {
@@ -330,6 +366,7 @@ impl<'a> Optimizer<'a> {
                 failure.get_or_insert(e);
             }
         };
+        let mut sim = rejected.guard(&mut sim);
         let r = match m {
             ExploitMethod::SimPso => pso::maximise(&mut sim, bounds, &self.cfg.sim_pso, seed),
             ExploitMethod::SimCmaes => cmaes::maximise(&mut sim, bounds, &self.cfg.sim_cmaes, seed),
@@ -344,6 +381,10 @@ impl<'a> Optimizer<'a> {
         let r = r?;
         if !matches!(m, ExploitMethod::OpenaiEs | ExploitMethod::CmaesEs) {
             return Ok(r);
+        }
+        // A rejected best is no longer the best seen: the operator will not build it.
+        if self.es_best.as_ref().is_some_and(|b| rejected.near(&b.design)) {
+            self.es_best = None;
         }
         if self.es_best.as_ref().is_none_or(|b| r.score > b.score) {
             self.es_best = Some(r.clone());
@@ -360,6 +401,9 @@ impl CriticObjective<'_> {
         crate::SwarmObjective::evaluate(self, design, out);
     }
 }
+
+/// Random draws before `random` gives up finding a design away from every rejected one.
+pub const RANDOM_DRAWS: usize = 10_000;
 
 /// Serves design requests until the learner closes the queue (`Ok`) or `shutdown` is set.
 pub fn run(opt: &mut Optimizer<'_>, links: &mut OptimizerLinks, shutdown: &AtomicBool) -> Result<u64, OptimizerError> {

@@ -51,7 +51,14 @@ fn weights(s: &OptimizerSpec) -> Weights {
 }
 
 fn request(index: u32) -> DesignRequest {
-    DesignRequest { index, kind: DesignKind::Exploit, weights_version: 1, start_states: vec![0.1; 3 * OBS], chosen: vec![] }
+    DesignRequest {
+        index,
+        kind: DesignKind::Exploit,
+        weights_version: 1,
+        start_states: vec![0.1; 3 * OBS],
+        chosen: vec![],
+        rejected: vec![],
+    }
 }
 
 fn sim_pso(sim_seed: SimSeed) -> Vec<(Vec<f32>, u64, f32)> {

@@ -10,18 +10,35 @@
 //! Designs: `initial-designs` fixed ones with `initial-episodes` each, then
 //! `episodes-per-design` for each later one, alternating exploitation and exploration
 //! (`alternate = false`: every later design is an exploitation).
+//!
+//! For real hardware (`confirm-designs`, `reset-needs-confirmation`) the run stops before each
+//! design until an operator has built its prototype, and before each episode until the robot
+//! has been reset by hand; [`crate::prototype`] has the files they answer through.
+//!
+//! # Layout
+//! - this file: the schedule's config, errors, events and [`run`], the loop over designs and
+//!   their episodes;
+//! - `driver`: the learner's side of the fleet (weights out, episodes out, experience in,
+//!   design requests);
+//! - `operator`: choosing a design with the operator's verdict on its prototype, and the
+//!   waits for the operator.
+
+mod driver;
+mod operator;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use coadapt_core::{EnvSpec, Transition};
+use coadapt_core::EnvSpec;
 use coadapt_transport::messages::Dims;
-use coadapt_transport::{Assignment, DesignKind, DesignRequest, EpisodeMode, LearnerLinks, TransportError, Validate, Weights};
+use coadapt_transport::{DesignKind, EpisodeMode, LearnerLinks, TransportError};
 use serde::{Deserialize, Serialize};
 
 use crate::fear::{ActingPolicy, FearLearner, FearLearnerConfig};
-use crate::flow::{Completed, FlowConfig, LearnerTime, Pending};
+use crate::flow::{Completed, FlowConfig, LearnerTime};
+use crate::prototype::{Outcome, ResetMode};
 use crate::run_dir::{DesignRow, EpisodeRow, RunWriter};
+use driver::Learner;
 
 /// The co-adaptation schedule; defaults are the reference's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -43,8 +60,22 @@ pub struct ScheduleConfig {
     /// Evaluate the deterministic policy after every this many episodes of a design (and
     /// always after its last); 0: only after the last.
     pub eval_every: usize,
-    /// Fail when no actor has sent anything for this long (seconds): the fleet is gone.
+    /// Fail when no actor has sent anything for this long (seconds): the fleet is gone. Waits
+    /// for an operator do not count.
     pub episode_timeout_secs: f64,
+    /// Real hardware: wait for an operator to build each design's prototype (the initial ones
+    /// too) and answer `coadapt confirm RUN_DIR` (built as asked), `--as-built V1,V2,...` (the
+    /// measured dimensions replace the requested ones) or `--reject` (the optimiser proposes
+    /// its next-best design).
+    pub confirm_designs: bool,
+    /// Population updates per second of waiting for an operator, on the population buffer
+    /// (0: none).
+    pub train_while_waiting: usize,
+    /// Real hardware that a person resets: wait before every episode (training and evaluation)
+    /// until an operator answers `coadapt confirm RUN_DIR --reset`.
+    pub reset_needs_confirmation: bool,
+    /// How often a waiting run looks for the operator's answer (seconds).
+    pub confirm_poll_secs: f64,
 }
 
 impl Default for ScheduleConfig {
@@ -58,6 +89,10 @@ impl Default for ScheduleConfig {
             start_state_batch: 32,
             eval_every: 1,
             episode_timeout_secs: 600.0,
+            confirm_designs: false,
+            train_while_waiting: 0,
+            reset_needs_confirmation: false,
+            confirm_poll_secs: 0.5,
         }
     }
 }
@@ -70,6 +105,15 @@ impl ScheduleConfig {
 
     pub fn total_episodes(&self) -> usize {
         (0..self.designs).map(|i| self.episodes_of(i)).sum()
+    }
+
+    /// `confirm-poll-secs` as a duration, refusing what is not a positive number of seconds.
+    pub fn poll_interval(&self) -> Result<Duration, String> {
+        let t = self.confirm_poll_secs;
+        match Duration::try_from_secs_f64(t) {
+            Ok(d) if t > 0.0 => Ok(d),
+            _ => Err(format!("schedule.confirm-poll-secs: {t} is not a positive number of seconds")),
+        }
     }
 
     /// The kind of design `i` (`None`: a fixed initial design).
@@ -107,269 +151,56 @@ pub enum CoadaptError {
 /// What the learner reports as it goes (for progress lines).
 #[derive(Clone, Debug)]
 pub enum RunEvent<'a> {
-    DesignStart { index: usize, row: &'a DesignRow },
-    Episode { row: &'a EpisodeRow, episodes_in_design: usize },
-    DesignEnd { row: &'a DesignRow },
+    DesignStart {
+        index: usize,
+        row: &'a DesignRow,
+    },
+    Episode {
+        row: &'a EpisodeRow,
+        episodes_in_design: usize,
+    },
+    DesignEnd {
+        row: &'a DesignRow,
+    },
+    /// `row` waits for its prototype (`prototype.json` is written); `names` name the entries
+    /// of `row.design`.
+    AwaitingPrototype {
+        index: usize,
+        row: &'a DesignRow,
+        names: &'a [String],
+    },
+    /// The operator's verdict on `row`'s prototype; `requested` is the design asked for (as
+    /// built, `row.design` is the measured one).
+    PrototypeDecided {
+        row: &'a DesignRow,
+        outcome: &'a Outcome,
+        requested: &'a [f32],
+    },
+    /// An episode waits for the robot to be reset by hand (`reset.json` is written).
+    AwaitingReset {
+        design_index: usize,
+        episode: usize,
+        episodes_in_design: usize,
+        mode: ResetMode,
+    },
+    ResetConfirmed {
+        design_index: usize,
+        episode: usize,
+        mode: ResetMode,
+    },
 }
 
 /// What a finished (or interrupted) run leaves.
 #[derive(Debug)]
 pub struct RunOutcome {
     pub learner: FearLearner,
+    /// The designs trained on (as built), in order.
     pub designs: Vec<DesignRow>,
+    /// Proposals the operator rejected, in order (each also a row of `designs.csv`).
+    pub rejected: Vec<DesignRow>,
     pub interrupted: bool,
     /// Where the learner's time went.
     pub time: LearnerTime,
-}
-
-fn mix(seed: u64, i: u64) -> u64 {
-    let mut z = seed ^ i.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z ^ (z >> 27)
-}
-
-const POLL: Duration = Duration::from_millis(100);
-
-struct Learner<'a> {
-    cfg: &'a ScheduleConfig,
-    dims: Dims,
-    links: &'a mut LearnerLinks,
-    shutdown: &'a AtomicBool,
-    fear: FearLearner,
-    acting_version: u64,
-    /// The acting policy changed since it was last published.
-    acting_dirty: bool,
-    acting_which: Option<ActingPolicy>,
-    population_version: u64,
-    next_assignment: u64,
-    seed: u64,
-    lease: Duration,
-    /// No message at all for this long fails the run (every actor gone).
-    silence: Duration,
-    pending: Vec<Pending>,
-    time: LearnerTime,
-}
-
-impl Learner<'_> {
-    /// Publishes the acting policy if it changed; returns the version actors must act with.
-    fn publish_acting(&mut self) -> Result<u64, CoadaptError> {
-        let which = self.fear.acting();
-        if !self.acting_dirty && self.acting_which == Some(which) {
-            return Ok(self.acting_version);
-        }
-        let t = Instant::now();
-        self.acting_version += 1;
-        let policy = self.fear.agent(which).policy_params().to_vec();
-        self.links.acting_weights.publish(Weights { version: self.acting_version, policy, q1: vec![], q2: vec![] })?;
-        self.acting_dirty = false;
-        self.acting_which = Some(which);
-        self.time.sending += t.elapsed().as_secs_f64();
-        Ok(self.acting_version)
-    }
-
-    fn publish_population(&mut self) -> Result<u64, CoadaptError> {
-        self.population_version += 1;
-        let pop = self.fear.agent(ActingPolicy::Population);
-        let w = Weights {
-            version: self.population_version,
-            policy: pop.policy_params().to_vec(),
-            q1: pop.critic_params(0).0.to_vec(),
-            q2: pop.critic_params(1).0.to_vec(),
-        };
-        self.links.population_weights.publish(w)?;
-        Ok(self.population_version)
-    }
-
-    /// Hands episode `episode` of design `design_index` to the actors.
-    fn issue(&mut self, design_index: usize, design: &[f32], episode: usize, global: u64, mode: EpisodeMode) -> Result<(), CoadaptError> {
-        let version = self.publish_acting()?;
-        let seed = mix(self.seed, 2 * global + u64::from(mode == EpisodeMode::Eval));
-        self.send_assignment(
-            design_index,
-            design,
-            Pending { id: 0, episode, global, mode, seed, min_weights_version: version, chunks: Vec::new(), last_heard: Instant::now() },
-        )
-    }
-
-    fn send_assignment(&mut self, design_index: usize, design: &[f32], mut p: Pending) -> Result<(), CoadaptError> {
-        let t = Instant::now();
-        self.next_assignment += 1;
-        p.id = self.next_assignment;
-        p.last_heard = Instant::now();
-        let a = Assignment {
-            id: p.id,
-            design_index: design_index as u32,
-            design: design.to_vec(),
-            mode: p.mode,
-            seed: p.seed,
-            min_weights_version: p.min_weights_version,
-        };
-        self.links.assignments.send(a)?;
-        self.pending.push(p);
-        self.time.sending += t.elapsed().as_secs_f64();
-        Ok(())
-    }
-
-    /// Issues again every episode whose actor has fallen silent.
-    fn reissue_expired(&mut self, design_index: usize, design: &[f32]) -> Result<(), CoadaptError> {
-        while let Some(i) = self.pending.iter().position(|p| p.last_heard.elapsed() > self.lease) {
-            let mut p = self.pending.swap_remove(i);
-            let old = p.id;
-            p.chunks.clear();
-            self.send_assignment(design_index, design, p)?;
-            self.time.reissued += 1;
-            eprintln!(
-                "learner: assignment {old} (design {design_index}) silent for {:?}: issued again as {}",
-                self.lease, self.next_assignment
-            );
-        }
-        Ok(())
-    }
-
-    /// Waits for the next episode to come back; `None` on shutdown.
-    fn next_completed(&mut self, design_index: usize, design: &[f32]) -> Result<Option<Completed>, CoadaptError> {
-        let mut heard = Instant::now();
-        loop {
-            if self.shutdown.load(Ordering::Relaxed) {
-                return Ok(None);
-            }
-            // Every time round, not only when the queue is quiet: with many actors it rarely is.
-            self.reissue_expired(design_index, design)?;
-            let t = Instant::now();
-            let got = match self.links.experience.recv_timeout(POLL) {
-                Ok(got) => got,
-                // Every actor has gone for now; restarted or new ones may join.
-                Err(TransportError::Closed) => {
-                    std::thread::sleep(POLL);
-                    None
-                }
-                Err(e) => return Err(e.into()),
-            };
-            self.time.waiting += t.elapsed().as_secs_f64();
-            let Some(chunk) = got else {
-                if heard.elapsed() > self.silence {
-                    return Err(CoadaptError::Protocol(format!(
-                        "no actor has sent anything for {:?} ({} episodes outstanding): are the actors running?",
-                        self.silence,
-                        self.pending.len()
-                    )));
-                }
-                continue;
-            };
-            heard = Instant::now();
-            let Some(i) = self.pending.iter().position(|p| p.id == chunk.assignment) else {
-                // A late chunk of an episode already issued again elsewhere.
-                continue;
-            };
-            if let Err(e) = chunk.validate(&self.dims) {
-                let p = self.pending.swap_remove(i);
-                eprintln!("learner: a malformed chunk of assignment {} from actor {}: {e}; issuing the episode again", p.id, chunk.actor);
-                self.send_assignment(design_index, design, Pending { chunks: Vec::new(), ..p })?;
-                continue;
-            }
-            let p = &mut self.pending[i];
-            p.last_heard = Instant::now();
-            let end = chunk.end;
-            if chunk.first && !p.chunks.is_empty() {
-                // The actor ran the episode again from its start (the first attempt failed in
-                // its environment): what that attempt sent is forgotten.
-                eprintln!(
-                    "learner: actor {} restarted assignment {}: dropping {} chunk(s) of its failed attempt",
-                    chunk.actor,
-                    p.id,
-                    p.chunks.len()
-                );
-                p.chunks.clear();
-                self.time.restarted += 1;
-            }
-            if !chunk.is_empty() || chunk.end.is_some() {
-                p.chunks.push(chunk);
-            }
-            if let Some(end) = end {
-                let p = self.pending.swap_remove(i);
-                let last = p.chunks.last();
-                let actor = last.map_or(0, |c| c.actor);
-                let weights_version = p.chunks.iter().map(|c| c.weights_version).min().unwrap_or(p.min_weights_version);
-                let policy_lag = self.acting_version.saturating_sub(weights_version);
-                self.time.max_policy_lag = self.time.max_policy_lag.max(policy_lag);
-                return Ok(Some(Completed {
-                    episode: p.episode,
-                    global: p.global,
-                    mode: p.mode,
-                    chunks: p.chunks,
-                    end,
-                    actor,
-                    weights_version,
-                    policy_lag,
-                }));
-            }
-        }
-    }
-
-    /// Puts a finished training episode into the replay buffers and trains on it.
-    fn learn_from(&mut self, c: &Completed) -> Result<(), CoadaptError> {
-        let (o, a) = (self.dims.obs, self.dims.act);
-        for chunk in &c.chunks {
-            if chunk.first {
-                self.fear.add_start_state(&chunk.obs[..o])?;
-            }
-            for i in 0..chunk.len() {
-                self.fear.add_transition(&Transition {
-                    obs: &chunk.obs[i * o..(i + 1) * o],
-                    action: &chunk.actions[i * a..(i + 1) * a],
-                    reward: chunk.rewards[i],
-                    next_obs: &chunk.next_obs[i * o..(i + 1) * o],
-                    terminated: chunk.terminated[i],
-                })?;
-            }
-        }
-        let t = Instant::now();
-        self.fear.end_episode()?;
-        self.time.training += t.elapsed().as_secs_f64();
-        self.acting_dirty = true;
-        Ok(())
-    }
-
-    fn request_design(
-        &mut self,
-        index: usize,
-        kind: DesignKind,
-        chosen: &[f32],
-    ) -> Result<Option<coadapt_transport::DesignReply>, CoadaptError> {
-        let version = self.publish_population()?;
-        let start_states = self
-            .fear
-            .sample_start_states(self.cfg.start_state_batch.max(1))
-            .ok_or_else(|| CoadaptError::Protocol("no start states yet: the run needs at least one initial design".into()))?;
-        let req = DesignRequest { index: index as u32, kind, weights_version: version, start_states, chosen: chosen.to_vec() };
-        self.links.design_requests.send(req)?;
-        let t = Instant::now();
-        let result = loop {
-            if self.shutdown.load(Ordering::Relaxed) {
-                break Ok(None);
-            }
-            let reply = match self.links.design_replies.recv_timeout(POLL) {
-                Ok(Some(reply)) => reply,
-                Ok(None) => continue,
-                // The optimiser has gone; a restarted one answers the request it finds.
-                Err(TransportError::Closed) => {
-                    std::thread::sleep(POLL);
-                    continue;
-                }
-                Err(e) => break Err(e.into()),
-            };
-            if reply.index as usize != index {
-                eprintln!("learner: ignored a reply for design {} while waiting for {index}", reply.index);
-                continue;
-            }
-            if let Err(e) = reply.validate(&self.dims) {
-                break Err(CoadaptError::Protocol(format!("the optimiser's design {index} is malformed: {e}")));
-            }
-            break Ok(Some(reply));
-        };
-        self.time.waiting += t.elapsed().as_secs_f64();
-        result
-    }
 }
 
 /// Runs the whole co-adaptation. `initial` replaces an empty `initial-designs`.
@@ -396,11 +227,14 @@ pub fn run(
     for (i, d) in cfg.initial_designs.iter().enumerate() {
         spec.design.check_finite("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
     }
+    cfg.poll_interval().map_err(CoadaptError::Config)?;
     let fear = FearLearner::new(dims.obs, dims.act, fear_cfg.clone(), seed).map_err(|e| CoadaptError::Config(e.to_string()))?;
     let lease = flow.lease().map_err(CoadaptError::Config)?;
     let in_flight = flow.in_flight(actors);
+    let dir = out.dir().to_path_buf();
     let mut l = Learner {
         cfg,
+        spec,
         dims,
         links,
         shutdown,
@@ -415,39 +249,16 @@ pub fn run(
         silence: Duration::from_secs_f64(t),
         pending: Vec::new(),
         time: LearnerTime::default(),
+        dir: &dir,
+        rejected: Vec::new(),
     };
     let start = Instant::now();
     let mut rows: Vec<DesignRow> = Vec::new();
     let mut chosen: Vec<f32> = Vec::new();
     let (mut global, mut steps) = (0u64, 0u64);
+    let mut stopped = false;
     for index in 0..cfg.designs {
-        let mut row = match cfg.kind_of(index) {
-            None => DesignRow {
-                index,
-                kind: "initial".into(),
-                design: cfg.initial_designs[index].clone(),
-                episodes: 0,
-                best_eval_return: None,
-                last_eval_return: None,
-                predicted_objective: None,
-                design_rollouts: 0,
-                method: "fixed".into(),
-            },
-            Some(kind) => {
-                let Some(reply) = l.request_design(index, kind, &chosen)? else { break };
-                DesignRow {
-                    index,
-                    kind: if kind == DesignKind::Exploit { "exploit" } else { "explore" }.into(),
-                    design: reply.design,
-                    episodes: 0,
-                    best_eval_return: None,
-                    last_eval_return: None,
-                    predicted_objective: reply.predicted_objective,
-                    design_rollouts: reply.design_rollouts,
-                    method: reply.method,
-                }
-            }
-        };
+        let Some(mut row) = l.choose_design(index, &chosen, out, on_event)? else { break };
         chosen.extend_from_slice(&row.design);
         on_event(&RunEvent::DesignStart { index, row: &row });
         l.fear.begin_design(index);
@@ -459,8 +270,12 @@ pub fn run(
         // Training episodes back and trained on, waiting for their evaluation.
         let mut awaiting_eval: Vec<(Completed, u64)> = Vec::new();
         let mut interrupted = false;
-        while written < n {
+        'episodes: while written < n {
             while l.pending.len() < in_flight && issued < n {
+                if !l.reset_before(index, issued, n, ResetMode::Train, on_event)? {
+                    interrupted = true;
+                    break 'episodes;
+                }
                 l.issue(index, &design, issued, base + issued as u64, EpisodeMode::Train)?;
                 issued += 1;
             }
@@ -474,6 +289,10 @@ pub fn run(
                     steps += c.end.length;
                     let e = c.episode;
                     if cfg.eval_every > 0 && (e + 1) % cfg.eval_every == 0 || e + 1 == n {
+                        if !l.reset_before(index, e, n, ResetMode::Eval, on_event)? {
+                            interrupted = true;
+                            break 'episodes;
+                        }
                         l.issue(index, &design, e, c.global, EpisodeMode::Eval)?;
                         awaiting_eval.push((c, steps));
                         continue;
@@ -517,9 +336,10 @@ pub fn run(
         on_event(&RunEvent::DesignEnd { row: &row });
         rows.push(row);
         if interrupted || shutdown.load(Ordering::Relaxed) {
-            return Ok(RunOutcome { learner: l.fear, designs: rows, interrupted: true, time: l.time });
+            stopped = true;
+            break;
         }
     }
-    let interrupted = rows.len() < cfg.designs;
-    Ok(RunOutcome { learner: l.fear, designs: rows, interrupted, time: l.time })
+    let interrupted = stopped || rows.len() < cfg.designs;
+    Ok(RunOutcome { learner: l.fear, designs: rows, rejected: l.rejected, interrupted, time: l.time })
 }

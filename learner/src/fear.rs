@@ -270,4 +270,26 @@ impl FearLearner {
         }
         Ok(out)
     }
+
+    /// `n` population updates on batches from the population buffer, outside the per-episode
+    /// schedule (while the run waits for a prototype or a reset); checked for non-finite
+    /// losses and parameters as [`Self::end_episode`] checks them. Returns the updates made: 0
+    /// while the population buffer is empty.
+    pub fn train_population(&mut self, n: usize) -> Result<usize, TrainError> {
+        if self.pop_replay.is_empty() || n == 0 {
+            return Ok(0);
+        }
+        let (design, episode) = (self.design_index.unwrap_or(0), self.episode_in_design);
+        for _ in 0..n {
+            self.pop_replay.sample(&mut self.rng, &mut self.pop_batch)?;
+            let l = self.population.update(&self.pop_batch);
+            if let Some(what) = non_finite_loss(&l) {
+                return Err(TrainError::NonFinite { pair: "population", update: self.population.updates(), design, episode, what });
+            }
+        }
+        if let Some(what) = non_finite_param(&self.population) {
+            return Err(TrainError::NonFinite { pair: "population", update: self.population.updates(), design, episode, what });
+        }
+        Ok(n)
+    }
 }

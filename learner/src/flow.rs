@@ -108,7 +108,7 @@ pub struct LearnerTime {
     pub waiting: f64,
     /// Publishing weights and sending assignments.
     pub sending: f64,
-    /// Gradient updates.
+    /// Gradient updates (those made while waiting for an operator too).
     pub training: f64,
     /// Episodes issued again after their actor fell silent.
     pub reissued: u64,
@@ -117,4 +117,11 @@ pub struct LearnerTime {
     pub restarted: u64,
     /// Largest policy lag seen (weights versions between acting and the newest).
     pub max_policy_lag: u64,
+    /// Waiting for an operator to build (or reject) a prototype (`schedule.confirm-designs`),
+    /// population updates made meanwhile included; not counted in `waiting`.
+    pub waiting_for_prototype: f64,
+    /// Waiting for an operator to reset the robot (`schedule.reset-needs-confirmation`).
+    pub waiting_for_reset: f64,
+    /// Population updates made while waiting (`schedule.train-while-waiting`).
+    pub updates_while_waiting: u64,
 }

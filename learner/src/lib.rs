@@ -11,6 +11,8 @@
 //!   per-episode training schedule.
 //! - [`coadapt`]: the learner role of a co-adaptation: the design schedule, episodes over the
 //!   transport, evaluation, and the run directory's rows ([`run_dir`]).
+//! - [`prototype`]: the prototype step for real hardware: the files through which a waiting
+//!   run and `coadapt confirm` talk (designs to build, resets by hand), both sides.
 //! - [`flow`]: flow control between collection and training (lock-step or a window of
 //!   episodes in flight), leases that re-issue a silent actor's episode, policy lag.
 //! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
@@ -22,6 +24,7 @@ pub mod ddpg;
 pub mod fear;
 pub mod flow;
 pub mod networks;
+pub mod prototype;
 pub mod run_dir;
 pub mod sac;
 pub mod train;

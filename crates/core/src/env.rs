@@ -11,6 +11,9 @@ pub struct EnvSpec {
     pub state_dim: usize,
     pub action: BoxSpace,
     pub design: BoxSpace,
+    /// What each entry of the design vector is, in order (`back thigh`, `pole length`, ...):
+    /// the names an operator building a prototype reads the dimensions by.
+    pub design_names: Vec<String>,
     /// The original (reference) design.
     pub default_design: Vec<f32>,
     /// Episode length after which [`TimeLimit`] truncates.

@@ -186,6 +186,7 @@ impl RemoteEnv {
             state_dim: profile.state_dim,
             action: BoxSpace::uniform(profile.action.dim(), -1.0, 1.0),
             design: profile.design.clone(),
+            design_names: (0..profile.design.dim()).map(|i| format!("design[{i}]")).collect(),
             default_design,
             // The server ends episodes (TERMINATED with discount 1 at its time limit).
             max_episode_steps: usize::MAX,

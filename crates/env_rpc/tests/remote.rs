@@ -72,6 +72,7 @@ impl Faulty {
                 state_dim: 2,
                 action: BoxSpace::uniform(1, -1.0, 1.0),
                 design: BoxSpace::uniform(1, 0.5, 2.0),
+                design_names: vec!["design[0]".into()],
                 default_design: vec![1.0],
                 max_episode_steps: 100,
             };

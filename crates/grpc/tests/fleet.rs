@@ -105,7 +105,14 @@ fn a_learner_that_crashes_leaves_its_actors_waiting() {
 fn design_requests_and_replies_round_trip() {
     let (mut learner, _server, endpoint) = common::learner();
     let mut opt = optimizer_links(&endpoint, &common::cfg()).expect("optimizer");
-    let req = DesignRequest { index: 3, kind: DesignKind::Exploit, weights_version: 2, start_states: vec![0.5; 6], chosen: vec![1.0, 2.0] };
+    let req = DesignRequest {
+        index: 3,
+        kind: DesignKind::Exploit,
+        weights_version: 2,
+        start_states: vec![0.5; 6],
+        chosen: vec![1.0, 2.0],
+        rejected: vec![2.0, 1.0],
+    };
     learner.design_requests.send(req.clone()).expect("send");
     assert_eq!(opt.requests.recv_timeout(LONG).expect("recv"), Some(req));
     let reply =

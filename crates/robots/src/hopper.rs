@@ -106,6 +106,7 @@ impl Robot for HopperModel {
     const DESIGN_LOW: &'static [f32] = &[0.5; 5];
     const DESIGN_HIGH: &'static [f32] = &[4.0, 2.0, 2.0, 2.0, 2.0];
     const DEFAULT_DESIGN: &'static [f32] = &[1.0; 5];
+    const DESIGN_NAMES: &'static [&'static str] = &["nose", "pelvis", "thigh", "calf", "foot"];
 
     fn default_config() -> SimConfig {
         SimConfig {

@@ -39,6 +39,7 @@ impl Pendulum {
             state_dim: 3,
             action: BoxSpace::uniform(1, -1.0, 1.0),
             design: BoxSpace::uniform(2, 0.5, 2.0),
+            design_names: vec!["pole length".into(), "pole mass".into()],
             default_design: vec![1.0, 1.0],
             max_episode_steps: 200,
         };

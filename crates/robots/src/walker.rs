@@ -108,6 +108,7 @@ impl Robot for WalkerModel {
     const DESIGN_LOW: &'static [f32] = &[0.5; 6];
     const DESIGN_HIGH: &'static [f32] = &[1.5; 6];
     const DEFAULT_DESIGN: &'static [f32] = &[1.0; 6];
+    const DESIGN_NAMES: &'static [&'static str] = &["right thigh", "right leg", "right foot", "left thigh", "left leg", "left foot"];
 
     fn default_config() -> SimConfig {
         SimConfig {

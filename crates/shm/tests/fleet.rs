@@ -148,6 +148,7 @@ fn a_fleet_exchanges_every_kind_of_message() {
             weights_version: 2 + u64::from(index),
             start_states: vec![0.0; 6],
             chosen: vec![],
+            rejected: vec![1.0; 2 * usize::from(index as u8)],
         };
         learner.design_requests.send(req).expect("design request");
         let reply = learner.design_replies.recv_timeout(LONG).expect("reply").expect("in time");

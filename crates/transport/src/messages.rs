@@ -191,6 +191,9 @@ pub struct DesignRequest {
     pub start_states: Vec<f32>,
     /// Every design chosen so far (`k x design`), for novelty search.
     pub chosen: Vec<f32>,
+    /// Every design an operator rejected as a prototype so far in the run (`k x design`): the
+    /// optimiser proposes none within `optimizer.reject-radius` of them.
+    pub rejected: Vec<f32>,
 }
 
 impl Validate for DesignRequest {
@@ -201,8 +204,12 @@ impl Validate for DesignRequest {
         if !self.chosen.len().is_multiple_of(dims.design) {
             return Err(field("chosen", format!("{} values is not a multiple of {}", self.chosen.len(), dims.design)));
         }
+        if !self.rejected.len().is_multiple_of(dims.design) {
+            return Err(field("rejected", format!("{} values is not a multiple of {}", self.rejected.len(), dims.design)));
+        }
         finite("start_states", &self.start_states)?;
-        finite("chosen", &self.chosen)
+        finite("chosen", &self.chosen)?;
+        finite("rejected", &self.rejected)
     }
 }
 

@@ -276,6 +276,7 @@ impl Wire for DesignRequest {
             weights_version: self.weights_version,
             start_states: f32_bytes(&self.start_states),
             chosen: self.chosen.clone(),
+            rejected: self.rejected.clone(),
         }
     }
 
@@ -291,6 +292,7 @@ impl Wire for DesignRequest {
             weights_version: pb.weights_version,
             start_states: f32s("start_states", &pb.start_states)?,
             chosen: finite("chosen", pb.chosen)?,
+            rejected: finite("rejected", pb.rejected)?,
         })
     }
 }

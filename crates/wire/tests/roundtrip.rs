@@ -23,6 +23,7 @@ fn messages_roundtrip() {
         weights_version: 2,
         start_states: vec![0.5; 9],
         chosen: vec![1.0, 2.0],
+        rejected: vec![1.5, 0.5],
     });
     roundtrip(&DesignReply {
         index: 6,
@@ -59,6 +60,8 @@ fn malformed_messages_name_the_field() {
 
     let a = pb::Assignment { mode: 9, ..Default::default() };
     assert_eq!(field_of(Assignment::decode(a.encode_to_vec().as_slice(), &l)), "mode");
+    let r = pb::DesignRequest { kind: 1, rejected: vec![1.0, f32::NAN], ..Default::default() };
+    assert_eq!(field_of(DesignRequest::decode(r.encode_to_vec().as_slice(), &l)), "rejected");
     let r = pb::DesignReply { predicted_objective: Some(f32::NAN), ..Default::default() };
     assert_eq!(field_of(DesignReply::decode(r.encode_to_vec().as_slice(), &l)), "predicted_objective");
 

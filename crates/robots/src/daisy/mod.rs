@@ -138,6 +138,18 @@ pub const LENGTH_BOUNDS: [f32; 2] = [0.12, 0.5];
 pub const OFFSET_BOUNDS: [f32; 2] = [-0.2, 0.2];
 /// The original design: 0.3 m femur and tibia on every pair, no base offsets.
 pub const ORIGINAL_DESIGN: [f32; DESIGN_DIM] = [0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.0, 0.0, 0.0];
+/// What each design entry is: segment lengths in metres, then base-motor range offsets in radians.
+pub const DESIGN_NAMES: [&str; DESIGN_DIM] = [
+    "front femur",
+    "front tibia",
+    "middle femur",
+    "middle tibia",
+    "back femur",
+    "back tibia",
+    "front base offset",
+    "middle base offset",
+    "back base offset",
+];
 /// PD gains (N m/rad, N m s/rad) holding the start pose while the body settles.
 const HOLD_KP: f32 = 60.0;
 const HOLD_KD: f32 = 2.0;
@@ -229,6 +241,7 @@ impl Daisy {
             state_dim: STATE_DIM,
             action: BoxSpace::uniform(JOINTS, -1.0, 1.0),
             design,
+            design_names: DESIGN_NAMES.iter().map(|n| n.to_string()).collect(),
             default_design: ORIGINAL_DESIGN.to_vec(),
             max_episode_steps: 1000,
         };

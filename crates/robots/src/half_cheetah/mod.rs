@@ -108,6 +108,7 @@ impl Robot for Cheetah {
     const DESIGN_LOW: &'static [f32] = &[0.8; 6];
     const DESIGN_HIGH: &'static [f32] = &[2.0; 6];
     const DEFAULT_DESIGN: &'static [f32] = &[1.0; 6];
+    const DESIGN_NAMES: &'static [&'static str] = &["back thigh", "back shin", "back foot", "front thigh", "front shin", "front foot"];
 
     fn default_config() -> SimConfig {
         SimConfig::default()

@@ -99,6 +99,8 @@ pub trait Robot: std::fmt::Debug + Send + 'static {
     const DESIGN_LOW: &'static [f32];
     const DESIGN_HIGH: &'static [f32];
     const DEFAULT_DESIGN: &'static [f32];
+    /// What each design entry scales, in order (for an operator building a prototype).
+    const DESIGN_NAMES: &'static [&'static str];
 
     /// The measured physics setting for this robot.
     fn default_config() -> SimConfig;
@@ -169,6 +171,7 @@ impl<R: Robot> PlanarEnv<R> {
             state_dim,
             action: BoxSpace::uniform(n, -1.0, 1.0),
             design: BoxSpace { low: R::DESIGN_LOW.to_vec(), high: R::DESIGN_HIGH.to_vec() },
+            design_names: R::DESIGN_NAMES.iter().map(|n| n.to_string()).collect(),
             default_design: R::DEFAULT_DESIGN.to_vec(),
             max_episode_steps: 1000,
         };

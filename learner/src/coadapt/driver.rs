@@ -1,0 +1,280 @@
+//! The learner's side of the fleet: publishing weights, handing out episodes, collecting their
+//! experience (with leases and restarts), training on it, and asking the optimiser for designs.
+
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use coadapt_core::{EnvSpec, Transition};
+use coadapt_transport::messages::Dims;
+use coadapt_transport::{Assignment, DesignKind, DesignRequest, EpisodeMode, LearnerLinks, TransportError, Validate, Weights};
+
+use super::{CoadaptError, ScheduleConfig};
+use crate::fear::{ActingPolicy, FearLearner};
+use crate::flow::{Completed, LearnerTime, Pending};
+use crate::run_dir::DesignRow;
+
+pub(super) fn mix(seed: u64, i: u64) -> u64 {
+    let mut z = seed ^ i.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z ^ (z >> 27)
+}
+
+pub(super) const POLL: Duration = Duration::from_millis(100);
+
+pub(super) struct Learner<'a> {
+    pub(super) cfg: &'a ScheduleConfig,
+    pub(super) spec: &'a EnvSpec,
+    pub(super) dims: Dims,
+    pub(super) links: &'a mut LearnerLinks,
+    pub(super) shutdown: &'a AtomicBool,
+    pub(super) fear: FearLearner,
+    pub(super) acting_version: u64,
+    /// The acting policy changed since it was last published.
+    pub(super) acting_dirty: bool,
+    pub(super) acting_which: Option<ActingPolicy>,
+    pub(super) population_version: u64,
+    pub(super) next_assignment: u64,
+    pub(super) seed: u64,
+    pub(super) lease: Duration,
+    /// No message at all for this long fails the run (every actor gone).
+    pub(super) silence: Duration,
+    pub(super) pending: Vec<Pending>,
+    pub(super) time: LearnerTime,
+    /// The run directory (the operator's files live there).
+    pub(super) dir: &'a Path,
+    /// Designs the operator would not build, in order (`designs.csv` rows).
+    pub(super) rejected: Vec<DesignRow>,
+}
+
+impl Learner<'_> {
+    /// Publishes the acting policy if it changed; returns the version actors must act with.
+    fn publish_acting(&mut self) -> Result<u64, CoadaptError> {
+        let which = self.fear.acting();
+        if !self.acting_dirty && self.acting_which == Some(which) {
+            return Ok(self.acting_version);
+        }
+        let t = Instant::now();
+        self.acting_version += 1;
+        let policy = self.fear.agent(which).policy_params().to_vec();
+        self.links.acting_weights.publish(Weights { version: self.acting_version, policy, q1: vec![], q2: vec![] })?;
+        self.acting_dirty = false;
+        self.acting_which = Some(which);
+        self.time.sending += t.elapsed().as_secs_f64();
+        Ok(self.acting_version)
+    }
+
+    fn publish_population(&mut self) -> Result<u64, CoadaptError> {
+        self.population_version += 1;
+        let pop = self.fear.agent(ActingPolicy::Population);
+        let w = Weights {
+            version: self.population_version,
+            policy: pop.policy_params().to_vec(),
+            q1: pop.critic_params(0).0.to_vec(),
+            q2: pop.critic_params(1).0.to_vec(),
+        };
+        self.links.population_weights.publish(w)?;
+        Ok(self.population_version)
+    }
+
+    /// Hands episode `episode` of design `design_index` to the actors.
+    pub(super) fn issue(
+        &mut self,
+        design_index: usize,
+        design: &[f32],
+        episode: usize,
+        global: u64,
+        mode: EpisodeMode,
+    ) -> Result<(), CoadaptError> {
+        let version = self.publish_acting()?;
+        let seed = mix(self.seed, 2 * global + u64::from(mode == EpisodeMode::Eval));
+        self.send_assignment(
+            design_index,
+            design,
+            Pending { id: 0, episode, global, mode, seed, min_weights_version: version, chunks: Vec::new(), last_heard: Instant::now() },
+        )
+    }
+
+    fn send_assignment(&mut self, design_index: usize, design: &[f32], mut p: Pending) -> Result<(), CoadaptError> {
+        let t = Instant::now();
+        self.next_assignment += 1;
+        p.id = self.next_assignment;
+        p.last_heard = Instant::now();
+        let a = Assignment {
+            id: p.id,
+            design_index: design_index as u32,
+            design: design.to_vec(),
+            mode: p.mode,
+            seed: p.seed,
+            min_weights_version: p.min_weights_version,
+        };
+        self.links.assignments.send(a)?;
+        self.pending.push(p);
+        self.time.sending += t.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    /// Issues again every episode whose actor has fallen silent.
+    fn reissue_expired(&mut self, design_index: usize, design: &[f32]) -> Result<(), CoadaptError> {
+        while let Some(i) = self.pending.iter().position(|p| p.last_heard.elapsed() > self.lease) {
+            let mut p = self.pending.swap_remove(i);
+            let old = p.id;
+            p.chunks.clear();
+            self.send_assignment(design_index, design, p)?;
+            self.time.reissued += 1;
+            eprintln!(
+                "learner: assignment {old} (design {design_index}) silent for {:?}: issued again as {}",
+                self.lease, self.next_assignment
+            );
+        }
+        Ok(())
+    }
+
+    /// Waits for the next episode to come back; `None` on shutdown.
+    pub(super) fn next_completed(&mut self, design_index: usize, design: &[f32]) -> Result<Option<Completed>, CoadaptError> {
+        let mut heard = Instant::now();
+        loop {
+            if self.shutdown.load(Ordering::Relaxed) {
+                return Ok(None);
+            }
+            // Every time round, not only when the queue is quiet: with many actors it rarely is.
+            self.reissue_expired(design_index, design)?;
+            let t = Instant::now();
+            let got = match self.links.experience.recv_timeout(POLL) {
+                Ok(got) => got,
+                // Every actor has gone for now; restarted or new ones may join.
+                Err(TransportError::Closed) => {
+                    std::thread::sleep(POLL);
+                    None
+                }
+                Err(e) => return Err(e.into()),
+            };
+            self.time.waiting += t.elapsed().as_secs_f64();
+            let Some(chunk) = got else {
+                if heard.elapsed() > self.silence {
+                    return Err(CoadaptError::Protocol(format!(
+                        "no actor has sent anything for {:?} ({} episodes outstanding): are the actors running?",
+                        self.silence,
+                        self.pending.len()
+                    )));
+                }
+                continue;
+            };
+            heard = Instant::now();
+            let Some(i) = self.pending.iter().position(|p| p.id == chunk.assignment) else {
+                // A late chunk of an episode already issued again elsewhere.
+                continue;
+            };
+            if let Err(e) = chunk.validate(&self.dims) {
+                let p = self.pending.swap_remove(i);
+                eprintln!("learner: a malformed chunk of assignment {} from actor {}: {e}; issuing the episode again", p.id, chunk.actor);
+                self.send_assignment(design_index, design, Pending { chunks: Vec::new(), ..p })?;
+                continue;
+            }
+            let p = &mut self.pending[i];
+            p.last_heard = Instant::now();
+            let end = chunk.end;
+            if chunk.first && !p.chunks.is_empty() {
+                // The actor ran the episode again from its start (the first attempt failed in
+                // its environment): what that attempt sent is forgotten.
+                eprintln!(
+                    "learner: actor {} restarted assignment {}: dropping {} chunk(s) of its failed attempt",
+                    chunk.actor,
+                    p.id,
+                    p.chunks.len()
+                );
+                p.chunks.clear();
+                self.time.restarted += 1;
+            }
+            if !chunk.is_empty() || chunk.end.is_some() {
+                p.chunks.push(chunk);
+            }
+            if let Some(end) = end {
+                let p = self.pending.swap_remove(i);
+                let last = p.chunks.last();
+                let actor = last.map_or(0, |c| c.actor);
+                let weights_version = p.chunks.iter().map(|c| c.weights_version).min().unwrap_or(p.min_weights_version);
+                let policy_lag = self.acting_version.saturating_sub(weights_version);
+                self.time.max_policy_lag = self.time.max_policy_lag.max(policy_lag);
+                return Ok(Some(Completed {
+                    episode: p.episode,
+                    global: p.global,
+                    mode: p.mode,
+                    chunks: p.chunks,
+                    end,
+                    actor,
+                    weights_version,
+                    policy_lag,
+                }));
+            }
+        }
+    }
+
+    /// Puts a finished training episode into the replay buffers and trains on it.
+    pub(super) fn learn_from(&mut self, c: &Completed) -> Result<(), CoadaptError> {
+        let (o, a) = (self.dims.obs, self.dims.act);
+        for chunk in &c.chunks {
+            if chunk.first {
+                self.fear.add_start_state(&chunk.obs[..o])?;
+            }
+            for i in 0..chunk.len() {
+                self.fear.add_transition(&Transition {
+                    obs: &chunk.obs[i * o..(i + 1) * o],
+                    action: &chunk.actions[i * a..(i + 1) * a],
+                    reward: chunk.rewards[i],
+                    next_obs: &chunk.next_obs[i * o..(i + 1) * o],
+                    terminated: chunk.terminated[i],
+                })?;
+            }
+        }
+        let t = Instant::now();
+        self.fear.end_episode()?;
+        self.time.training += t.elapsed().as_secs_f64();
+        self.acting_dirty = true;
+        Ok(())
+    }
+
+    /// Asks the optimiser for design `index`, telling it every design chosen and every one
+    /// rejected so far; `None` on shutdown.
+    pub(super) fn request_design(
+        &mut self,
+        index: usize,
+        kind: DesignKind,
+        chosen: &[f32],
+    ) -> Result<Option<coadapt_transport::DesignReply>, CoadaptError> {
+        let version = self.publish_population()?;
+        let start_states = self
+            .fear
+            .sample_start_states(self.cfg.start_state_batch.max(1))
+            .ok_or_else(|| CoadaptError::Protocol("no start states yet: the run needs at least one initial design".into()))?;
+        let rejected = self.rejected.iter().flat_map(|r| r.design.iter().copied()).collect();
+        let req = DesignRequest { index: index as u32, kind, weights_version: version, start_states, chosen: chosen.to_vec(), rejected };
+        self.links.design_requests.send(req)?;
+        let t = Instant::now();
+        let result = loop {
+            if self.shutdown.load(Ordering::Relaxed) {
+                break Ok(None);
+            }
+            let reply = match self.links.design_replies.recv_timeout(POLL) {
+                Ok(Some(reply)) => reply,
+                Ok(None) => continue,
+                // The optimiser has gone; a restarted one answers the request it finds.
+                Err(TransportError::Closed) => {
+                    std::thread::sleep(POLL);
+                    continue;
+                }
+                Err(e) => break Err(e.into()),
+            };
+            if reply.index as usize != index {
+                eprintln!("learner: ignored a reply for design {} while waiting for {index}", reply.index);
+                continue;
+            }
+            if let Err(e) = reply.validate(&self.dims) {
+                break Err(CoadaptError::Protocol(format!("the optimiser's design {index} is malformed: {e}")));
+            }
+            break Ok(Some(reply));
+        };
+        self.time.waiting += t.elapsed().as_secs_f64();
+        result
+    }
+}
