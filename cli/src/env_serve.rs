@@ -4,8 +4,9 @@
 use anyhow::Context;
 use clap::Args;
 
-/// Serve a built-in robot over dm_env_rpc v1 (gRPC), following the coadapt profile
-/// (proto/README.md): action `action` in the robot's action box; observations `observation`
+/// Serve a built-in robot over dm_env_rpc v1 (gRPC), for any dm_env_rpc client.
+///
+/// The coadapt profile (proto/README.md): action `action` in the robot's action box; observations `observation`
 /// (the state), `reward`, `discount` (0 only at a true end), `design`; world settings `design`
 /// and `seed`. Each client connection creates its own worlds; they end with it.
 #[derive(Debug, Args)]
