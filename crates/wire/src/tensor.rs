@@ -44,7 +44,9 @@ pub fn resolve_shape(name: &str, shape: &[i32], n: usize) -> Result<Vec<usize>, 
     if negative > 1 {
         return Err(err(name, format!("shape {shape:?} has more than one negative dimension")));
     }
-    let known: usize = shape.iter().filter(|&&d| d >= 0).map(|&d| d as usize).product();
+    // Shapes come from the network: a product that overflows is refused, never a panic.
+    let too_big = || err(name, format!("shape {shape:?} has more elements than memory"));
+    let known = shape.iter().filter(|&&d| d >= 0).try_fold(1usize, |p, &d| p.checked_mul(d as usize)).ok_or_else(too_big)?;
     let mut dims: Vec<usize> = shape.iter().map(|&d| d.max(0) as usize).collect();
     if let Some(i) = shape.iter().position(|&d| d < 0) {
         // With one element the unknown dimension is 1 (broadcast of a scalar).
@@ -60,7 +62,7 @@ pub fn resolve_shape(name: &str, shape: &[i32], n: usize) -> Result<Vec<usize>, 
         }
         dims[i] = fill;
     }
-    let total: usize = dims.iter().product();
+    let total = dims.iter().try_fold(1usize, |p, &d| p.checked_mul(d)).ok_or_else(too_big)?;
     if n != total && n != 1 {
         return Err(err(name, format!("{n} elements for shape {shape:?} ({total} expected)")));
     }
@@ -165,6 +167,9 @@ pub struct FloatSpec {
     pub bounds: Option<(Vec<f32>, Vec<f32>)>,
 }
 
+/// The most elements a spec may declare (a robot's action, state or design is far smaller).
+pub const MAX_SPEC_ELEMENTS: usize = 1 << 20;
+
 /// Reads a numeric spec: fixed dimensions (no negative ones), a float type, bounds given as one
 /// value or one per element, finite, `min <= max`.
 pub fn read_float_spec(spec: &TensorSpec) -> Result<FloatSpec, TensorError> {
@@ -177,7 +182,12 @@ pub fn read_float_spec(spec: &TensorSpec) -> Result<FloatSpec, TensorError> {
         return Err(err(name, format!("spec type {dtype:?}, FLOAT or DOUBLE expected")));
     }
     let dims: Vec<usize> = spec.shape.iter().map(|&d| d as usize).collect();
-    let n: usize = dims.iter().product();
+    // A spec's bounds are expanded to one value per element: refuse absurd sizes from the wire.
+    let n = dims
+        .iter()
+        .try_fold(1usize, |p, &d| p.checked_mul(d))
+        .filter(|&n| n <= MAX_SPEC_ELEMENTS)
+        .ok_or_else(|| err(name, format!("spec shape {:?} has more than {MAX_SPEC_ELEMENTS} elements", spec.shape)))?;
     let read = |which: &str, v: &Option<Value>| -> Result<Option<Vec<f32>>, TensorError> {
         let values: Vec<f32> = match v.as_ref().and_then(|v| v.payload.as_ref()) {
             None => return Ok(None),

@@ -21,6 +21,8 @@ fn shapes_broadcast_and_variable_dimensions_resolve_as_the_spec_says() {
     assert!(resolve_shape("x", &[-1, -1], 4).unwrap_err().to_string().contains("more than one negative"));
     assert!(resolve_shape("x", &[-1, 3], 7).unwrap_err().to_string().contains("do not fill"));
     assert!(resolve_shape("x", &[3], 2).unwrap_err().to_string().contains("2 elements for shape [3]"));
+    let huge = [i32::MAX, i32::MAX, i32::MAX, 8];
+    assert!(resolve_shape("x", &huge, 1).unwrap_err().to_string().contains("more elements than memory"), "no overflow panic");
     assert_eq!(read(&floats(&[1.5], &[3]), &[3], Accept::FloatOnly).unwrap(), [1.5; 3]);
     assert_eq!(read(&Tensor { payload: floats(&[1.0, 2.0], &[2]).payload, shape: vec![-1] }, &[2], Accept::FloatOnly).unwrap(), [1.0, 2.0]);
 }
@@ -55,6 +57,8 @@ fn specs_round_trip_and_bad_bounds_are_refused() {
     assert!(read_float_spec(&upside_down).unwrap_err().to_string().contains("min[0] 1 exceeds max[0] -1"));
     let infinite = float_spec("action", &[1], Some((&[f32::NEG_INFINITY], &[1.0])));
     assert!(read_float_spec(&infinite).unwrap_err().to_string().contains("spec min[0] is -inf"));
+    let huge = float_spec("action", &[1 << 16, 1 << 16], Some((&[0.0], &[1.0])));
+    assert!(read_float_spec(&huge).unwrap_err().to_string().contains("more than 1048576 elements"));
     let mut variable = float_spec("observation", &[3], None);
     variable.shape = vec![-1];
     assert!(read_float_spec(&variable).unwrap_err().to_string().contains("variable"));
