@@ -14,6 +14,9 @@
 # applied by scripts/config_with.py. `random-only:CONFIG` is CONFIG with `alternate = false`
 # (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
 # Each run's stdout (the JSON summary line) goes to RUN/summary.json, stderr to RUN.log.
+# A finished run's small files (summary.json, config.toml, designs.csv, episodes.csv) are also
+# copied to docs/campaign/results/NAME-seedSEED/ to be committed: runs/ does not survive a new
+# checkout, and a line whose results are archived there is skipped too.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=2
@@ -30,7 +33,8 @@ cp target/release/coadapt "$bin.new" && mv "$bin.new" "$bin"
 run_one() {
   local name=$1 config=$2 seed=$3; shift 3
   local dir=$root/$name-seed$seed
-  if [ -s "$dir/summary.json" ]; then echo "campaign: $dir done already, skipped"; return 0; fi
+  local archive=docs/campaign/results/$name-seed$seed
+  if [ -s "$dir/summary.json" ] || [ -s "$archive/summary.json" ]; then echo "campaign: $name-seed$seed done already, skipped"; return 0; fi
   if [ -e "$dir" ]; then mv "$dir" "$dir.partial-$(date +%s)"; fi
   case $config in
     random-only:*) config="${config#random-only:}+schedule.alternate=false" ;;
@@ -48,6 +52,8 @@ run_one() {
   if RAYON_NUM_THREADS=1 "$bin" run --config "$config" --seed "$seed" --out "$dir" --transport in-process "$@" \
       > "$dir.summary.tmp" 2> "$dir.log"; then
     mv "$dir.summary.tmp" "$dir/summary.json"
+    mkdir -p "$archive"
+    cp "$dir"/{summary.json,config.toml,designs.csv,episodes.csv} "$archive/"
     echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
   else
     echo "campaign: FAILED $dir after $((SECONDS - t0)) s (see $dir.log)" >&2
