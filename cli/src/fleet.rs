@@ -48,8 +48,13 @@ pub struct FleetConfig {
     pub connect: String,
     /// gRPC: the deadline of every call (seconds).
     pub rpc_timeout_secs: f64,
-    /// `coadapt run`: restarts of crashed actors and optimisers allowed in one run.
+    /// `coadapt run`: restarts of one crashed process (the learner resumes from its newest
+    /// snapshot, an actor or the optimiser starts again) allowed within `restart-window-secs`;
+    /// one more and the supervisor gives up on it (on the learner: the run stops).
     pub max_restarts: usize,
+    /// The window of `max-restarts` (seconds): a process that crashes now and then for days is
+    /// restarted every time; one that crash-loops is not.
+    pub restart_window_secs: f64,
     /// Shared memory: most actors at once (sizes the channels' port tables; every process of
     /// a fleet must agree, so it lives in the shared config).
     pub max_actors: usize,
@@ -63,7 +68,8 @@ impl Default for FleetConfig {
             listen: "0.0.0.0:50051".into(),
             connect: "http://127.0.0.1:50051".into(),
             rpc_timeout_secs: 10.0,
-            max_restarts: 100,
+            max_restarts: 10,
+            restart_window_secs: 600.0,
             max_actors: 64,
         }
     }

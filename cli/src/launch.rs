@@ -61,8 +61,43 @@ fn describe(s: ExitStatus) -> String {
     }
 }
 
-/// Launches the fleet for `cfg` into `dir` and supervises it until the learner is done.
-pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Result<()> {
+/// Restart times of one process, for the windowed budget.
+#[derive(Default)]
+struct Budget {
+    restarts: Vec<Instant>,
+}
+
+impl Budget {
+    /// Records a restart if the budget allows one more within the window.
+    fn allow(&mut self, max: usize, window: Duration) -> bool {
+        self.restarts.retain(|t| t.elapsed() < window);
+        if self.restarts.len() >= max {
+            return false;
+        }
+        self.restarts.push(Instant::now());
+        true
+    }
+}
+
+/// Stops `p` (SIGTERM, then SIGKILL after `grace`) and reaps it.
+fn stop(p: &mut Proc, grace: Duration) {
+    if matches!(p.child.try_wait(), Ok(None)) {
+        signal(p, Signal::SIGTERM);
+        let until = Instant::now() + grace;
+        while matches!(p.child.try_wait(), Ok(None)) && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = p.child.kill();
+    }
+    let _ = p.child.wait();
+}
+
+/// Launches the fleet for `cfg` into `dir` (continuing the run there with `resume`) and
+/// supervises it until the learner is done. A learner that crashes is started again with
+/// `--resume` from its newest snapshot, the other processes with it (actors hold nothing; the
+/// optimiser continues from its state file), within `fleet.max-restarts` per
+/// `fleet.restart-window-secs`.
+pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> anyhow::Result<()> {
     let mut cfg = cfg.clone();
     match cfg.fleet.transport {
         TransportKind::Shm => {
@@ -79,9 +114,13 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
         }
         TransportKind::InProcess => bail!("fleet.transport: in-process runs without a fleet"),
     }
+    let window = Duration::try_from_secs_f64(cfg.fleet.restart_window_secs)
+        .ok()
+        .filter(|d| !d.is_zero())
+        .with_context(|| format!("fleet.restart-window-secs: {} is not a positive number of seconds", cfg.fleet.restart_window_secs))?;
     let logs = dir.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("creating {}", logs.display()))?;
-    let config = dir.join("config.toml");
+    let config = dir.join("fleet.toml");
     std::fs::write(&config, toml::to_string(&cfg)?).with_context(|| format!("writing {}", config.display()))?;
     let config = config.display().to_string();
     let common = ["--config".to_string(), config.clone(), "--transport".into(), cfg.fleet.transport.name().into()];
@@ -92,26 +131,34 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
     // Resolved once: a rebuild during a long run replaces the file, and a restart should still
     // find a binary at this path.
     let exe = std::env::current_exe().context("finding the coadapt binary")?;
-    let mut learner = spawn(&exe, "learner", &learner_args, None)?;
-    let mut others = Vec::new();
     let mut opt_args = vec!["optimizer".to_string()];
     opt_args.extend(common.iter().cloned());
-    others.push(spawn(&exe, "optimizer", &opt_args, Some(&logs.join("optimizer.log")))?);
-    for i in 0..cfg.actors {
-        let mut a = vec!["actor".to_string()];
-        a.extend(common.iter().cloned());
-        a.extend(["--id".into(), i.to_string()]);
-        others.push(spawn(&exe, &format!("actor {i}"), &a, Some(&logs.join(format!("actor-{i}.log"))))?);
-    }
-    eprintln!(
-        "fleet {}: learner pid {}, {}; logs in {}",
-        if cfg.fleet.name.is_empty() { cfg.fleet.connect.as_str() } else { cfg.fleet.name.as_str() },
-        learner.child.id(),
-        others.iter().map(|p| format!("{} pid {}", p.name, p.child.id())).collect::<Vec<_>>().join(", "),
-        logs.display()
-    );
+    opt_args.extend(["--state-dir".into(), crate::resume::optimizer_state_dir(dir).display().to_string()]);
+    let start_fleet = |resume: bool| -> anyhow::Result<(Proc, Vec<Proc>)> {
+        let mut args = learner_args.clone();
+        if resume {
+            args.push("--resume".into());
+        }
+        let learner = spawn(&exe, "learner", &args, None)?;
+        let mut others = vec![spawn(&exe, "optimizer", &opt_args, Some(&logs.join("optimizer.log")))?];
+        for i in 0..cfg.actors {
+            let mut a = vec!["actor".to_string()];
+            a.extend(common.iter().cloned());
+            a.extend(["--id".into(), i.to_string()]);
+            others.push(spawn(&exe, &format!("actor {i}"), &a, Some(&logs.join(format!("actor-{i}.log"))))?);
+        }
+        eprintln!(
+            "fleet {}: learner pid {}, {}; logs in {}",
+            if cfg.fleet.name.is_empty() { cfg.fleet.connect.as_str() } else { cfg.fleet.name.as_str() },
+            learner.child.id(),
+            others.iter().map(|p| format!("{} pid {}", p.name, p.child.id())).collect::<Vec<_>>().join(", "),
+            logs.display()
+        );
+        Ok((learner, others))
+    };
+    let (mut learner, mut others) = start_fleet(resume)?;
 
-    let mut restarts = 0usize;
+    let mut budgets: std::collections::HashMap<String, Budget> = Default::default();
     let mut interrupted = false;
     let status = loop {
         if shutdown.load(Ordering::Relaxed) && !interrupted {
@@ -121,6 +168,27 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
             }
         }
         match learner.child.try_wait() {
+            Ok(Some(s))
+                if !s.success() && !interrupted && budgets.entry("learner".into()).or_default().allow(cfg.fleet.max_restarts, window) =>
+            {
+                eprintln!(
+                    "fleet: the learner (pid {}) ended with {}; stopping the fleet and starting it again from the newest snapshot",
+                    learner.child.id(),
+                    describe(s)
+                );
+                for p in others.iter_mut() {
+                    stop(p, Duration::from_secs(2));
+                }
+                if cfg.fleet.transport == TransportKind::Shm {
+                    clean_stale();
+                }
+                std::thread::sleep(Duration::from_millis(500));
+                match start_fleet(true) {
+                    Ok((l, o)) => (learner, others) = (l, o),
+                    Err(e) => break Err(e.context("starting the fleet again")),
+                }
+                continue;
+            }
             Ok(Some(s)) => break Ok(s),
             Ok(None) => {}
             Err(e) => break Err(anyhow::Error::new(e).context("watching the learner")),
@@ -130,7 +198,18 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
             // A role that ends well has seen the learner finish; one that fails while the
             // learner still runs has crashed: start it again, after a pause if it failed
             // straight away.
-            if s.success() || p.ended || interrupted || restarts >= cfg.fleet.max_restarts {
+            if s.success() || p.ended || interrupted {
+                p.ended = true;
+                continue;
+            }
+            if !budgets.entry(p.name.clone()).or_default().allow(cfg.fleet.max_restarts, window) {
+                eprintln!(
+                    "fleet: {} ended with {}, its {} restart(s) in {:?} are used up (fleet.max-restarts); it stays down",
+                    p.name,
+                    describe(s),
+                    cfg.fleet.max_restarts,
+                    window
+                );
                 p.ended = true;
                 continue;
             }
@@ -144,7 +223,6 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Res
             if p.started.elapsed() < Duration::from_secs(2) {
                 std::thread::sleep(Duration::from_secs(1));
             }
-            restarts += 1;
             match spawn(&exe, &p.name.clone(), &p.args.clone(), p.log.as_deref()) {
                 Ok(new) => *p = new,
                 Err(e) => {

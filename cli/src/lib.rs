@@ -29,6 +29,7 @@ pub mod launch;
 pub mod plot;
 pub mod progress;
 pub mod render;
+pub mod resume;
 pub mod role_cmd;
 pub mod roles;
 pub mod run;

@@ -44,6 +44,7 @@ impl RoleArgs {
             transport: self.transport,
             actors: None,
             flow: None,
+            resume: None,
         };
         let (mut cfg, name) = resolve(&run)?;
         if let Some(f) = &self.fleet {
@@ -67,6 +68,11 @@ pub struct LearnerArgs {
     /// Override fleet.listen: the gRPC address to serve on (port 0: any free port).
     #[arg(long)]
     pub listen: Option<String>,
+    /// Continue the run in --out from its newest sound snapshot (a damaged one is skipped,
+    /// naming what is wrong); an --out without a run starts one. For restarts by systemd or
+    /// Kubernetes: the same command line starts and resumes.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 /// An actor: runs the episodes the learner hands out, with the newest weights.
@@ -90,6 +96,10 @@ pub struct OptimizerArgs {
     /// Override fleet.connect: the learner's gRPC address.
     #[arg(long)]
     pub connect: Option<String>,
+    /// Keep the optimiser's state here (optimizer-state.json, written after every reply) and
+    /// continue from it when it exists, so a restarted optimiser answers as the one that died.
+    #[arg(long)]
+    pub state_dir: Option<PathBuf>,
 }
 
 /// `coadapt learner`.
@@ -98,17 +108,18 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     if let Some(l) = args.listen {
         cfg.fleet.listen = l;
     }
-    let dir = args.out.unwrap_or_else(|| crate::run::default_out(&name, cfg.seed));
-    if dir.join("designs.csv").exists() {
-        bail!("{} already holds a run (designs.csv exists); choose another --out", dir.display());
-    }
+    let dir = match args.out {
+        Some(d) => d,
+        None if args.resume => bail!("--resume needs --out RUN_DIR"),
+        None => crate::run::default_out(&name, cfg.seed),
+    };
     let spec = make_env(&cfg.env)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     let (mut links, guard) = cfg.fleet.learner_links(Some(dims))?;
     eprintln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
     let start = Instant::now();
-    let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown);
+    let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown, args.resume);
     // Closing the channels tells actors and optimiser the run is over.
     drop(links);
     let mut outcome = result?;
@@ -151,5 +162,5 @@ pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
     let shutdown = shutdown_on_ctrl_c();
     let mut links = cfg.fleet.optimizer_links()?;
     eprintln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());
-    roles::optimizer(&cfg, &spec, &mut links, &shutdown)
+    roles::optimizer(&cfg, &spec, &mut links, &shutdown, args.state_dir.as_deref())
 }

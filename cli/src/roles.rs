@@ -9,11 +9,14 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use coadapt_actors::{Actor, PolicyKind};
 use coadapt_core::{Env, EnvSpec};
+use coadapt_design_optimizer::resume::StateFile;
 use coadapt_design_optimizer::role::{self as optimizer, Optimizer, OptimizerSpec, RolloutEvaluator};
 use coadapt_env_rpc::{RemoteEnv, RemoteOptions};
 use coadapt_learner::coadapt::{self, RunEvent};
 use coadapt_learner::networks;
 use coadapt_learner::prototype::{self, Outcome, ResetMode};
+use coadapt_learner::run_dir::RunWriter;
+use coadapt_learner::snapshot;
 use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 
 use crate::progress::duration;
@@ -227,20 +230,70 @@ fn rounded(v: &[f32]) -> String {
 }
 
 /// The learner: runs the schedule over `links` and writes the run directory `dir` (created
-/// here; `config.toml` is written first).
+/// here; `config.toml` is written first). With `resume`, a run directory that holds a run is
+/// continued from its newest sound snapshot (one that holds none starts over, once its config
+/// is checked); without, it must not hold one.
 pub fn learner(
     cfg: &RunConfig,
     spec: &EnvSpec,
     dir: &Path,
     links: &mut LearnerLinks,
     shutdown: &AtomicBool,
+    resume: bool,
 ) -> anyhow::Result<coadapt::RunOutcome> {
-    let mut writer =
-        coadapt_learner::run_dir::RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?;
+    let run_id = crate::resume::new_run_id();
+    let root = crate::resume::snapshot_root(dir);
+    let mut snaps =
+        coadapt::Snapshots { cfg: cfg.snapshot.clone(), root: Some(root.clone()), run_id: run_id.clone(), ..Default::default() };
+    let holds_run = dir.join("designs.csv").exists();
+    if holds_run && !resume {
+        anyhow::bail!("{} already holds a run (designs.csv exists); choose another --out, or --resume it", dir.display());
+    }
+    let mut writer = if holds_run {
+        crate::resume::check_compatible(&crate::resume::stored_config(dir)?, cfg)?;
+        if snapshot::list(&root)?.is_empty() {
+            eprintln!("learner: {} has no snapshot yet: starting the run over (run id {run_id})", dir.display());
+            RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
+        } else {
+            let (from, manifest, state, skipped) = snapshot::load_latest(&root)?;
+            for why in &skipped {
+                eprintln!("learner: skipped snapshot {why}");
+            }
+            let (rows, bytes) = coadapt::resume_rows(&state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
+            eprintln!(
+                "learner: resuming {} from {} ({}; written by run id {}), run id {run_id}",
+                dir.display(),
+                from.display(),
+                manifest.label,
+                manifest.run_id
+            );
+            snaps.resume = Some(state);
+            snaps.next_sequence = manifest.sequence + 1;
+            RunWriter::resume(dir, rows, bytes).with_context(|| format!("reopening run directory {}", dir.display()))?
+        }
+    } else {
+        RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
+    };
     std::fs::write(dir.join("config.toml"), toml::to_string(cfg)?).context("writing config.toml")?;
     // The operator may answer from another directory: name the run directory in full.
     let mut on_event = progress_printer(cfg, &std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()));
-    Ok(coadapt::run(&cfg.schedule, &cfg.learner, spec, cfg.seed, &cfg.flow, cfg.actors, links, &mut writer, shutdown, &mut on_event)?)
+    let outcome = coadapt::run(
+        &cfg.schedule,
+        &cfg.learner,
+        spec,
+        cfg.seed,
+        &cfg.flow,
+        cfg.actors,
+        links,
+        &mut writer,
+        shutdown,
+        &mut on_event,
+        &mut snaps,
+    )?;
+    if snaps.taken > 0 {
+        eprintln!("learner: {} snapshot(s) in {:.2} s, the last {:.1} MB", snaps.taken, snaps.seconds, snaps.last_bytes as f64 / 1e6);
+    }
+    Ok(outcome)
 }
 
 /// One actor: runs the episodes it is handed until the learner is done.
@@ -256,8 +309,15 @@ pub fn actor(cfg: &RunConfig, spec: &EnvSpec, id: u64, links: &mut ActorLinks, s
     Ok(())
 }
 
-/// The design optimiser: answers design requests until the learner is done.
-pub fn optimizer(cfg: &RunConfig, spec: &EnvSpec, links: &mut OptimizerLinks, shutdown: &AtomicBool) -> anyhow::Result<()> {
+/// The design optimiser: answers design requests until the learner is done. With `state_dir`,
+/// it continues from the state saved there and saves its state after every reply.
+pub fn optimizer(
+    cfg: &RunConfig,
+    spec: &EnvSpec,
+    links: &mut OptimizerLinks,
+    shutdown: &AtomicBool,
+    state_dir: Option<&Path>,
+) -> anyhow::Result<()> {
     let hidden = &cfg.learner.sac.hidden;
     let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
     let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
@@ -285,6 +345,22 @@ pub fn optimizer(cfg: &RunConfig, spec: &EnvSpec, links: &mut OptimizerLinks, sh
         None
     };
     let mut opt = Optimizer::new(cfg.optimizer.clone(), ospec, sim.as_mut().map(|s| s as &mut dyn RolloutEvaluator), cfg.seed)?;
-    optimizer::run(&mut opt, links, shutdown).context("design optimiser")?;
+    let store = match state_dir {
+        Some(d) => {
+            let store = StateFile::in_dir(d).with_context(|| format!("creating {}", d.display()))?;
+            let (state, skipped) = store.load();
+            for why in &skipped {
+                eprintln!("optimizer: skipped state {why}");
+            }
+            if let Some(s) = state {
+                let n = s.replies.len();
+                opt.restore(s).map_err(|e| anyhow::anyhow!("{}: {e}", store.path().display()))?;
+                eprintln!("optimizer: continuing from {} ({n} replies so far)", store.path().display());
+            }
+            Some(store)
+        }
+        None => None,
+    };
+    optimizer::run(&mut opt, links, shutdown, store.as_ref()).context("design optimiser")?;
     Ok(())
 }

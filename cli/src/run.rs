@@ -55,6 +55,8 @@ pub struct RunConfig {
     pub optimizer: OptimizerConfig,
     /// Deadlines and retries of a remote environment.
     pub remote: crate::roles::RemoteEnvConfig,
+    /// Snapshots of the whole run for `--resume` (`every-episodes`, `keep`).
+    pub snapshot: coadapt_learner::snapshot::SnapshotConfig,
 }
 
 impl Default for RunConfig {
@@ -73,6 +75,7 @@ impl Default for RunConfig {
             learner: FearLearnerConfig::default(),
             optimizer: OptimizerConfig::default(),
             remote: crate::roles::RemoteEnvConfig::default(),
+            snapshot: coadapt_learner::snapshot::SnapshotConfig::default(),
         }
     }
 }
@@ -128,6 +131,12 @@ pub struct RunArgs {
     /// (episodes in flight on every actor while the learner trains).
     #[arg(long)]
     pub flow: Option<String>,
+    /// Continue the run in RUN_DIR (after a crash, a kill, a reboot or Ctrl-C) from its newest
+    /// sound snapshot, with its config.toml (a --config given must agree with it except in
+    /// schedule.designs, actors, fleet, snapshot, remote and deadlines). CSVs are cut back to
+    /// the snapshot; the same seed gives the same rows as a run never stopped.
+    #[arg(long, value_name = "RUN_DIR", conflicts_with = "out")]
+    pub resume: Option<PathBuf>,
 }
 
 fn parse_enum<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> anyhow::Result<T> {
@@ -136,7 +145,11 @@ fn parse_enum<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> anyhow::Re
 
 /// Reads the config: embedded default, or `--config`, then the flags.
 pub fn resolve(args: &RunArgs) -> anyhow::Result<(RunConfig, String)> {
-    let (text, name) = match &args.config {
+    let resumed_config = match (&args.resume, &args.config) {
+        (Some(dir), None) => Some(dir.join("config.toml")),
+        _ => None,
+    };
+    let (text, name) = match resumed_config.as_ref().or(args.config.as_ref()) {
         Some(p) => (
             std::fs::read_to_string(p).with_context(|| format!("reading config {}", p.display()))?,
             p.file_stem().map_or("run".into(), |s| s.to_string_lossy().into_owned()),
@@ -209,7 +222,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
 
 /// Runs the co-adaptation described by `cfg` into `dir`, every role a thread of this process
 /// over the in-process transport.
-pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow::Result<coadapt::RunOutcome> {
+pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> anyhow::Result<coadapt::RunOutcome> {
     let spec = make_env(&cfg.env)?.spec().clone();
     check(cfg, &spec)?;
     let (mut learner_links, actor_links, mut optimizer_links) = in_process::fleet(cfg.actors);
@@ -227,8 +240,9 @@ pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool) -> anyhow:
             .enumerate()
             .map(|(i, mut links)| s.spawn(move || stop_on_error(roles::actor(cfg, spec, i as u64, &mut links, shutdown))))
             .collect();
-        let opt = s.spawn(move || stop_on_error(roles::optimizer(cfg, spec, &mut optimizer_links, shutdown)));
-        let result = roles::learner(cfg, spec, dir, &mut learner_links, shutdown);
+        let state = crate::resume::optimizer_state_dir(dir);
+        let opt = s.spawn(move || stop_on_error(roles::optimizer(cfg, spec, &mut optimizer_links, shutdown, Some(&state))));
+        let result = roles::learner(cfg, spec, dir, &mut learner_links, shutdown, resume);
         // Closing the learner's channels lets the other roles finish.
         drop(learner_links);
         let mut errors = Vec::new();
@@ -360,9 +374,16 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let spec = make_env(&cfg.env)?.spec().clone();
     resolve_initial_designs(&mut cfg, &spec);
     check(&cfg, &spec)?;
-    let dir = args.out.clone().unwrap_or_else(|| default_out(&name, cfg.seed));
-    if dir.join("designs.csv").exists() {
-        bail!("{} already holds a run (designs.csv exists); choose another --out", dir.display());
+    let resume = args.resume.is_some();
+    let dir = match &args.resume {
+        Some(d) => {
+            crate::resume::check_compatible(&crate::resume::stored_config(d)?, &cfg)?;
+            d.clone()
+        }
+        None => args.out.clone().unwrap_or_else(|| default_out(&name, cfg.seed)),
+    };
+    if !resume && dir.join("designs.csv").exists() {
+        bail!("{} already holds a run (designs.csv exists); choose another --out, or --resume it", dir.display());
     }
     let shutdown = shutdown_on_ctrl_c();
     eprintln!(
@@ -378,9 +399,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         dir.display()
     );
     if cfg.fleet.transport != TransportKind::InProcess {
-        return crate::launch::launch(&cfg, &dir, &shutdown);
+        return crate::launch::launch(&cfg, &dir, &shutdown, resume);
     }
     let start = Instant::now();
-    let mut outcome = run_config(&cfg, &dir, &shutdown)?;
+    let mut outcome = run_config(&cfg, &dir, &shutdown, resume)?;
     finish(&cfg, &dir, &mut outcome, &shutdown, start)
 }

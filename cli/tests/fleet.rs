@@ -182,8 +182,8 @@ fn a_silent_actors_episode_is_issued_again() {
         let (c, spec, shutdown) = (&c, &spec, &shutdown);
         std::thread::sleep(Duration::from_millis(50));
         s.spawn(move || roles::actor(c, spec, 1, &mut live, shutdown).unwrap());
-        s.spawn(move || roles::optimizer(c, spec, &mut optimizer, shutdown).unwrap());
-        let outcome = roles::learner(c, spec, &dir, &mut learner, shutdown).unwrap();
+        s.spawn(move || roles::optimizer(c, spec, &mut optimizer, shutdown, None).unwrap());
+        let outcome = roles::learner(c, spec, &dir, &mut learner, shutdown, false).unwrap();
         drop(learner);
         finished.store(true, std::sync::atomic::Ordering::Relaxed);
         assert_eq!(taken.join().unwrap(), 1, "the silent actor took the first episode");
@@ -203,7 +203,7 @@ fn async_flow_keeps_episodes_in_flight_and_reports_policy_lag() {
     c.flow.mode = FlowMode::Async;
     let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
     resolve_initial_designs(&mut c, &spec);
-    let o = coadapt_cli::run::run_config(&c, &dir.join("run"), &AtomicBool::new(false)).unwrap();
+    let o = coadapt_cli::run::run_config(&c, &dir.join("run"), &AtomicBool::new(false), false).unwrap();
     assert!(!o.interrupted);
     assert_eq!(o.designs.iter().map(|d| d.episodes).sum::<usize>(), 10);
     assert!(o.time.max_policy_lag >= 1, "with three episodes in flight some act with older weights: {:?}", o.time);

@@ -158,7 +158,7 @@ fn small(exploit: ExploitMethod) -> RunConfig {
 
 fn rollouts_and_methods(c: &RunConfig, name: &str) -> Vec<(String, String, u64)> {
     let out = tmpdir(name);
-    let outcome = run_config(c, &out, &AtomicBool::new(false)).unwrap();
+    let outcome = run_config(c, &out, &AtomicBool::new(false), false).unwrap();
     assert!(!outcome.interrupted);
     assert_eq!(outcome.designs.len(), c.schedule.designs);
     outcome.designs.iter().map(|d| (d.kind.clone(), d.method.clone(), d.design_rollouts)).collect()
@@ -223,7 +223,7 @@ fn run_recording_requests(c: &RunConfig, name: &str) -> (coadapt_learner::coadap
             }
             states
         });
-        let outcome = roles::learner(c, spec, &dir, &mut learner, shutdown).unwrap();
+        let outcome = roles::learner(c, spec, &dir, &mut learner, shutdown, false).unwrap();
         drop(learner);
         (outcome, recorder.join().unwrap())
     })
@@ -256,15 +256,15 @@ fn bad_configs_are_refused_with_the_field_named() {
     let out = tmpdir("bad");
     let mut c = small(ExploitMethod::PsoQ);
     c.schedule.initial_designs[1] = vec![1.0; 5];
-    let e = format!("{:#}", run_config(&c, &out, &AtomicBool::new(false)).unwrap_err());
+    let e = format!("{:#}", run_config(&c, &out, &AtomicBool::new(false), false).unwrap_err());
     assert!(e.contains("schedule.initial-designs[1]"), "{e}");
     let mut c = small(ExploitMethod::PsoQ);
     c.schedule.episode_timeout_secs = f64::INFINITY;
-    let e = format!("{:#}", run_config(&c, &tmpdir("bad-timeout"), &AtomicBool::new(false)).unwrap_err());
+    let e = format!("{:#}", run_config(&c, &tmpdir("bad-timeout"), &AtomicBool::new(false), false).unwrap_err());
     assert!(e.contains("schedule.episode-timeout-secs"), "{e}");
     let mut c = small(ExploitMethod::PsoQ);
     c.actors = 65;
-    let e = format!("{:#}", run_config(&c, &tmpdir("bad-actors"), &AtomicBool::new(false)).unwrap_err());
+    let e = format!("{:#}", run_config(&c, &tmpdir("bad-actors"), &AtomicBool::new(false), false).unwrap_err());
     assert!(e.contains("fleet.max-actors"), "{e}");
     let e = toml::from_str::<RunConfig>("[schedule]\ndesings = 3\n").unwrap_err().to_string();
     assert!(e.contains("desings"), "{e}");

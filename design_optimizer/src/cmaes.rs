@@ -60,7 +60,7 @@ impl Default for CmaesConfig {
 }
 
 /// Hansen's default parameters for dimension `n` and population `lambda`.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 struct Params {
     weights: Vec<f64>,
     mu_eff: f64,
@@ -103,7 +103,7 @@ pub(crate) fn reflect(u: f64) -> f64 {
 /// size, the evolution paths and the covariance. The state persists between calls, so the
 /// strategy can run one generation each time a co-adaptation loop needs a design (Ha's
 /// population-based ES baseline); [`maximise`] runs it to convergence instead.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Cmaes {
     p: Params,
     n: usize,

@@ -137,6 +137,10 @@ pub trait AskTell {
     fn population(&self) -> usize;
     /// The distribution's mean in design units, inside the box.
     fn mean_design(&self) -> Vec<f32>;
+    /// The whole state (distribution, generator, counters), for the optimiser's state file.
+    fn save(&self) -> Result<String, String>;
+    /// Restores what [`AskTell::save`] returned.
+    fn load(&mut self, v: &str) -> Result<(), String>;
 }
 
 /// One generation of `es` over `objective` (Ha's baseline step): asks, scores every candidate in
@@ -157,7 +161,7 @@ pub fn one_generation(es: &mut dyn AskTell, objective: &mut dyn SwarmObjective) 
 
 /// OpenAI-ES (Salimans et al. 2017) as estool's `OpenES` runs it, as an ask/tell state machine in
 /// box-normalised coordinates; the module documentation has the algorithm.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct OpenAiEs {
     config: OpenAiEsConfig,
     n: usize,
@@ -360,6 +364,14 @@ impl AskTell for OpenAiEs {
     fn ask(&mut self) -> &[f32] {
         OpenAiEs::ask(self)
     }
+    fn save(&self) -> Result<String, String> {
+        // A string, not a `serde_json::Value`: the generator's state is a u128.
+        serde_json::to_string(self).map_err(|e| e.to_string())
+    }
+    fn load(&mut self, v: &str) -> Result<(), String> {
+        *self = serde_json::from_str(v).map_err(|e| e.to_string())?;
+        Ok(())
+    }
     fn tell(&mut self, scores: &[f32]) -> Result<(), SearchError> {
         OpenAiEs::tell(self, scores)
     }
@@ -377,6 +389,14 @@ impl AskTell for OpenAiEs {
 impl AskTell for Cmaes {
     fn ask(&mut self) -> &[f32] {
         Cmaes::ask(self)
+    }
+    fn save(&self) -> Result<String, String> {
+        // A string, not a `serde_json::Value`: the generator's state is a u128.
+        serde_json::to_string(self).map_err(|e| e.to_string())
+    }
+    fn load(&mut self, v: &str) -> Result<(), String> {
+        *self = serde_json::from_str(v).map_err(|e| e.to_string())?;
+        Ok(())
     }
     fn tell(&mut self, scores: &[f32]) -> Result<(), SearchError> {
         Cmaes::tell(self, scores)

@@ -24,6 +24,8 @@
 //! - [`role`]: the optimiser role: design requests in, designs out, by PSO/CMA-ES over Q,
 //!   the simulation baselines (through a [`role::RolloutEvaluator`]), ES or random; and
 //!   exploration by random designs or novelty.
+//! - [`resume`]: the optimiser's state file (generator, request count, ES state, every reply
+//!   by request), so a restarted optimiser continues exactly where it stopped.
 //!
 //! Every search is seeded (`coadapt_core::rng(seed, <its stream>)`): the same seed gives the
 //! same design.
@@ -35,6 +37,7 @@ pub mod novelty;
 pub mod objective;
 pub mod pso;
 pub mod reject;
+pub mod resume;
 pub mod role;
 pub mod swarm;
 

@@ -204,15 +204,17 @@ pub enum OptimizerError {
 
 /// The optimiser's state across requests.
 pub struct Optimizer<'a> {
-    cfg: OptimizerConfig,
+    pub(crate) cfg: OptimizerConfig,
     spec: OptimizerSpec,
     evaluator: Option<&'a mut dyn RolloutEvaluator>,
-    es: Option<Box<dyn AskTell>>,
+    pub(crate) es: Option<Box<dyn AskTell>>,
     /// The best ES candidate so far and its score.
-    es_best: Option<SearchResult>,
-    rng: Rng64,
-    seed: u64,
-    requests: u64,
+    pub(crate) es_best: Option<SearchResult>,
+    pub(crate) rng: Rng64,
+    pub(crate) seed: u64,
+    pub(crate) requests: u64,
+    /// Every reply so far, by request ([`crate::resume`]).
+    pub(crate) replies: std::collections::BTreeMap<crate::resume::RequestKey, crate::resume::StoredReply>,
 }
 
 impl std::fmt::Debug for Optimizer<'_> {
@@ -247,7 +249,7 @@ impl<'a> Optimizer<'a> {
             )),
             _ => None,
         };
-        Ok(Self { rng: rng(seed, 0x4f50_5449), cfg, spec, evaluator, es, es_best: None, seed, requests: 0 })
+        Ok(Self { rng: rng(seed, 0x4f50_5449), cfg, spec, evaluator, es, es_best: None, seed, requests: 0, replies: Default::default() })
     }
 
     fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, String> {
@@ -405,16 +407,35 @@ impl CriticObjective<'_> {
 /// Random draws before `random` gives up finding a design away from every rejected one.
 pub const RANDOM_DRAWS: usize = 10_000;
 
-/// Serves design requests until the learner closes the queue (`Ok`) or `shutdown` is set.
-pub fn run(opt: &mut Optimizer<'_>, links: &mut OptimizerLinks, shutdown: &AtomicBool) -> Result<u64, OptimizerError> {
+/// Serves design requests until the learner closes the queue (`Ok`) or `shutdown` is set. A
+/// request answered before (the learner sent it again after a deadline, or a resumed learner
+/// asks again) gets the same reply without a new search. With `store`, the optimiser's state
+/// is written there after every reply, before it is sent.
+pub fn run(
+    opt: &mut Optimizer<'_>,
+    links: &mut OptimizerLinks,
+    shutdown: &AtomicBool,
+    store: Option<&crate::resume::StateFile>,
+) -> Result<u64, OptimizerError> {
     let dims = Dims { obs: opt.spec.obs_dim, act: opt.spec.act_dim, design: opt.spec.bounds.dim() };
     let mut served = 0;
     while let Some(req) = next_or_stop(links.requests.as_mut(), shutdown)? {
         if let Err(e) = req.validate(&dims) {
             return Err(OptimizerError::Design { index: req.index, why: format!("malformed request: {e}") });
         }
+        let key = crate::resume::RequestKey::of(&req, dims.design);
+        if let Some(r) = opt.replies.get(&key) {
+            eprintln!("optimizer: design {} was answered before; sending the same reply", req.index);
+            links.replies.send(r.reply(req.index))?;
+            continue;
+        }
         let Some(w) = newest_or_stop(links.weights.as_mut(), req.weights_version, shutdown)? else { break };
         let reply = opt.choose(&req, &w)?;
+        opt.replies.insert(key, crate::resume::StoredReply::of(&reply));
+        if let Some(s) = store {
+            s.save(&opt.state().map_err(OptimizerError::Config)?)
+                .map_err(|e| OptimizerError::Config(format!("writing {}: {e}", s.path().display())))?;
+        }
         links.replies.send(reply)?;
         served += 1;
     }

@@ -21,10 +21,14 @@
 //! - `driver`: the learner's side of the fleet (weights out, episodes out, experience in,
 //!   design requests);
 //! - `operator`: choosing a design with the operator's verdict on its prototype, and the
-//!   waits for the operator.
+//!   waits for the operator;
+//! - `resume`: snapshots of the schedule's position and resuming from one.
 
 mod driver;
 mod operator;
+mod resume;
+
+pub use resume::Snapshots;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -34,10 +38,11 @@ use coadapt_transport::messages::Dims;
 use coadapt_transport::{DesignKind, EpisodeMode, LearnerLinks, TransportError};
 use serde::{Deserialize, Serialize};
 
-use crate::fear::{ActingPolicy, FearLearner, FearLearnerConfig};
+use crate::fear::{FearLearner, FearLearnerConfig};
 use crate::flow::{Completed, FlowConfig, LearnerTime};
 use crate::prototype::{Outcome, ResetMode};
 use crate::run_dir::{DesignRow, EpisodeRow, RunWriter};
+use crate::snapshot::{SnapshotError, StateIn};
 use driver::Learner;
 
 /// The co-adaptation schedule; defaults are the reference's.
@@ -76,6 +81,12 @@ pub struct ScheduleConfig {
     pub reset_needs_confirmation: bool,
     /// How often a waiting run looks for the operator's answer (seconds).
     pub confirm_poll_secs: f64,
+    /// Send a design request again when no reply has come for this long (seconds): an
+    /// optimiser that died with the request is restarted and answers the copy (one that is
+    /// only slow answers the copy from its stored replies, without a second search).
+    pub design_request_resend_secs: f64,
+    /// Fail the run when a design request has had no reply for this long (seconds).
+    pub design_request_timeout_secs: f64,
 }
 
 impl Default for ScheduleConfig {
@@ -93,6 +104,8 @@ impl Default for ScheduleConfig {
             train_while_waiting: 0,
             reset_needs_confirmation: false,
             confirm_poll_secs: 0.5,
+            design_request_resend_secs: 60.0,
+            design_request_timeout_secs: 7200.0,
         }
     }
 }
@@ -146,6 +159,8 @@ pub enum CoadaptError {
     Io(#[from] std::io::Error),
     #[error("saving a checkpoint: {0}")]
     Checkpoint(#[from] coadapt_nn::NnError),
+    #[error("snapshot: {0}")]
+    Snapshot(#[from] SnapshotError),
 }
 
 /// What the learner reports as it goes (for progress lines).
@@ -203,7 +218,15 @@ pub struct RunOutcome {
     pub time: LearnerTime,
 }
 
-/// Runs the whole co-adaptation. `initial` replaces an empty `initial-designs`.
+/// The rows of `designs.csv` and the length of `episodes.csv` at the snapshot `inp`, to open
+/// the run directory with [`RunWriter::resume`] before [`run`] continues from it.
+pub fn resume_rows(inp: &StateIn) -> Result<(Vec<DesignRow>, u64), SnapshotError> {
+    let p: resume::Progress = inp.get("progress")?;
+    Ok((p.written, p.episodes_bytes))
+}
+
+/// Runs the whole co-adaptation, or continues it from `snapshots.resume`. `initial` replaces
+/// an empty `initial-designs`.
 pub fn run(
     cfg: &ScheduleConfig,
     fear_cfg: &FearLearnerConfig,
@@ -215,6 +238,7 @@ pub fn run(
     out: &mut RunWriter,
     shutdown: &AtomicBool,
     on_event: &mut dyn FnMut(&RunEvent<'_>),
+    snaps: &mut Snapshots,
 ) -> Result<RunOutcome, CoadaptError> {
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     if cfg.initial_designs.is_empty() {
@@ -228,6 +252,14 @@ pub fn run(
         spec.design.check_finite("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
     }
     cfg.poll_interval().map_err(CoadaptError::Config)?;
+    for (name, v) in
+        [("design-request-resend-secs", cfg.design_request_resend_secs), ("design-request-timeout-secs", cfg.design_request_timeout_secs)]
+    {
+        if !(v.is_finite() && v > 0.0 && v < 1e9) {
+            return Err(CoadaptError::Config(format!("schedule.{name}: {v} is not a positive number of seconds")));
+        }
+    }
+    snaps.cfg.validate().map_err(CoadaptError::Config)?;
     let fear = FearLearner::new(dims.obs, dims.act, fear_cfg.clone(), seed).map_err(|e| CoadaptError::Config(e.to_string()))?;
     let lease = flow.lease().map_err(CoadaptError::Config)?;
     let in_flight = flow.in_flight(actors);
@@ -241,6 +273,7 @@ pub fn run(
         fear,
         acting_version: 0,
         acting_dirty: true,
+        republish: false,
         acting_which: None,
         population_version: 0,
         next_assignment: 0,
@@ -252,21 +285,37 @@ pub fn run(
         dir: &dir,
         rejected: Vec::new(),
     };
+    let mut p = match snaps.resume.take() {
+        Some(mut inp) => {
+            l.fear.load_state(&mut inp)?;
+            let p: resume::Progress = inp.get("progress")?;
+            l.restore(&p);
+            p
+        }
+        None => resume::Progress::start(),
+    };
     let start = Instant::now();
-    let mut rows: Vec<DesignRow> = Vec::new();
-    let mut chosen: Vec<f32> = Vec::new();
-    let (mut global, mut steps) = (0u64, 0u64);
+    let seconds_before = p.seconds;
     let mut stopped = false;
-    for index in 0..cfg.designs {
-        let Some(mut row) = l.choose_design(index, &chosen, out, on_event)? else { break };
-        chosen.extend_from_slice(&row.design);
+    for index in p.design..cfg.designs {
+        p.design = index;
+        let (mut row, done) = match p.in_design.take() {
+            // Resumed in the middle of this design: chosen, begun and partly trained already.
+            Some(d) => (d.row, d.episodes),
+            None => {
+                let Some(row) = l.choose_design(index, &p.chosen, out, on_event)? else { break };
+                p.chosen.extend_from_slice(&row.design);
+                l.fear.begin_design(index);
+                l.acting_dirty = true;
+                (row, 0)
+            }
+        };
         on_event(&RunEvent::DesignStart { index, row: &row });
-        l.fear.begin_design(index);
-        l.acting_dirty = true;
         let n = cfg.episodes_of(index);
         let design = row.design.clone();
-        let base = global;
-        let (mut issued, mut written) = (0usize, 0usize);
+        let base = p.global - done as u64;
+        let (mut issued, mut written) = (done, done);
+        let mut since_snapshot = 0usize;
         // Training episodes back and trained on, waiting for their evaluation.
         let mut awaiting_eval: Vec<(Completed, u64)> = Vec::new();
         let mut interrupted = false;
@@ -286,7 +335,7 @@ pub fn run(
             let ((c, steps_then), eval_return) = match c.mode {
                 EpisodeMode::Train => {
                     l.learn_from(&c)?;
-                    steps += c.end.length;
+                    p.steps += c.end.length;
                     let e = c.episode;
                     if cfg.eval_every > 0 && (e + 1) % cfg.eval_every == 0 || e + 1 == n {
                         if !l.reset_before(index, e, n, ResetMode::Eval, on_event)? {
@@ -294,10 +343,10 @@ pub fn run(
                             break 'episodes;
                         }
                         l.issue(index, &design, e, c.global, EpisodeMode::Eval)?;
-                        awaiting_eval.push((c, steps));
+                        awaiting_eval.push((c, p.steps));
                         continue;
                     }
-                    ((c, steps), None)
+                    ((c, p.steps), None)
                 }
                 EpisodeMode::Eval => {
                     let Some(i) = awaiting_eval.iter().position(|(t, _)| t.episode == c.episode) else {
@@ -321,25 +370,46 @@ pub fn run(
                 weights_version: c.weights_version,
                 actor: c.actor,
                 policy_lag: c.policy_lag,
-                seconds: start.elapsed().as_secs_f64(),
+                seconds: seconds_before + start.elapsed().as_secs_f64(),
             };
             out.episode(&ep)?;
             on_event(&RunEvent::Episode { row: &ep, episodes_in_design: n });
             written += 1;
-            global += 1;
+            p.global += 1;
+            since_snapshot += 1;
+            // Nothing out with an actor: the state is whole. A snapshot every `every-episodes`
+            // and, on shutdown, one now (the design's end takes its own).
+            let quiet = l.pending.is_empty() && awaiting_eval.is_empty();
+            let stopping = shutdown.load(Ordering::Relaxed);
+            let every = snaps.cfg.every_episodes;
+            if quiet && written < n && (stopping || every > 0 && since_snapshot >= every) {
+                p.in_design = Some(resume::InDesign { row: row.clone(), episodes: written });
+                p.seconds = seconds_before + start.elapsed().as_secs_f64();
+                l.snapshot(&mut p, out, snaps, &format!("design {index} episode {written}"))?;
+                p.in_design = None;
+                since_snapshot = 0;
+                if stopping {
+                    interrupted = true;
+                    break;
+                }
+            }
         }
         // An interrupted design drops what is still out; the actors' late chunks are ignored.
         l.pending.clear();
         out.design(&row)?;
-        l.fear.agent(ActingPolicy::Population).save(&out.checkpoint_path("population"))?;
-        l.fear.agent(ActingPolicy::Individual).save(&out.checkpoint_path("individual"))?;
+        out.checkpoint(index, &l.fear)?;
         on_event(&RunEvent::DesignEnd { row: &row });
-        rows.push(row);
+        p.rows.push(row);
+        if !interrupted {
+            p.design = index + 1;
+            p.seconds = seconds_before + start.elapsed().as_secs_f64();
+            l.snapshot(&mut p, out, snaps, &format!("design {index} end"))?;
+        }
         if interrupted || shutdown.load(Ordering::Relaxed) {
             stopped = true;
             break;
         }
     }
-    let interrupted = stopped || rows.len() < cfg.designs;
-    Ok(RunOutcome { learner: l.fear, designs: rows, rejected: l.rejected, interrupted, time: l.time })
+    let interrupted = stopped || p.rows.len() < cfg.designs;
+    Ok(RunOutcome { learner: l.fear, designs: p.rows, rejected: l.rejected, interrupted, time: l.time })
 }

@@ -19,6 +19,7 @@ use coadapt_nn::NnError;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::snapshot::{SnapshotError, StateIn, StateOut};
 use crate::{Sac, SacConfig, SacLosses};
 
 /// FEAR's learner settings; defaults are the reference's (DESIGN.md section 2).
@@ -102,8 +103,17 @@ fn non_finite_param(sac: &Sac) -> Option<String> {
         .or_else(|| (!sac.alpha().is_finite()).then(|| format!("alpha ({})", sac.alpha())))
 }
 
+/// The scalars of [`FearLearner::save_state`].
+#[derive(Serialize, Deserialize)]
+struct FearScalars {
+    design_index: Option<usize>,
+    episode_in_design: usize,
+    #[serde(with = "crate::snapshot::bits::rng")]
+    rng: Rng64,
+}
+
 /// Which network pair acts in the current episode.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ActingPolicy {
     Population,
     Individual,
@@ -269,6 +279,41 @@ impl FearLearner {
             }
         }
         Ok(out)
+    }
+
+    /// Writes both pairs, the three buffers, the schedule position and the generator.
+    pub fn save_state(&self, out: &mut StateOut) -> std::io::Result<()> {
+        self.population.save_state("population", out)?;
+        self.individual.save_state("individual", out)?;
+        for (name, buf) in
+            [("replay.population", &self.pop_replay), ("replay.species", &self.species_replay), ("replay.start", &self.start_states)]
+        {
+            let (arrays, next) = buf.raw();
+            for (part, a) in ["obs", "act", "rew", "next_obs", "done"].iter().zip(arrays) {
+                out.f32s(&format!("{name}.{part}"), a)?;
+            }
+            out.put(&format!("{name}.next"), &next)?;
+        }
+        out.put("fear", &FearScalars { design_index: self.design_index, episode_in_design: self.episode_in_design, rng: self.rng.clone() })
+    }
+
+    /// Restores what [`Self::save_state`] wrote into a learner built with the same settings.
+    pub fn load_state(&mut self, inp: &mut StateIn) -> Result<(), SnapshotError> {
+        self.population.load_state("population", inp)?;
+        self.individual.load_state("individual", inp)?;
+        for (name, buf) in [
+            ("replay.population", &mut self.pop_replay),
+            ("replay.species", &mut self.species_replay),
+            ("replay.start", &mut self.start_states),
+        ] {
+            let mut take = |part: &str| inp.f32s_any(&format!("{name}.{part}"));
+            let arrays = [take("obs")?, take("act")?, take("rew")?, take("next_obs")?, take("done")?];
+            let next: usize = inp.get(&format!("{name}.next"))?;
+            buf.restore_raw(arrays, next).map_err(|e| SnapshotError::Mismatch(format!("{name}: {e}")))?;
+        }
+        let f: FearScalars = inp.get("fear")?;
+        (self.design_index, self.episode_in_design, self.rng) = (f.design_index, f.episode_in_design, f.rng);
+        Ok(())
     }
 
     /// `n` population updates on batches from the population buffer, outside the per-episode

@@ -102,7 +102,7 @@ pub struct Completed {
 }
 
 /// Where the learner's time went (seconds), for the run summary.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct LearnerTime {
     /// Blocked on the transport waiting for experience or design replies.
     pub waiting: f64,
@@ -124,4 +124,7 @@ pub struct LearnerTime {
     pub waiting_for_reset: f64,
     /// Population updates made while waiting (`schedule.train-while-waiting`).
     pub updates_while_waiting: u64,
+    /// Design requests sent again after `schedule.design-request-resend-secs` without a reply.
+    #[serde(default)]
+    pub design_requests_resent: u64,
 }

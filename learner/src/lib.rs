@@ -15,6 +15,8 @@
 //!   run and `coadapt confirm` talk (designs to build, resets by hand), both sides.
 //! - [`flow`]: flow control between collection and training (lock-step or a window of
 //!   episodes in flight), leases that re-issue a silent actor's episode, policy lag.
+//! - [`snapshot`]: snapshots of a whole run (networks, optimisers, replay buffers, schedule)
+//!   written crash-safely and checked on reading, for resuming after any crash.
 //! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
 
 pub mod agent;
@@ -27,6 +29,7 @@ pub mod networks;
 pub mod prototype;
 pub mod run_dir;
 pub mod sac;
+pub mod snapshot;
 pub mod train;
 
 pub use agent::{Agent, Algo};

@@ -12,22 +12,29 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use serde::{Deserialize, Serialize};
+
 /// The header of `designs.csv`. `design` is the design vector joined with `;`.
 pub const DESIGNS_HEADER: &str =
     "index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts,method,prototype";
 /// The header of `episodes.csv`; `eval_return` is empty for episodes without an evaluation.
 pub const EPISODES_HEADER: &str = "design,episode,global_episode,steps,return,eval_return,weights_version,seconds,actor,policy_lag";
 
-/// One finished (or interrupted) design.
-#[derive(Clone, Debug, PartialEq)]
+/// One finished (or interrupted) design. Snapshots store its numbers by their bits, so a
+/// resumed run trains on exactly the design it chose.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DesignRow {
     pub index: usize,
     /// `initial`, `exploit` or `explore`.
     pub kind: String,
+    #[serde(with = "crate::snapshot::bits::vec")]
     pub design: Vec<f32>,
     pub episodes: usize,
+    #[serde(with = "crate::snapshot::bits::opt")]
     pub best_eval_return: Option<f32>,
+    #[serde(with = "crate::snapshot::bits::opt")]
     pub last_eval_return: Option<f32>,
+    #[serde(with = "crate::snapshot::bits::opt")]
     pub predicted_objective: Option<f32>,
     pub design_rollouts: u64,
     /// How the design was chosen (`fixed`, `pso-q`, `novelty`, `random`, `sim-pso`, ...).
@@ -87,15 +94,20 @@ pub struct RunWriter {
     /// Every row of `designs.csv`, in order.
     designs: Vec<DesignRow>,
     episodes: BufWriter<File>,
+    /// Bytes of `episodes.csv` written so far (a snapshot records it; a resume cuts back to it).
+    episodes_bytes: u64,
 }
 
-/// Writes `text` to `path` through `path.tmp` and a rename, so a reader sees the old file or
-/// the new one, never a part.
+/// Writes `text` to `path` through `path.tmp` (fsynced) and a rename, so a reader sees the old
+/// file or the new one, never a part.
 pub fn write_atomically(path: &Path, text: &str) -> io::Result<()> {
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".tmp");
     let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text)?;
+    let mut f = File::create(&tmp)?;
+    f.write_all(text.as_bytes())?;
+    // On the disk before the rename: after a power cut the name holds the old or the new text.
+    f.sync_all()?;
     std::fs::rename(&tmp, path)
 }
 
@@ -104,11 +116,46 @@ impl RunWriter {
     pub fn create(dir: &Path) -> io::Result<Self> {
         std::fs::create_dir_all(dir.join("checkpoints"))?;
         let mut episodes = BufWriter::new(File::create(dir.join("episodes.csv"))?);
-        writeln!(episodes, "{EPISODES_HEADER}")?;
+        let header = format!("{EPISODES_HEADER}\n");
+        episodes.write_all(header.as_bytes())?;
         episodes.flush()?;
-        let w = Self { dir: dir.to_path_buf(), designs: Vec::new(), episodes };
+        let w = Self { dir: dir.to_path_buf(), designs: Vec::new(), episodes, episodes_bytes: header.len() as u64 };
         w.write_designs()?;
         Ok(w)
+    }
+
+    /// Opens the run directory `dir` of a run resumed from a snapshot: `episodes.csv` is cut
+    /// back to its first `episodes_bytes` bytes and `designs.csv` rewritten with `designs`, so
+    /// the rows after the snapshot, which the resumed run writes again, appear once.
+    pub fn resume(dir: &Path, designs: Vec<DesignRow>, episodes_bytes: u64) -> io::Result<Self> {
+        std::fs::create_dir_all(dir.join("checkpoints"))?;
+        let path = dir.join("episodes.csv");
+        let f = File::options().write(true).open(&path)?;
+        let len = f.metadata()?.len();
+        if len < episodes_bytes {
+            return Err(io::Error::other(format!(
+                "{} has {len} bytes, fewer than the {episodes_bytes} the snapshot recorded: it was changed after the snapshot",
+                path.display()
+            )));
+        }
+        f.set_len(episodes_bytes)?;
+        f.sync_all()?;
+        drop(f);
+        let episodes = BufWriter::new(File::options().append(true).open(&path)?);
+        let w = Self { dir: dir.to_path_buf(), designs, episodes, episodes_bytes };
+        w.write_designs()?;
+        Ok(w)
+    }
+
+    /// Bytes of `episodes.csv` so far.
+    pub fn episodes_bytes(&self) -> u64 {
+        self.episodes_bytes
+    }
+
+    /// Flushes `episodes.csv` to the disk (before a snapshot that records its length).
+    pub fn sync(&mut self) -> io::Result<()> {
+        self.episodes.flush()?;
+        self.episodes.get_ref().sync_all()
     }
 
     pub fn dir(&self) -> &Path {
@@ -117,6 +164,41 @@ impl RunWriter {
 
     pub fn checkpoint_path(&self, name: &str) -> PathBuf {
         self.dir.join("checkpoints").join(format!("{name}.safetensors"))
+    }
+
+    /// The networks at the end of design `index`, as one directory
+    /// `checkpoints/design-NNN/{population,individual}.safetensors` (written under a temporary
+    /// name, fsynced and renamed: both files or neither), and the newest pair again as
+    /// `checkpoints/{population,individual}.safetensors`.
+    pub fn checkpoint(&self, index: usize, fear: &crate::fear::FearLearner) -> Result<(), coadapt_nn::NnError> {
+        use crate::fear::ActingPolicy::{Individual, Population};
+        let root = self.dir.join("checkpoints");
+        let tmp = root.join(format!(".tmp-design-{index:03}"));
+        let dir = root.join(format!("design-{index:03}"));
+        let io = |source: io::Error| coadapt_nn::NnError::Write { path: root.display().to_string(), source };
+        if tmp.exists() {
+            std::fs::remove_dir_all(&tmp).map_err(io)?;
+        }
+        std::fs::create_dir_all(&tmp).map_err(io)?;
+        for (name, which) in [("population", Population), ("individual", Individual)] {
+            let path = tmp.join(format!("{name}.safetensors"));
+            fear.agent(which).save(&path)?;
+            File::open(&path).and_then(|f| f.sync_all()).map_err(io)?;
+        }
+        File::open(&tmp).and_then(|f| f.sync_all()).map_err(io)?;
+        if dir.exists() {
+            // Written before a resume went back past this design.
+            std::fs::remove_dir_all(&dir).map_err(io)?;
+        }
+        std::fs::rename(&tmp, &dir).map_err(io)?;
+        for name in ["population", "individual"] {
+            let latest = self.checkpoint_path(name);
+            let mut part = latest.clone().into_os_string();
+            part.push(".tmp");
+            std::fs::copy(dir.join(format!("{name}.safetensors")), &part).map_err(io)?;
+            std::fs::rename(&part, &latest).map_err(io)?;
+        }
+        File::open(&root).and_then(|f| f.sync_all()).map_err(io)
     }
 
     /// The rows of `designs.csv` so far.
@@ -156,9 +238,8 @@ impl RunWriter {
     }
 
     pub fn episode(&mut self, r: &EpisodeRow) -> io::Result<()> {
-        writeln!(
-            self.episodes,
-            "{},{},{},{},{},{},{},{:.3},{},{}",
+        let line = format!(
+            "{},{},{},{},{},{},{},{:.3},{},{}\n",
             r.design,
             r.episode,
             r.global_episode,
@@ -169,7 +250,9 @@ impl RunWriter {
             r.seconds,
             r.actor,
             r.policy_lag
-        )?;
+        );
+        self.episodes.write_all(line.as_bytes())?;
+        self.episodes_bytes += line.len() as u64;
         self.episodes.flush()
     }
 }

@@ -14,8 +14,11 @@ use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NamedNetwork, NnError, clam
 use rand::Rng;
 use rand_distr::StandardNormal;
 
+use serde::{Deserialize, Serialize};
+
 use crate::config::SacConfig;
 use crate::networks::{concat_rows, critic, gaussian_policy, resize};
+use crate::snapshot::{SnapshotError, StateIn, StateOut};
 
 /// Losses of one update, for logging.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -26,6 +29,16 @@ pub struct SacLosses {
     pub alpha: f32,
     /// Mean log pi(a~|s) of the batch (minus the policy's entropy).
     pub log_pi: f32,
+}
+
+/// The scalars of [`Sac::save_state`].
+#[derive(Serialize, Deserialize)]
+struct SacScalars {
+    log_alpha: f32,
+    adam_steps: [u32; 4],
+    updates: u64,
+    #[serde(with = "crate::snapshot::bits::rng")]
+    rng: Rng64,
 }
 
 /// One critic with its target, optimiser and scratch: what one core owns during an update.
@@ -366,6 +379,57 @@ impl Sac {
         let q = [get("q1", &self.critic)?, get("q2", &self.critic)?];
         let q_bar = [get("q1_target", &self.critic)?, get("q2_target", &self.critic)?];
         self.set_params(&phi, [&q[0], &q[1]], [&q_bar[0], &q_bar[1]]);
+        Ok(())
+    }
+
+    /// Writes everything that decides this agent's future (networks, targets, every Adam state,
+    /// log alpha, the generator, the update count) under `prefix`.
+    pub fn save_state(&self, prefix: &str, out: &mut StateOut) -> std::io::Result<()> {
+        let (m, v) = self.phi_adam.moments();
+        out.f32s(&format!("{prefix}.policy"), &self.phi)?;
+        out.f32s(&format!("{prefix}.policy.adam.m"), m)?;
+        out.f32s(&format!("{prefix}.policy.adam.v"), v)?;
+        for (i, c) in self.critics.iter().enumerate() {
+            let (m, v) = c.adam.moments();
+            out.f32s(&format!("{prefix}.q{}", i + 1), &c.theta)?;
+            out.f32s(&format!("{prefix}.q{}.target", i + 1), &c.theta_bar)?;
+            out.f32s(&format!("{prefix}.q{}.adam.m", i + 1), m)?;
+            out.f32s(&format!("{prefix}.q{}.adam.v", i + 1), v)?;
+        }
+        let (m, v) = self.alpha_adam.moments();
+        out.f32s(&format!("{prefix}.log_alpha.adam.m"), m)?;
+        out.f32s(&format!("{prefix}.log_alpha.adam.v"), v)?;
+        out.put(
+            prefix,
+            &SacScalars { log_alpha: self.log_alpha, adam_steps: self.optimiser_steps(), updates: self.updates, rng: self.rng.clone() },
+        )
+    }
+
+    /// Restores what [`Self::save_state`] wrote; the shapes must be this agent's.
+    pub fn load_state(&mut self, prefix: &str, inp: &mut StateIn) -> Result<(), SnapshotError> {
+        let mismatch = |e: String| SnapshotError::Mismatch(format!("{prefix}: {e}"));
+        let s: SacScalars = inp.get(prefix)?;
+        let (np, nc) = (self.phi.len(), self.critics[0].theta.len());
+        self.phi = inp.f32s(&format!("{prefix}.policy"), np)?;
+        let (m, v) = (inp.f32s(&format!("{prefix}.policy.adam.m"), np)?, inp.f32s(&format!("{prefix}.policy.adam.v"), np)?);
+        self.phi_adam.restore(&m, &v, s.adam_steps[0]).map_err(mismatch)?;
+        for i in 0..2 {
+            let theta = inp.f32s(&format!("{prefix}.q{}", i + 1), nc)?;
+            let theta_bar = inp.f32s(&format!("{prefix}.q{}.target", i + 1), nc)?;
+            let m = inp.f32s(&format!("{prefix}.q{}.adam.m", i + 1), nc)?;
+            let v = inp.f32s(&format!("{prefix}.q{}.adam.v", i + 1), nc)?;
+            let c = &mut self.critics[i];
+            c.adam.restore(&m, &v, s.adam_steps[1 + i]).map_err(mismatch)?;
+            (c.theta, c.theta_bar) = (theta, theta_bar);
+        }
+        let (m, v) = (inp.f32s(&format!("{prefix}.log_alpha.adam.m"), 1)?, inp.f32s(&format!("{prefix}.log_alpha.adam.v"), 1)?);
+        self.alpha_adam.restore(&m, &v, s.adam_steps[3]).map_err(mismatch)?;
+        if !s.log_alpha.is_finite() {
+            return Err(mismatch(format!("log alpha {} is not finite", s.log_alpha)));
+        }
+        self.log_alpha = s.log_alpha;
+        self.updates = s.updates;
+        self.rng = s.rng;
         Ok(())
     }
 

@@ -186,7 +186,19 @@ fn run<T: Send>(name: &str, schedule: &ScheduleConfig, operator: impl FnOnce(&Be
             _ => {}
         };
         let flow = FlowConfig::default();
-        let outcome = coadapt::run(schedule, &learner_cfg(), spec, 11, &flow, 1, &mut learner, &mut out, shutdown, &mut on_event);
+        let outcome = coadapt::run(
+            schedule,
+            &learner_cfg(),
+            spec,
+            11,
+            &flow,
+            1,
+            &mut learner,
+            &mut out,
+            shutdown,
+            &mut on_event,
+            &mut coadapt::Snapshots::off(),
+        );
         over.store(true, Ordering::Relaxed);
         // Closing the learner's channels ends the actor and the optimiser.
         drop(learner);

@@ -153,6 +153,36 @@ impl ReplayBuffer {
         self.next = self.len() % cap;
     }
 
+    /// The stored arrays (`obs`, `act`, `rew`, `next_obs`, `done`) and the next slot to write,
+    /// for a snapshot of the run.
+    pub fn raw(&self) -> ([&[f32]; 5], usize) {
+        ([&self.obs, &self.act, &self.rew, &self.next_obs, &self.done], self.next)
+    }
+
+    /// Restores arrays saved by [`Self::raw`] from a buffer of the same widths and capacity.
+    pub fn restore_raw(&mut self, [obs, act, rew, next_obs, done]: [Vec<f32>; 5], next: usize) -> Result<(), String> {
+        let n = rew.len();
+        let (o, a) = (self.obs_dim, self.act_dim);
+        if n > self.capacity || obs.len() != n * o || act.len() != n * a || next_obs.len() != n * o || done.len() != n {
+            return Err(format!(
+                "replay arrays of {n} transitions do not fit widths {o}/{a} and capacity {} (obs {}, act {}, next_obs {}, done {})",
+                self.capacity,
+                obs.len(),
+                act.len(),
+                next_obs.len(),
+                done.len()
+            ));
+        }
+        if next >= self.capacity || (n < self.capacity && next != n % self.capacity) {
+            return Err(format!("replay write position {next} does not fit {n} transitions and capacity {}", self.capacity));
+        }
+        if let Some(i) = [&obs, &act, &rew, &next_obs, &done].iter().find_map(|v| v.iter().position(|x| !x.is_finite())) {
+            return Err(format!("replay arrays hold a non-finite value (at {i})"));
+        }
+        (self.obs, self.act, self.rew, self.next_obs, self.done, self.next) = (obs, act, rew, next_obs, done, next);
+        Ok(())
+    }
+
     /// Transition `i` (0 is the oldest still stored when not yet wrapped).
     pub fn get(&self, i: usize) -> Transition<'_> {
         let (o, a) = (self.obs_dim, self.act_dim);

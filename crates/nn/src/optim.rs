@@ -41,6 +41,22 @@ impl Adam {
         self.t
     }
 
+    /// The first and second moment estimates (for a snapshot of the whole run).
+    pub fn moments(&self) -> (&[f32], &[f32]) {
+        (&self.m, &self.v)
+    }
+
+    /// Restores moments and step count saved from an optimiser of the same size.
+    pub fn restore(&mut self, m: &[f32], v: &[f32], t: u32) -> Result<(), String> {
+        if m.len() != self.m.len() || v.len() != self.v.len() {
+            return Err(format!("Adam moments of {} and {} values for {} parameters", m.len(), v.len(), self.m.len()));
+        }
+        self.m.copy_from_slice(m);
+        self.v.copy_from_slice(v);
+        self.t = t;
+        Ok(())
+    }
+
     /// One descent step of `params` along `grad`.
     pub fn step(&mut self, params: &mut [f32], grad: &[f32]) {
         assert_eq!(params.len(), self.m.len(), "Adam built for another network");

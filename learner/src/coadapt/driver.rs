@@ -32,6 +32,8 @@ pub(super) struct Learner<'a> {
     pub(super) acting_version: u64,
     /// The acting policy changed since it was last published.
     pub(super) acting_dirty: bool,
+    /// Publish the acting policy again under its version (a resumed run's actors have none).
+    pub(super) republish: bool,
     pub(super) acting_which: Option<ActingPolicy>,
     pub(super) population_version: u64,
     pub(super) next_assignment: u64,
@@ -51,11 +53,15 @@ impl Learner<'_> {
     /// Publishes the acting policy if it changed; returns the version actors must act with.
     fn publish_acting(&mut self) -> Result<u64, CoadaptError> {
         let which = self.fear.acting();
-        if !self.acting_dirty && self.acting_which == Some(which) {
+        let changed = self.acting_dirty || self.acting_which != Some(which);
+        if !changed && !self.republish {
             return Ok(self.acting_version);
         }
         let t = Instant::now();
-        self.acting_version += 1;
+        if changed {
+            self.acting_version += 1;
+        }
+        self.republish = false;
         let policy = self.fear.agent(which).policy_params().to_vec();
         self.links.acting_weights.publish(Weights { version: self.acting_version, policy, q1: vec![], q2: vec![] })?;
         self.acting_dirty = false;
@@ -249,11 +255,25 @@ impl Learner<'_> {
             .ok_or_else(|| CoadaptError::Protocol("no start states yet: the run needs at least one initial design".into()))?;
         let rejected = self.rejected.iter().flat_map(|r| r.design.iter().copied()).collect();
         let req = DesignRequest { index: index as u32, kind, weights_version: version, start_states, chosen: chosen.to_vec(), rejected };
-        self.links.design_requests.send(req)?;
+        self.links.design_requests.send(req.clone())?;
         let t = Instant::now();
+        let resend = Duration::from_secs_f64(self.cfg.design_request_resend_secs);
+        let deadline = Duration::from_secs_f64(self.cfg.design_request_timeout_secs);
+        let mut sent = Instant::now();
         let result = loop {
             if self.shutdown.load(Ordering::Relaxed) {
                 break Ok(None);
+            }
+            if t.elapsed() > deadline {
+                break Err(CoadaptError::Protocol(format!(
+                    "no design {index} from the optimiser in {deadline:?} (schedule.design-request-timeout-secs): is it running?"
+                )));
+            }
+            if sent.elapsed() > resend {
+                eprintln!("learner: no reply to design request {index} for {resend:?}; sending it again");
+                self.links.design_requests.send(req.clone())?;
+                self.time.design_requests_resent += 1;
+                sent = Instant::now();
             }
             let reply = match self.links.design_replies.recv_timeout(POLL) {
                 Ok(Some(reply)) => reply,

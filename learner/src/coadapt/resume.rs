@@ -1,0 +1,151 @@
+//! Snapshots of the run loop and resuming from one: what the schedule needs besides the
+//! learner's networks and buffers ([`crate::fear::FearLearner::save_state`]) to continue as if
+//! nothing had happened: the design in progress and its episodes, the rows written, the
+//! counters that number weights and assignments, and the time spent.
+//!
+//! Snapshots are taken only where no episode is out with an actor (in lock-step, after every
+//! episode's row; in async flow at least at the end of each design), so a resumed run issues
+//! exactly the episodes the interrupted one would have issued next, with the same seeds.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use super::CoadaptError;
+use super::driver::Learner;
+use crate::fear::ActingPolicy;
+use crate::flow::LearnerTime;
+use crate::run_dir::{DesignRow, RunWriter};
+use crate::snapshot::{self, SnapshotConfig, StateIn};
+
+/// The snapshots of one learner start.
+#[derive(Debug, Default)]
+pub struct Snapshots {
+    pub cfg: SnapshotConfig,
+    /// `RUN_DIR/snapshots`; `None`: no snapshots.
+    pub root: Option<PathBuf>,
+    /// This learner start's id (new at every start).
+    pub run_id: String,
+    /// The checked contents of the snapshot to continue from.
+    pub resume: Option<StateIn>,
+    /// Sequence number of the next snapshot.
+    pub next_sequence: u64,
+    /// Snapshots this start took, and the seconds they took.
+    pub taken: u64,
+    pub seconds: f64,
+    /// Size of the newest snapshot (bytes) and when it was taken.
+    pub last_bytes: u64,
+    pub last_at: Option<Instant>,
+}
+
+impl Snapshots {
+    /// No snapshots at all.
+    pub fn off() -> Self {
+        Self { cfg: SnapshotConfig { every_episodes: 0, ..SnapshotConfig::default() }, ..Self::default() }
+    }
+}
+
+/// A design whose episodes were under way at the snapshot.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(super) struct InDesign {
+    pub row: DesignRow,
+    /// Episodes finished (and written) of the design.
+    pub episodes: usize,
+}
+
+/// Where the schedule stands.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub(super) struct Progress {
+    /// The design in progress, or the next one to choose.
+    pub design: usize,
+    pub in_design: Option<InDesign>,
+    /// Finished designs.
+    pub rows: Vec<DesignRow>,
+    pub rejected: Vec<DesignRow>,
+    /// Every row of `designs.csv`.
+    pub written: Vec<DesignRow>,
+    pub episodes_bytes: u64,
+    #[serde(with = "crate::snapshot::bits::vec")]
+    pub chosen: Vec<f32>,
+    pub global: u64,
+    pub steps: u64,
+    pub acting_version: u64,
+    pub acting_which: Option<ActingPolicy>,
+    pub acting_dirty: bool,
+    pub population_version: u64,
+    pub next_assignment: u64,
+    pub time: LearnerTime,
+    /// Seconds since the run started (episodes.csv's `seconds` goes on from it).
+    pub seconds: f64,
+}
+
+impl Progress {
+    pub fn start() -> Self {
+        Self {
+            design: 0,
+            in_design: None,
+            rows: Vec::new(),
+            rejected: Vec::new(),
+            written: Vec::new(),
+            episodes_bytes: 0,
+            chosen: Vec::new(),
+            global: 0,
+            steps: 0,
+            acting_version: 0,
+            acting_which: None,
+            acting_dirty: true,
+            population_version: 0,
+            next_assignment: 0,
+            time: LearnerTime::default(),
+            seconds: 0.0,
+        }
+    }
+}
+
+impl Learner<'_> {
+    /// Fills in the counters this side keeps.
+    pub(super) fn progress(&self, p: &mut Progress) {
+        p.rejected = self.rejected.clone();
+        p.acting_version = self.acting_version;
+        p.acting_which = self.acting_which;
+        p.acting_dirty = self.acting_dirty;
+        p.population_version = self.population_version;
+        p.next_assignment = self.next_assignment;
+        p.time = self.time;
+    }
+
+    /// Restores the counters of `p` (the acting weights are published again under their
+    /// version before the next episode: new actors have none).
+    pub(super) fn restore(&mut self, p: &Progress) {
+        self.rejected = p.rejected.clone();
+        self.acting_version = p.acting_version;
+        self.acting_which = p.acting_which;
+        self.acting_dirty = p.acting_dirty;
+        self.republish = true;
+        self.population_version = p.population_version;
+        self.next_assignment = p.next_assignment;
+        self.time = p.time;
+    }
+
+    /// Takes a snapshot of the learner and `p` (rows of `out`).
+    pub(super) fn snapshot(&self, p: &mut Progress, out: &mut RunWriter, snaps: &mut Snapshots, label: &str) -> Result<(), CoadaptError> {
+        let Some(root) = snaps.root.clone() else { return Ok(()) };
+        let t = Instant::now();
+        self.progress(p);
+        out.sync()?;
+        p.written = out.designs().to_vec();
+        p.episodes_bytes = out.episodes_bytes();
+        let seq = snaps.next_sequence;
+        let dir = snapshot::write(&root, seq, &snaps.run_id, label, snaps.cfg.keep, |o| {
+            self.fear.save_state(o)?;
+            o.put("progress", &*p)
+        })?;
+        snaps.next_sequence += 1;
+        snaps.taken += 1;
+        snaps.seconds += t.elapsed().as_secs_f64();
+        snaps.last_bytes = std::fs::read_dir(&dir)?.filter_map(|e| e.ok()?.metadata().ok()).map(|m| m.len()).sum();
+        snaps.last_at = Some(Instant::now());
+        Ok(())
+    }
+}

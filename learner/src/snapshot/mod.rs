@@ -1,0 +1,220 @@
+//! Snapshots of a whole run, written so that a crash at any instant leaves the previous ones
+//! intact, and read so that a damaged one is detected before anything is restored from it.
+//!
+//! A snapshot is a directory `RUN_DIR/snapshots/snap-NNNNNNNN` (NNNNNNNN grows with every
+//! snapshot of the run) holding `arrays.bin` (named `f32` arrays: networks, Adam moments, replay
+//! buffers), `state.json` (their index with a CRC-32 each, and every other value by name:
+//! counters, generators, the schedule's position, the rows written so far) and `MANIFEST.json`
+//! (sizes and checksums of the two, the run id), written last. The directory is built under a
+//! temporary name, every file fsynced, then renamed into place and the parent fsynced: a
+//! snapshot directory either is complete or does not exist under its final name. The newest
+//! `keep` are kept.
+//!
+//! # Layout
+//! - this file: [`SnapshotConfig`], [`write`], [`load_latest`], the manifest;
+//! - `state`: [`StateOut`] and [`StateIn`], the contents;
+//! - [`bits`]: `f32` values in JSON by their bits (a decimal round trip could move one by an ulp).
+
+pub mod bits;
+mod state;
+
+use std::collections::BTreeMap;
+use std::fs::{self, File};
+use std::io;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+pub use state::{ArrayEntry, StateIn, StateIndex, StateOut};
+
+/// When snapshots are taken and how many are kept.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct SnapshotConfig {
+    /// Take a snapshot after every this many episodes (at the first moment after them when no
+    /// episode is out with an actor), besides the one at the end of every design and on
+    /// shutdown; 0: only at the end of designs and on shutdown.
+    pub every_episodes: usize,
+    /// Snapshots kept (the newest); at least 2, so that a damaged newest one has a
+    /// predecessor to fall back to.
+    pub keep: usize,
+}
+
+impl Default for SnapshotConfig {
+    fn default() -> Self {
+        Self { every_episodes: 10, keep: 3 }
+    }
+}
+
+impl SnapshotConfig {
+    pub fn validate(&self) -> Result<(), String> {
+        if self.keep < 2 {
+            return Err(format!("snapshot.keep: {} is fewer than 2 (a damaged newest snapshot needs one to fall back to)", self.keep));
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SnapshotError {
+    #[error("{0}")]
+    Io(#[from] io::Error),
+    /// The files are damaged: truncated, bit flips, missing.
+    #[error("damaged: {0}")]
+    Corrupt(String),
+    /// The files are sound but do not fit this run (another robot, network sizes, version).
+    #[error("does not fit this run: {0}")]
+    Mismatch(String),
+    #[error("no usable snapshot in {dir}{}", if .why.is_empty() { String::new() } else { format!(" ({})", .why.join("; ")) })]
+    None { dir: PathBuf, why: Vec<String> },
+}
+
+/// The snapshot format this build writes and reads.
+pub const FORMAT: u32 = 1;
+
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    pub bytes: u64,
+    /// CRC-32 of the whole file (`arrays.bin` is checked array by array instead: `None`).
+    pub crc32: Option<u32>,
+}
+
+/// `MANIFEST.json`.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: u32,
+    /// `little` (arrays are stored in the writer's byte order).
+    pub endian: String,
+    /// The learner start that wrote it.
+    pub run_id: String,
+    pub sequence: u64,
+    /// What the snapshot marks, e.g. `design 3 end` or `design 4 episode 10`.
+    pub label: String,
+    pub files: BTreeMap<String, FileEntry>,
+}
+
+const ENDIAN: &str = if cfg!(target_endian = "little") { "little" } else { "big" };
+
+fn sync_dir(dir: &Path) -> io::Result<()> {
+    File::open(dir)?.sync_all()
+}
+
+fn write_synced(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    use io::Write;
+    let mut f = File::create(path)?;
+    f.write_all(bytes)?;
+    f.sync_all()
+}
+
+/// The snapshot directories under `root`, oldest first, with their sequence numbers.
+pub fn list(root: &Path) -> io::Result<Vec<(u64, PathBuf)>> {
+    let mut out = Vec::new();
+    let entries = match fs::read_dir(root) {
+        Ok(e) => e,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(out),
+        Err(e) => return Err(e),
+    };
+    for e in entries {
+        let e = e?;
+        let name = e.file_name();
+        let Some(seq) = name.to_str().and_then(|n| n.strip_prefix("snap-")).and_then(|n| n.parse::<u64>().ok()) else { continue };
+        out.push((seq, e.path()));
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Writes snapshot `sequence` under `root` with what `fill` puts in it, then removes all but
+/// the newest `keep`. Returns its directory.
+pub fn write(
+    root: &Path,
+    sequence: u64,
+    run_id: &str,
+    label: &str,
+    keep: usize,
+    fill: impl FnOnce(&mut StateOut) -> io::Result<()>,
+) -> io::Result<PathBuf> {
+    fs::create_dir_all(root)?;
+    let tmp = root.join(format!(".tmp-snap-{sequence:08}"));
+    if tmp.exists() {
+        fs::remove_dir_all(&tmp)?;
+    }
+    fs::create_dir(&tmp)?;
+    let mut out = StateOut::create(&tmp.join("arrays.bin"))?;
+    fill(&mut out)?;
+    let index = out.finish()?;
+    let state = serde_json::to_vec(&index).map_err(io::Error::other)?;
+    write_synced(&tmp.join("state.json"), &state)?;
+    let bin_bytes = fs::metadata(tmp.join("arrays.bin"))?.len();
+    let manifest = Manifest {
+        format: FORMAT,
+        endian: ENDIAN.into(),
+        run_id: run_id.into(),
+        sequence,
+        label: label.into(),
+        files: BTreeMap::from([
+            ("arrays.bin".into(), FileEntry { bytes: bin_bytes, crc32: None }),
+            ("state.json".into(), FileEntry { bytes: state.len() as u64, crc32: Some(crc32fast::hash(&state)) }),
+        ]),
+    };
+    write_synced(&tmp.join("MANIFEST.json"), &serde_json::to_vec_pretty(&manifest).map_err(io::Error::other)?)?;
+    sync_dir(&tmp)?;
+    let dir = root.join(format!("snap-{sequence:08}"));
+    if dir.exists() {
+        // A snapshot of this number from before a resume that went back past it.
+        fs::remove_dir_all(&dir)?;
+    }
+    fs::rename(&tmp, &dir)?;
+    sync_dir(root)?;
+    let all = list(root)?;
+    for (_, old) in all.iter().take(all.len().saturating_sub(keep)) {
+        fs::remove_dir_all(old)?;
+    }
+    Ok(dir)
+}
+
+/// Reads and checks the snapshot in `dir`.
+pub fn load(dir: &Path) -> Result<(Manifest, StateIn), SnapshotError> {
+    let corrupt = SnapshotError::Corrupt;
+    let manifest = fs::read(dir.join("MANIFEST.json")).map_err(|e| corrupt(format!("MANIFEST.json: {e}")))?;
+    let manifest: Manifest = serde_json::from_slice(&manifest).map_err(|e| corrupt(format!("MANIFEST.json: {e}")))?;
+    if manifest.format != FORMAT {
+        return Err(SnapshotError::Mismatch(format!("format {} (this build reads {FORMAT})", manifest.format)));
+    }
+    if manifest.endian != ENDIAN {
+        return Err(SnapshotError::Mismatch(format!("written on a {}-endian machine", manifest.endian)));
+    }
+    let entry = |name: &str| manifest.files.get(name).ok_or_else(|| corrupt(format!("MANIFEST.json lists no {name}")));
+    let (state_entry, bin_entry) = (entry("state.json")?, entry("arrays.bin")?);
+    let state = fs::read(dir.join("state.json")).map_err(|e| corrupt(format!("state.json: {e}")))?;
+    if state.len() as u64 != state_entry.bytes {
+        return Err(corrupt(format!("state.json has {} bytes, the manifest says {}", state.len(), state_entry.bytes)));
+    }
+    if let Some(crc) = state_entry.crc32 {
+        let got = crc32fast::hash(&state);
+        if got != crc {
+            return Err(corrupt(format!("state.json: checksum {got:08x}, expected {crc:08x}")));
+        }
+    }
+    let index: StateIndex = serde_json::from_slice(&state).map_err(|e| corrupt(format!("state.json: {e}")))?;
+    let bin = dir.join("arrays.bin");
+    let got = fs::metadata(&bin).map_err(|e| corrupt(format!("arrays.bin: {e}")))?.len();
+    if got != bin_entry.bytes {
+        return Err(corrupt(format!("arrays.bin has {got} bytes, the manifest says {}", bin_entry.bytes)));
+    }
+    let contents = StateIn::read(&bin, index, got)?;
+    Ok((manifest, contents))
+}
+
+/// The newest snapshot under `root` that reads and checks, and what was wrong with each newer
+/// one (`snap-00000012: damaged: arrays.bin: ...`).
+pub fn load_latest(root: &Path) -> Result<(PathBuf, Manifest, StateIn, Vec<String>), SnapshotError> {
+    let mut why = Vec::new();
+    for (_, dir) in list(root)?.into_iter().rev() {
+        match load(&dir) {
+            Ok((m, s)) => return Ok((dir, m, s, why)),
+            Err(e) => why.push(format!("{}: {e}", dir.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned()))),
+        }
+    }
+    Err(SnapshotError::None { dir: root.to_path_buf(), why })
+}
