@@ -1,0 +1,257 @@
+//! Nothing lost: runs killed at random points (the learner, the optimiser mid-request, an actor
+//! mid-episode) resume to exactly the rows of a run never stopped; a damaged newest snapshot
+//! falls back to the one before; a resume with a config that changes what the run learns is
+//! refused naming the key. All through the binary.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use coadapt_cli::run::RunConfig;
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coadapt-resume-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The tiny protocol, 6 designs, a snapshot every 2 episodes, short deadlines, and a PSO big
+/// enough (seconds) that a kill lands while the learner waits for a design.
+fn config() -> RunConfig {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
+    let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    c.landscape_grid = 0;
+    c.schedule.designs = 6;
+    c.schedule.design_request_resend_secs = 1.5;
+    c.snapshot.every_episodes = 2;
+    c.flow.assignment_lease_secs = 2.0;
+    c.optimizer.pso.particles = 20_000;
+    c.optimizer.pso.iterations = 40;
+    c
+}
+
+fn write_config(dir: &Path, c: &RunConfig) -> PathBuf {
+    let p = dir.join("config-in.toml");
+    std::fs::write(&p, toml::to_string(c).unwrap()).unwrap();
+    p
+}
+
+fn rows(path: &Path) -> usize {
+    std::fs::read_to_string(path).map_or(0, |t| t.lines().count().saturating_sub(1))
+}
+
+/// `designs.csv`, and `episodes.csv` without its wall-clock column (`seconds`).
+fn tables(out: &Path) -> (String, String) {
+    let designs = std::fs::read_to_string(out.join("designs.csv")).unwrap();
+    let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    let episodes = episodes
+        .lines()
+        .map(|l| l.split(',').enumerate().filter(|(i, _)| *i != 7).map(|(_, f)| f).collect::<Vec<_>>().join(","))
+        .collect::<Vec<_>>()
+        .join("\n");
+    (designs, episodes)
+}
+
+fn coadapt(args: &[&str], stderr: &Path) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(stderr).unwrap())
+        .spawn()
+        .unwrap()
+}
+
+/// The uninterrupted run of `c` in process (the same rows as a fleet: tested in fleet.rs).
+fn reference(dir: &Path, c: &RunConfig) -> (String, String) {
+    let config = write_config(dir, c);
+    let out = dir.join("reference");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    tables(&out)
+}
+
+/// Child processes of `pid` whose command line holds ` role `.
+fn role_pids(pid: u32, role: &str) -> Vec<u32> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(p) = e.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{p}/stat")) else { continue };
+        let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r.to_string()) else { continue };
+        let ppid: u32 = rest.split_whitespace().nth(1).and_then(|s| s.parse().ok()).unwrap_or(0);
+        let cmd = String::from_utf8_lossy(&std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default()).replace('\0', " ");
+        if ppid == pid && cmd.contains(&format!(" {role} ")) {
+            out.push(p);
+        }
+    }
+    out
+}
+
+fn kill9(pid: u32) {
+    assert!(Command::new("kill").args(["-KILL", &pid.to_string()]).status().unwrap().success());
+}
+
+fn wait_until(what: &str, stderr: &Path, mut done: impl FnMut() -> bool) {
+    let t = Instant::now();
+    while !done() {
+        assert!(t.elapsed() < Duration::from_secs(180), "waiting for {what}: {}", std::fs::read_to_string(stderr).unwrap_or_default());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// A small generator for the kill points, seeded by the clock and printed, so a failure can be
+/// replayed with COADAPT_KILL_SEED.
+fn kill_seed() -> u64 {
+    let seed = std::env::var("COADAPT_KILL_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos() as u64);
+    eprintln!("kill points from COADAPT_KILL_SEED={seed}");
+    seed
+}
+
+fn draw(state: &mut u64, n: usize) -> usize {
+    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    ((*state >> 33) % n as u64) as usize
+}
+
+#[test]
+fn a_shared_memory_fleet_killed_at_random_points_resumes_to_the_rows_of_a_run_never_stopped() {
+    killed_fleet("shm");
+}
+
+#[test]
+fn a_grpc_fleet_killed_at_random_points_resumes_to_the_rows_of_a_run_never_stopped() {
+    killed_fleet("grpc");
+}
+
+fn killed_fleet(transport: &str) {
+    let dir = tmpdir(&format!("kill-{transport}"));
+    let c = config();
+    let want = reference(&dir, &c);
+    let mut rng = kill_seed();
+    let config = write_config(&dir, &c);
+    let out = dir.join("fleet");
+    let stderr = dir.join("stderr.txt");
+    let run = coadapt(&["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", transport], &stderr);
+    let episodes = out.join("episodes.csv");
+    // 2 initial designs x 3 episodes, then 4 x 2: 14 rows.
+    // An actor mid-episode, somewhere in the initial designs.
+    let at = 1 + draw(&mut rng, 3);
+    wait_until("episode rows", &stderr, || rows(&episodes) >= at);
+    let actor = role_pids(run.id(), "actor");
+    assert_eq!(actor.len(), 1);
+    kill9(actor[0]);
+    // The optimiser while the learner waits for the first chosen design (design 3).
+    let log = || std::fs::read_to_string(&stderr).unwrap_or_default();
+    wait_until("design 2 to end", &stderr, || log().contains("design 2 done"));
+    let opt = role_pids(run.id(), "optimizer");
+    assert_eq!(opt.len(), 1);
+    kill9(opt[0]);
+    // The learner, anywhere in the chosen designs.
+    let at = 7 + draw(&mut rng, 6);
+    wait_until("episode rows", &stderr, || rows(&episodes) >= at);
+    std::thread::sleep(Duration::from_millis(draw(&mut rng, 500) as u64));
+    let learner = role_pids(run.id(), "learner");
+    assert_eq!(learner.len(), 1);
+    kill9(learner[0]);
+    let o = run.wait_with_output().unwrap();
+    let log = log();
+    assert!(o.status.success(), "{log}");
+    assert!(log.contains("actor 0 (pid") && log.contains("ended with signal 9; starting it again"), "{log}");
+    assert!(log.contains("the learner (pid") && log.contains("starting it again from the newest snapshot"), "{log}");
+    assert!(log.contains("learner: resuming"), "{log}");
+    // The optimiser died with the request; the learner sent it again to the restarted one.
+    assert!(log.contains("learner: no reply to design request 2 for 1.5s; sending it again"), "{log}");
+    let got = tables(&out);
+    assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped; {log}");
+    assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped; {log}");
+    // Every transition once: the summary counts the replay, 14 episodes of 1000 steps.
+    let summary: serde_json::Value = serde_json::from_str(String::from_utf8_lossy(&o.stdout).lines().last().unwrap()).unwrap();
+    assert_eq!(summary["replay_transitions"], 14_000, "{summary}");
+    assert_eq!(summary["start_states"], 14, "{summary}");
+}
+
+#[test]
+fn a_damaged_newest_snapshot_falls_back_to_the_one_before() {
+    let dir = tmpdir("corrupt");
+    let c = config();
+    let want = reference(&dir, &c);
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let stderr = dir.join("stderr.txt");
+    let mut run =
+        coadapt(&["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"], &stderr);
+    wait_until("ten episodes", &stderr, || rows(&out.join("episodes.csv")) >= 10);
+    run.kill().unwrap();
+    run.wait().unwrap();
+    let snaps = coadapt_learner::snapshot::list(&out.join("snapshots")).unwrap();
+    assert!(snaps.len() >= 2, "{snaps:?}");
+    let newest = &snaps.last().unwrap().1;
+    // One flipped bit in the middle of the arrays.
+    let bin = newest.join("arrays.bin");
+    let mut bytes = std::fs::read(&bin).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x10;
+    std::fs::write(&bin, bytes).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt")).args(["run", "--resume", out.to_str().unwrap()]).output().unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    let name = newest.file_name().unwrap().to_string_lossy();
+    assert!(log.contains(&format!("skipped snapshot {name}: damaged: arrays.bin: array")) && log.contains("checksum"), "{log}");
+    let got = tables(&out);
+    assert_eq!(got, want, "{log}");
+
+    // A truncated snapshot is found out too, and with every snapshot damaged the run is
+    // refused, naming each.
+    for (_, s) in coadapt_learner::snapshot::list(&out.join("snapshots")).unwrap() {
+        let f = std::fs::OpenOptions::new().write(true).open(s.join("arrays.bin")).unwrap();
+        f.set_len(f.metadata().unwrap().len() / 2).unwrap();
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt")).args(["run", "--resume", out.to_str().unwrap()]).output().unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(log.contains("no usable snapshot") && log.contains("arrays.bin has") && log.contains("the manifest says"), "{log}");
+}
+
+#[test]
+fn a_resume_that_would_change_what_the_run_learns_is_refused_naming_the_key() {
+    let dir = tmpdir("config");
+    let mut c = config();
+    c.schedule.designs = 3;
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Another learning rate: refused, naming it.
+    let mut other = c.clone();
+    other.learner.sac.policy_lr = 1e-3;
+    let other_path = dir.join("other.toml");
+    std::fs::write(&other_path, toml::to_string(&other).unwrap()).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--resume", out.to_str().unwrap(), "--config", other_path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(log.contains("`learner.sac.policy-lr`"), "{log}");
+    // Another seed by flag: refused too.
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt")).args(["run", "--resume", out.to_str().unwrap(), "--seed", "7"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("`seed`"), "{}", String::from_utf8_lossy(&o.stderr));
+    // A longer schedule may change: the finished run goes on to 5 designs.
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--resume", out.to_str().unwrap(), "--designs", "5", "--transport", "in-process"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(rows(&out.join("designs.csv")), 5);
+    assert_eq!(rows(&out.join("episodes.csv")), 2 * 3 + 3 * 2);
+}
