@@ -354,6 +354,8 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         "learner_training_seconds": t.training,
         "episodes_reissued": t.reissued,
         "episodes_restarted": t.restarted,
+        "design_requests_resent": t.design_requests_resent,
+        "design_replies_refused": t.design_replies_refused,
         "max_policy_lag": t.max_policy_lag,
         // The prototype step (schedule.confirm-designs, schedule.reset-needs-confirmation).
         "prototype_waiting_seconds": t.waiting_for_prototype,

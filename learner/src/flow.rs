@@ -127,4 +127,7 @@ pub struct LearnerTime {
     /// Design requests sent again after `schedule.design-request-resend-secs` without a reply.
     #[serde(default)]
     pub design_requests_resent: u64,
+    /// Design replies refused: malformed, or outside the design box.
+    #[serde(default)]
+    pub design_replies_refused: u64,
 }

@@ -218,23 +218,27 @@ impl RunWriter {
     }
 
     fn write_designs(&self) -> io::Result<()> {
-        let mut text = format!("{DESIGNS_HEADER}\n");
+        // A real CSV writer: a text field with a comma, a quote or a newline is quoted, so no
+        // value can forge a row (plain fields are written as they are).
+        let mut w = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(Vec::new());
+        w.write_record(DESIGNS_HEADER.split(',')).map_err(io::Error::other)?;
         for r in &self.designs {
-            text += &format!(
-                "{},{},{},{},{},{},{},{},{},{}\n",
-                r.index,
-                r.kind,
+            w.write_record([
+                r.index.to_string(),
+                r.kind.clone(),
                 join_design(&r.design),
-                r.episodes,
+                r.episodes.to_string(),
                 opt(r.best_eval_return),
                 opt(r.last_eval_return),
                 opt(r.predicted_objective),
-                r.design_rollouts,
-                r.method,
-                r.prototype
-            );
+                r.design_rollouts.to_string(),
+                r.method.clone(),
+                r.prototype.clone(),
+            ])
+            .map_err(io::Error::other)?;
         }
-        write_atomically(&self.dir.join("designs.csv"), &text)
+        let bytes = w.into_inner().map_err(|e| io::Error::other(e.to_string()))?;
+        write_atomically(&self.dir.join("designs.csv"), &String::from_utf8_lossy(&bytes))
     }
 
     pub fn episode(&mut self, r: &EpisodeRow) -> io::Result<()> {

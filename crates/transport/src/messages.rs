@@ -236,6 +236,21 @@ impl Validate for DesignReply {
         {
             return Err(field("predicted_objective", format!("{p}")));
         }
+        // The method's name goes into designs.csv and progress lines: a short word, nothing
+        // that could forge a row or a line.
+        let ok = |c: char| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.' | '+');
+        if self.method.is_empty() || self.method.len() > MAX_METHOD_LEN || !self.method.chars().all(ok) {
+            return Err(field(
+                "method",
+                format!(
+                    "{:?} is not 1 to {MAX_METHOD_LEN} letters, digits, '-', '_', '.' or '+'",
+                    self.method.chars().take(80).collect::<String>()
+                ),
+            ));
+        }
         Ok(())
     }
 }
+
+/// Longest name of a design method in a reply.
+pub const MAX_METHOD_LEN: usize = 64;

@@ -289,8 +289,17 @@ impl Learner<'_> {
                 eprintln!("learner: ignored a reply for design {} while waiting for {index}", reply.index);
                 continue;
             }
-            if let Err(e) = reply.validate(&self.dims) {
-                break Err(CoadaptError::Protocol(format!("the optimiser's design {index} is malformed: {e}")));
+            // A reply that is malformed or outside the design box (an actor could not build the
+            // body) is refused and counted, as if it had not come: the request is sent again
+            // after its deadline, and the run fails only when no good reply comes in time.
+            if let Err(e) = reply
+                .validate(&self.dims)
+                .map_err(|e| e.to_string())
+                .and_then(|()| self.spec.design.check("design", &reply.design).map_err(|e| e.to_string()))
+            {
+                self.time.design_replies_refused += 1;
+                eprintln!("learner: refused the optimiser's design {index}: {e}");
+                continue;
             }
             break Ok(Some(reply));
         };
