@@ -66,8 +66,13 @@ pub struct ScheduleConfig {
     /// always after its last); 0: only after the last.
     pub eval_every: usize,
     /// Fail when no actor has sent anything for this long (seconds): the fleet is gone. Waits
-    /// for an operator do not count.
+    /// for an operator do not count. 0: never (real robots that pause for minutes or hours).
     pub episode_timeout_secs: f64,
+    /// Reject an episode (it is run again, and counted) with an observation entry beyond this
+    /// magnitude: a sensor glitch must not poison the replay. 0: no limit.
+    pub max_abs_observation: f32,
+    /// The same for rewards. 0: no limit.
+    pub max_abs_reward: f32,
     /// Real hardware: wait for an operator to build each design's prototype (the initial ones
     /// too) and answer `coadapt confirm RUN_DIR` (built as asked), `--as-built V1,V2,...` (the
     /// measured dimensions replace the requested ones) or `--reject` (the optimiser proposes
@@ -100,6 +105,8 @@ impl Default for ScheduleConfig {
             start_state_batch: 32,
             eval_every: 1,
             episode_timeout_secs: 600.0,
+            max_abs_observation: 0.0,
+            max_abs_reward: 0.0,
             confirm_designs: false,
             train_while_waiting: 0,
             reset_needs_confirmation: false,
@@ -245,8 +252,13 @@ pub fn run(
         return Err(CoadaptError::Config("schedule.initial-designs: at least one initial design is needed".into()));
     }
     let t = cfg.episode_timeout_secs;
-    if !(t.is_finite() && t > 0.0 && Duration::try_from_secs_f64(t).is_ok()) {
-        return Err(CoadaptError::Config(format!("schedule.episode-timeout-secs: {t} is not a positive number of seconds")));
+    if !(t.is_finite() && t >= 0.0 && Duration::try_from_secs_f64(t).is_ok()) {
+        return Err(CoadaptError::Config(format!("schedule.episode-timeout-secs: {t} is not a number of seconds >= 0")));
+    }
+    for (name, v) in [("max-abs-observation", cfg.max_abs_observation), ("max-abs-reward", cfg.max_abs_reward)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(CoadaptError::Config(format!("schedule.{name}: {v} is not a finite number >= 0")));
+        }
     }
     for (i, d) in cfg.initial_designs.iter().enumerate() {
         spec.design.check_finite("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
@@ -279,7 +291,9 @@ pub fn run(
         next_assignment: 0,
         seed,
         lease,
-        silence: Duration::from_secs_f64(t),
+        silence: (t > 0.0).then(|| Duration::from_secs_f64(t)),
+        reissue: flow.reissue_silent_episodes,
+        rejected_in_a_row: 0,
         pending: Vec::new(),
         time: LearnerTime::default(),
         dir: &dir,

@@ -51,6 +51,21 @@ pub struct FearLearnerConfig {
     pub start_state_capacity: usize,
     /// Train only the population networks and act with them (the thesis's Fig. 5.7 ablation).
     pub population_only: bool,
+    /// What a NaN or infinite loss or parameter does: `stop` the run (naming the update), or
+    /// `roll-back` both network pairs (and their optimisers and generator) to where they were
+    /// before the episode's updates, report it and go on; `max-rollbacks-in-a-row` roll-backs
+    /// without a good episode between them stop the run.
+    pub on_non_finite: OnNonFinite,
+    pub max_rollbacks_in_a_row: usize,
+}
+
+/// See [`FearLearnerConfig::on_non_finite`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OnNonFinite {
+    #[default]
+    Stop,
+    RollBack,
 }
 
 impl Default for FearLearnerConfig {
@@ -67,6 +82,8 @@ impl Default for FearLearnerConfig {
             species_capacity: 1_000_000,
             start_state_capacity: 100_000,
             population_only: false,
+            on_non_finite: OnNonFinite::Stop,
+            max_rollbacks_in_a_row: 5,
         }
     }
 }
@@ -120,12 +137,14 @@ pub enum ActingPolicy {
 }
 
 /// What one episode's training did.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct EpisodeTraining {
     pub individual_updates: usize,
     pub population_updates: usize,
     /// Losses of the last individual (or, population-only, population) update.
     pub last: Option<SacLosses>,
+    /// The updates produced a non-finite value (named) and the networks were rolled back.
+    pub rolled_back: Option<String>,
 }
 
 /// The learner's state across designs.
@@ -142,6 +161,7 @@ pub struct FearLearner {
     ind_batch: Batch,
     pop_batch: Batch,
     rng: Rng64,
+    rollbacks_in_a_row: usize,
 }
 
 impl FearLearner {
@@ -160,6 +180,7 @@ impl FearLearner {
             design_index: None,
             episode_in_design: 0,
             rng: rng(seed, 4),
+            rollbacks_in_a_row: 0,
             cfg,
         })
     }
@@ -236,8 +257,33 @@ impl FearLearner {
 
     /// Ends an episode of the current design and trains as the schedule says. Every update's
     /// losses, and each pair's parameters after its updates, are checked for NaN and
-    /// infinities ([`TrainError::NonFinite`] names the first and the update that made it).
+    /// infinities ([`TrainError::NonFinite`] names the first and the update that made it);
+    /// with `on-non-finite = "roll-back"` the networks return to their state before this
+    /// episode's updates instead, and the result says so.
     pub fn end_episode(&mut self) -> Result<EpisodeTraining, TrainError> {
+        if self.cfg.on_non_finite == OnNonFinite::Stop {
+            return self.train_episode();
+        }
+        let saved = (self.population.clone(), self.individual.clone(), self.rng.clone());
+        match self.train_episode() {
+            Err(e @ TrainError::NonFinite { .. }) => {
+                self.rollbacks_in_a_row += 1;
+                if self.rollbacks_in_a_row > self.cfg.max_rollbacks_in_a_row {
+                    return Err(e);
+                }
+                (self.population, self.individual, self.rng) = saved;
+                Ok(EpisodeTraining { rolled_back: Some(e.to_string()), ..EpisodeTraining::default() })
+            }
+            other => {
+                if other.is_ok() {
+                    self.rollbacks_in_a_row = 0;
+                }
+                other
+            }
+        }
+    }
+
+    fn train_episode(&mut self) -> Result<EpisodeTraining, TrainError> {
         let episode = self.episode_in_design;
         let warm = self.episode_in_design < self.cfg.warmup_episodes;
         self.episode_in_design += 1;

@@ -43,11 +43,16 @@ pub struct FlowConfig {
     /// Issue an episode again when its actor has sent nothing for this long (seconds).
     /// Actors report at least every `chunk-len` steps, evaluation episodes included.
     pub assignment_lease_secs: f64,
+    /// Issue a silent episode again (true: simulated actors, where a re-run costs nothing).
+    /// False for real robots: a robot that pauses (a person resetting it, a battery swap) is
+    /// waited for and its episode not re-run elsewhere (every re-run costs wear); the silence
+    /// is reported once per lease. Pair it with `schedule.episode-timeout-secs = 0`.
+    pub reissue_silent_episodes: bool,
 }
 
 impl Default for FlowConfig {
     fn default() -> Self {
-        Self { mode: FlowMode::LockStep, max_in_flight: 0, assignment_lease_secs: 60.0 }
+        Self { mode: FlowMode::LockStep, max_in_flight: 0, assignment_lease_secs: 60.0, reissue_silent_episodes: true }
     }
 }
 
@@ -130,4 +135,12 @@ pub struct LearnerTime {
     /// Design replies refused: malformed, or outside the design box.
     #[serde(default)]
     pub design_replies_refused: u64,
+    /// Episodes rejected for an observation or reward beyond `schedule.max-abs-observation` /
+    /// `max-abs-reward` (a sensor glitch) and run again.
+    #[serde(default)]
+    pub episodes_rejected: u64,
+    /// Updates that produced non-finite values and were rolled back
+    /// (`learner.on-non-finite = "roll-back"`).
+    #[serde(default)]
+    pub rollbacks: u64,
 }

@@ -127,3 +127,31 @@ fn a_non_finite_loss_stops_training_with_the_update_named() {
     );
     assert!(msg.contains("critic 1 loss (inf)"), "{msg}");
 }
+
+#[test]
+fn with_roll_back_a_non_finite_update_restores_the_networks_and_training_goes_on() {
+    use coadapt_learner::fear::{ActingPolicy, OnNonFinite};
+    let c = FearLearnerConfig { warmup_episodes: 0, on_non_finite: OnNonFinite::RollBack, max_rollbacks_in_a_row: 2, ..cfg() };
+    let mut l = FearLearner::new(2, 1, c, 4).unwrap();
+    l.begin_design(0);
+    l.add_start_state(&[0.1, 0.0]).unwrap();
+    let before = |l: &FearLearner| {
+        let a = l.agent(ActingPolicy::Individual);
+        (a.policy_params().to_vec(), a.critic_params(0).0.to_vec(), a.optimiser_steps(), a.updates())
+    };
+    let push = |l: &mut FearLearner, reward: f32| {
+        for k in 0..10 {
+            let (o, n) = ([k as f32 * 0.1, 0.0], [(k + 1) as f32 * 0.1, 0.0]);
+            l.add_transition(&Transition { obs: &o, action: &[0.5], reward, next_obs: &n, terminated: false }).unwrap();
+        }
+    };
+    push(&mut l, 3e38);
+    let saved = before(&l);
+    let t = l.end_episode().unwrap();
+    let why = t.rolled_back.expect("rolled back");
+    assert!(why.contains("critic 1 loss (inf)"), "{why}");
+    assert_eq!(before(&l), saved, "networks, Adam steps and update count are as before the episode");
+    // Twice more in a row is one more than allowed: the run stops with the update named.
+    assert!(l.end_episode().unwrap().rolled_back.is_some());
+    assert!(matches!(l.end_episode(), Err(coadapt_learner::fear::TrainError::NonFinite { .. })));
+}

@@ -22,6 +22,25 @@ pub(super) fn mix(seed: u64, i: u64) -> u64 {
 
 pub(super) const POLL: Duration = Duration::from_millis(100);
 
+/// Episodes rejected in a row for magnitudes before the run stops: the limits, not the sensors,
+/// are wrong.
+const MAX_REJECTED_IN_A_ROW: u32 = 10;
+
+fn chunk_actor(chunks: &[coadapt_transport::ExperienceChunk]) -> u64 {
+    chunks.last().map_or(0, |c| c.actor)
+}
+
+/// The first observation or reward of an episode beyond the configured magnitudes (0: no
+/// limit), named.
+fn beyond_limits(chunks: &[coadapt_transport::ExperienceChunk], max_obs: f32, max_rew: f32) -> Option<String> {
+    let find = |field: &str, v: &[f32], max: f32| {
+        (max > 0.0).then(|| v.iter().position(|x| x.abs() > max).map(|i| format!("{field}[{i}] = {} is beyond {max}", v[i]))).flatten()
+    };
+    chunks.iter().find_map(|c| {
+        find("obs", &c.obs, max_obs).or_else(|| find("next_obs", &c.next_obs, max_obs)).or_else(|| find("rewards", &c.rewards, max_rew))
+    })
+}
+
 pub(super) struct Learner<'a> {
     pub(super) cfg: &'a ScheduleConfig,
     pub(super) spec: &'a EnvSpec,
@@ -39,8 +58,12 @@ pub(super) struct Learner<'a> {
     pub(super) next_assignment: u64,
     pub(super) seed: u64,
     pub(super) lease: Duration,
-    /// No message at all for this long fails the run (every actor gone).
-    pub(super) silence: Duration,
+    /// No message at all for this long fails the run (every actor gone); `None`: never.
+    pub(super) silence: Option<Duration>,
+    /// Issue a silent episode again (false: wait for it, reporting the silence).
+    pub(super) reissue: bool,
+    /// Episodes rejected for magnitudes since the last accepted one.
+    pub(super) rejected_in_a_row: u32,
     pub(super) pending: Vec<Pending>,
     pub(super) time: LearnerTime,
     /// The run directory (the operator's files live there).
@@ -122,6 +145,17 @@ impl Learner<'_> {
 
     /// Issues again every episode whose actor has fallen silent.
     fn reissue_expired(&mut self, design_index: usize, design: &[f32]) -> Result<(), CoadaptError> {
+        if !self.reissue {
+            for p in self.pending.iter_mut().filter(|p| p.last_heard.elapsed() > self.lease) {
+                eprintln!(
+                    "learner: assignment {} (design {design_index}) silent for {:?}; waiting for it (flow.reissue-silent-episodes = false)",
+                    p.id, self.lease
+                );
+                // Reported once per lease.
+                p.last_heard = Instant::now();
+            }
+            return Ok(());
+        }
         while let Some(i) = self.pending.iter().position(|p| p.last_heard.elapsed() > self.lease) {
             let mut p = self.pending.swap_remove(i);
             let old = p.id;
@@ -157,10 +191,11 @@ impl Learner<'_> {
             };
             self.time.waiting += t.elapsed().as_secs_f64();
             let Some(chunk) = got else {
-                if heard.elapsed() > self.silence {
+                if let Some(silence) = self.silence
+                    && heard.elapsed() > silence
+                {
                     return Err(CoadaptError::Protocol(format!(
-                        "no actor has sent anything for {:?} ({} episodes outstanding): are the actors running?",
-                        self.silence,
+                        "no actor has sent anything for {silence:?} ({} episodes outstanding): are the actors running?",
                         self.pending.len()
                     )));
                 }
@@ -197,6 +232,24 @@ impl Learner<'_> {
             }
             if let Some(end) = end {
                 let p = self.pending.swap_remove(i);
+                if let Some(why) = beyond_limits(&p.chunks, self.cfg.max_abs_observation, self.cfg.max_abs_reward) {
+                    eprintln!(
+                        "learner: episode {} of design {design_index} (assignment {}, actor {}) rejected: {why}; running it again",
+                        p.episode,
+                        p.id,
+                        chunk_actor(&p.chunks)
+                    );
+                    self.time.episodes_rejected += 1;
+                    self.rejected_in_a_row += 1;
+                    if self.rejected_in_a_row > MAX_REJECTED_IN_A_ROW {
+                        return Err(CoadaptError::Protocol(format!(
+                            "{MAX_REJECTED_IN_A_ROW} episodes in a row rejected (the last: {why}): schedule.max-abs-observation or max-abs-reward is tighter than the robot's normal range"
+                        )));
+                    }
+                    self.send_assignment(design_index, design, Pending { chunks: Vec::new(), ..p })?;
+                    continue;
+                }
+                self.rejected_in_a_row = 0;
                 let last = p.chunks.last();
                 let actor = last.map_or(0, |c| c.actor);
                 let weights_version = p.chunks.iter().map(|c| c.weights_version).min().unwrap_or(p.min_weights_version);
@@ -234,8 +287,12 @@ impl Learner<'_> {
             }
         }
         let t = Instant::now();
-        self.fear.end_episode()?;
+        let trained = self.fear.end_episode()?;
         self.time.training += t.elapsed().as_secs_f64();
+        if let Some(why) = trained.rolled_back {
+            self.time.rollbacks += 1;
+            eprintln!("learner: {why}; rolled the networks back to before this episode's updates (learner.on-non-finite = \"roll-back\")");
+        }
         self.acting_dirty = true;
         Ok(())
     }
