@@ -23,6 +23,9 @@ pub enum BenchCommand {
     /// Transports between processes: weight broadcast latency to 1, 4 and 16 actor processes,
     /// experience throughput, over shared memory and gRPC.
     Transport(crate::bench_transport::TransportArgs),
+    /// Snapshots: writing and reading a learner with 1 and 10 million transitions in its
+    /// population buffer (seconds and MB/s; the disk under --dir).
+    Snapshot(crate::bench_snapshot::SnapshotArgs),
     /// Environments over dm_env_rpc: steps/s and step latency (median, p99) of our robots
     /// served on loopback against the same in process, and of any server given by --url.
     Env(crate::bench_env::EnvArgs),
@@ -73,6 +76,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Nn(a) => nn(&a),
         BenchCommand::Sim(a) => sim(&a),
         BenchCommand::Pso(a) => pso(&a),
+        BenchCommand::Snapshot(a) => crate::bench_snapshot::run(&a),
         BenchCommand::Transport(a) => crate::bench_transport::run(&a),
         BenchCommand::Env(a) => crate::bench_env::run(&a),
     }

@@ -21,6 +21,7 @@
 
 pub mod bench;
 pub mod bench_env;
+pub mod bench_snapshot;
 pub mod bench_transport;
 pub mod confirm;
 pub mod env_serve;

@@ -356,6 +356,8 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         "episodes_restarted": t.restarted,
         "design_requests_resent": t.design_requests_resent,
         "design_replies_refused": t.design_replies_refused,
+        "episodes_rejected": t.episodes_rejected,
+        "rollbacks": t.rollbacks,
         "max_policy_lag": t.max_policy_lag,
         // The prototype step (schedule.confirm-designs, schedule.reset-needs-confirmation).
         "prototype_waiting_seconds": t.waiting_for_prototype,
