@@ -39,12 +39,16 @@ args=("$role" --config "$COADAPT_CONFIG" --transport "$transport" --fleet "${COA
 case $role in
   learner)
     [[ $# -eq 1 ]] || die "learner takes no id"
-    args+=(--out "${COADAPT_RUN_DIR:-/var/lib/coadapt/run}")
+    # --resume: a restarted learner continues the run from its newest snapshot (a fresh
+    # directory starts a run), so systemd's Restart=on-failure resumes after any crash.
+    args+=(--out "${COADAPT_RUN_DIR:-/var/lib/coadapt/run}" --resume)
     [[ $transport != grpc ]] || args+=(--listen "${COADAPT_LISTEN:-0.0.0.0:50051}")
     [[ -z ${COADAPT_SEED:-} ]] || args+=(--seed "$COADAPT_SEED")
     ;;
   optimizer)
     [[ $# -eq 1 ]] || die "optimizer takes no id"
+    # Its state (generator, ES state, every reply) survives a restart here.
+    args+=(--state-dir "${COADAPT_OPTIMIZER_STATE_DIR:-/var/lib/coadapt/optimizer}")
     [[ $transport != grpc ]] || args+=(--connect "${COADAPT_CONNECT:-http://127.0.0.1:50051}")
     ;;
   actor)
