@@ -106,7 +106,7 @@ pub fn run<E: Env>(
             Err(e) => return Err(e.into()),
         }
         summary.episodes += 1;
-        summary.steps += stats.length;
+        summary.steps = summary.steps.saturating_add(stats.length);
     }
     Ok(summary)
 }

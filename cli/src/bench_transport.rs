@@ -119,7 +119,7 @@ struct Learner {
 fn learner(kind: TransportKind, tag: &str) -> anyhow::Result<Learner> {
     let fleet = format!("coadapt-bench-{}-{tag}", std::process::id());
     let cfg = fleet_config(kind, &fleet, "");
-    let (links, guard) = cfg.learner_links(None)?;
+    let (links, guard) = cfg.learner_links(None, None)?;
     let connect = match &guard {
         crate::fleet::LearnerGuard::Grpc(s) => format!("http://{}", s.local_addr()),
         crate::fleet::LearnerGuard::None => String::new(),

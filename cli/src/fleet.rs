@@ -114,7 +114,9 @@ impl FleetConfig {
 
     /// The learner's side; for gRPC this starts the server, which then refuses experience of
     /// other widths than `dims` at the edge.
-    pub fn learner_links(&self, dims: Option<Dims>) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
+    /// `max_episode_steps`: the robot's episode length, the most steps an episode's end may
+    /// claim over gRPC (it bounds what the server holds per episode).
+    pub fn learner_links(&self, dims: Option<Dims>, max_episode_steps: Option<usize>) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
@@ -125,8 +127,11 @@ impl FleetConfig {
             TransportKind::Grpc => {
                 let addr: SocketAddr =
                     self.listen.parse().with_context(|| format!("fleet.listen: {:?} is not an address like 0.0.0.0:50051", self.listen))?;
-                let (links, server) =
-                    coadapt_grpc::serve_learner(addr, &self.grpc()?).with_context(|| format!("serving gRPC on {addr}"))?;
+                let mut grpc = self.grpc()?;
+                if let Some(n) = max_episode_steps {
+                    grpc.max_episode_steps = n as u64;
+                }
+                let (links, server) = coadapt_grpc::serve_learner(addr, &grpc).with_context(|| format!("serving gRPC on {addr}"))?;
                 eprintln!("learner: gRPC on {}", server.local_addr());
                 if let Some(d) = dims {
                     server.expect_dims(d);

@@ -116,7 +116,7 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     let spec = make_env(&cfg.env)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
-    let (mut links, guard) = cfg.fleet.learner_links(Some(dims))?;
+    let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps))?;
     eprintln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
     let start = Instant::now();
     let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown, args.resume);

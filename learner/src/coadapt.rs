@@ -349,7 +349,7 @@ pub fn run(
             let ((c, steps_then), eval_return) = match c.mode {
                 EpisodeMode::Train => {
                     l.learn_from(&c)?;
-                    p.steps += c.end.length;
+                    p.steps = p.steps.saturating_add(c.end.length);
                     let e = c.episode;
                     if cfg.eval_every > 0 && (e + 1) % cfg.eval_every == 0 || e + 1 == n {
                         if !l.reset_before(index, e, n, ResetMode::Eval, on_event)? {

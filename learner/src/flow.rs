@@ -89,6 +89,10 @@ pub struct Pending {
     pub min_weights_version: u64,
     pub chunks: Vec<ExperienceChunk>,
     pub last_heard: Instant,
+    /// Chunks with neither transitions nor an end received: keep-alives (an evaluation
+    /// episode sends only these), which refresh the lease only up to a bound, so an actor
+    /// cannot hold an episode for ever by sending nothing.
+    pub empties: u64,
 }
 
 /// An episode whose last chunk has arrived.

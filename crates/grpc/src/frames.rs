@@ -29,7 +29,7 @@ pub(crate) trait Frame: prost::Message + Default + Clone + Send + Sync + 'static
     fn set_seq(&mut self, seq: u64);
     /// Opens the bidirectional stream that carries these frames.
     #[doc(hidden)]
-    fn open(client: FleetClient<Channel>, frames: ReceiverStream<Self>) -> Opening;
+    fn open(client: FleetClient<Channel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening;
 }
 
 impl Frame for pb::ExperienceFrame {
@@ -52,7 +52,7 @@ impl Frame for pb::ExperienceFrame {
         self.seq = seq;
     }
 
-    fn open(mut client: FleetClient<Channel>, frames: ReceiverStream<Self>) -> Opening {
+    fn open(mut client: FleetClient<Channel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening {
         Box::pin(async move { client.push_experience(frames).await })
     }
 }
@@ -77,7 +77,7 @@ impl Frame for pb::DesignReplyFrame {
         self.seq = seq;
     }
 
-    fn open(mut client: FleetClient<Channel>, frames: ReceiverStream<Self>) -> Opening {
+    fn open(mut client: FleetClient<Channel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening {
         Box::pin(async move { client.push_design_replies(frames).await })
     }
 }

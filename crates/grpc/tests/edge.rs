@@ -18,13 +18,25 @@ fn rt() -> tokio::runtime::Runtime {
     tokio::runtime::Builder::new_current_thread().enable_all().build().expect("runtime")
 }
 
-/// Sends one experience frame from a plain tonic client; returns the first answer.
+/// Sends one experience frame from a plain tonic client (registered as an actor, naming its
+/// session in the stream's metadata); returns the first answer.
 fn push_raw(endpoint: &str, chunk: pb::ExperienceChunk) -> Result<pb::Ack, tonic::Status> {
     let endpoint = endpoint.to_string();
     rt().block_on(async move {
         let mut client = FleetClient::connect(endpoint).await.expect("connect").max_encoding_message_size(usize::MAX);
+        let session = 0x5E55_1011;
+        let hello = pb::Hello {
+            fleet: GrpcConfig::default().fleet,
+            protocol: coadapt_grpc::PROTOCOL,
+            role: pb::Role::Actor as i32,
+            actor_id: 99,
+            session,
+        };
+        client.register(hello).await.expect("register");
         let frame = pb::ExperienceFrame { sender: 99, seq: 1, chunk: Some(chunk), fin: false };
-        let mut acks = client.push_experience(tokio_stream::iter(vec![frame])).await?.into_inner();
+        let mut req = tonic::Request::new(tokio_stream::iter(vec![frame]));
+        req.metadata_mut().insert("coadapt-session", session.to_string().parse().expect("ascii"));
+        let mut acks = client.push_experience(req).await?.into_inner();
         acks.message().await?.ok_or_else(|| tonic::Status::unknown("no answer"))
     })
 }

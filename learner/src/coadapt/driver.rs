@@ -120,7 +120,17 @@ impl Learner<'_> {
         self.send_assignment(
             design_index,
             design,
-            Pending { id: 0, episode, global, mode, seed, min_weights_version: version, chunks: Vec::new(), last_heard: Instant::now() },
+            Pending {
+                id: 0,
+                episode,
+                global,
+                mode,
+                seed,
+                min_weights_version: version,
+                chunks: Vec::new(),
+                last_heard: Instant::now(),
+                empties: 0,
+            },
         )
     }
 
@@ -160,6 +170,7 @@ impl Learner<'_> {
             let mut p = self.pending.swap_remove(i);
             let old = p.id;
             p.chunks.clear();
+            p.empties = 0;
             self.send_assignment(design_index, design, p)?;
             self.time.reissued += 1;
             eprintln!(
@@ -209,11 +220,18 @@ impl Learner<'_> {
             if let Err(e) = chunk.validate(&self.dims) {
                 let p = self.pending.swap_remove(i);
                 eprintln!("learner: a malformed chunk of assignment {} from actor {}: {e}; issuing the episode again", p.id, chunk.actor);
-                self.send_assignment(design_index, design, Pending { chunks: Vec::new(), ..p })?;
+                self.send_assignment(design_index, design, Pending { chunks: Vec::new(), empties: 0, ..p })?;
                 continue;
             }
             let p = &mut self.pending[i];
-            p.last_heard = Instant::now();
+            let progress = !chunk.is_empty() || chunk.end.is_some();
+            // Keep-alives refresh the lease at most once per step of an episode.
+            if progress || p.empties < self.spec.max_episode_steps as u64 {
+                p.last_heard = Instant::now();
+            }
+            if !progress {
+                p.empties += 1;
+            }
             let end = chunk.end;
             if chunk.first && !p.chunks.is_empty() {
                 // The actor ran the episode again from its start (the first attempt failed in
@@ -232,6 +250,18 @@ impl Learner<'_> {
             }
             if let Some(end) = end {
                 let p = self.pending.swap_remove(i);
+                let streamed: u64 = p.chunks.iter().map(|c| c.len() as u64).sum();
+                if p.mode == EpisodeMode::Train && end.length != streamed {
+                    eprintln!(
+                        "learner: episode {} of design {design_index} (assignment {}, actor {}) ends with length {} after {streamed} transitions; issuing it again",
+                        p.episode,
+                        p.id,
+                        chunk_actor(&p.chunks),
+                        end.length
+                    );
+                    self.send_assignment(design_index, design, Pending { chunks: Vec::new(), empties: 0, ..p })?;
+                    continue;
+                }
                 if let Some(why) = beyond_limits(&p.chunks, self.cfg.max_abs_observation, self.cfg.max_abs_reward) {
                     eprintln!(
                         "learner: episode {} of design {design_index} (assignment {}, actor {}) rejected: {why}; running it again",
@@ -246,7 +276,7 @@ impl Learner<'_> {
                             "{MAX_REJECTED_IN_A_ROW} episodes in a row rejected (the last: {why}): schedule.max-abs-observation or max-abs-reward is tighter than the robot's normal range"
                         )));
                     }
-                    self.send_assignment(design_index, design, Pending { chunks: Vec::new(), ..p })?;
+                    self.send_assignment(design_index, design, Pending { chunks: Vec::new(), empties: 0, ..p })?;
                     continue;
                 }
                 self.rejected_in_a_row = 0;

@@ -18,7 +18,7 @@ use coadapt_wire::pb::fleet_client::FleetClient;
 use tokio::runtime::Runtime;
 use tonic::transport::{Channel, Endpoint};
 
-use crate::{Backoff, CONNECTION_WINDOW, GrpcConfig, PROTOCOL, STREAM_WINDOW, is_permanent, status_error};
+use crate::{Backoff, CONNECTION_WINDOW, GrpcConfig, PROTOCOL, STREAM_WINDOW, is_permanent, is_unregistered, status_error};
 
 static RUNTIME: OnceLock<Runtime> = OnceLock::new();
 
@@ -146,26 +146,11 @@ async fn register(conn: Arc<Conn>) -> Result<(), TransportError> {
     let cfg = &conn.cfg;
     let give_up = Instant::now() + cfg.connect_timeout.max(cfg.rpc_timeout.min(Duration::from_secs(1)));
     let mut backoff = Backoff::new(cfg.reconnect_backoff_max);
-    let hello =
-        pb::Hello { fleet: cfg.fleet.clone(), protocol: PROTOCOL, role: conn.role as i32, actor_id: conn.actor_id, session: conn.session };
     loop {
-        let mut req = tonic::Request::new(hello.clone());
-        req.set_timeout(cfg.rpc_timeout);
-        let mut client = conn.client.clone();
-        let status = match tokio::time::timeout(cfg.rpc_timeout, client.register(req)).await {
-            Ok(Ok(w)) => {
-                let w = w.into_inner();
-                if w.fleet != cfg.fleet || w.protocol != PROTOCOL {
-                    return Err(TransportError::Invalid(format!(
-                        "the learner serves fleet {:?} protocol {}, not {:?} protocol {PROTOCOL}",
-                        w.fleet, w.protocol, cfg.fleet
-                    )));
-                }
-                return Ok(());
-            }
-            Ok(Err(s)) if is_permanent(&s) => return Err(status_error(&s)),
-            Ok(Err(s)) => s,
-            Err(_) => tonic::Status::deadline_exceeded("register"),
+        let status = match conn.register_once().await {
+            Ok(()) => return Ok(()),
+            Err(s) if is_permanent(&s) => return Err(status_error(&s)),
+            Err(s) => s,
         };
         let delay = backoff.next_delay();
         if Instant::now() + delay >= give_up {
@@ -176,12 +161,49 @@ async fn register(conn: Arc<Conn>) -> Result<(), TransportError> {
 }
 
 impl Conn {
-    /// One heartbeat: returns the reply, and records a finished fleet.
+    /// One registration of our session (again, after the learner said it does not know it).
+    pub(crate) async fn register_once(&self) -> Result<(), tonic::Status> {
+        let cfg = &self.cfg;
+        let hello = pb::Hello {
+            fleet: cfg.fleet.clone(),
+            protocol: PROTOCOL,
+            role: self.role as i32,
+            actor_id: self.actor_id,
+            session: self.session,
+        };
+        let mut req = tonic::Request::new(hello);
+        req.set_timeout(cfg.rpc_timeout);
+        let mut client = self.client.clone();
+        match tokio::time::timeout(cfg.rpc_timeout, client.register(req)).await {
+            Ok(Ok(w)) => {
+                let w = w.into_inner();
+                if w.fleet != cfg.fleet || w.protocol != PROTOCOL {
+                    return Err(tonic::Status::failed_precondition(format!(
+                        "the learner serves fleet {:?} protocol {}, not {:?} protocol {PROTOCOL}",
+                        w.fleet, w.protocol, cfg.fleet
+                    )));
+                }
+                Ok(())
+            }
+            Ok(Err(s)) => Err(s),
+            Err(_) => Err(tonic::Status::deadline_exceeded("register")),
+        }
+    }
+
+    /// One heartbeat: returns the reply, and records a finished fleet. A learner that does
+    /// not know our session (it restarted, or forgot us) hears a registration instead.
     pub(crate) async fn beat_once(&self, deadline: Duration) -> Option<pb::BeatReply> {
         let mut req = tonic::Request::new(self.beat(false));
         req.set_timeout(deadline);
         let mut client = self.client.clone();
-        let reply = tokio::time::timeout(deadline, client.heartbeat(req)).await.ok()?.ok()?.into_inner();
+        let reply = match tokio::time::timeout(deadline, client.heartbeat(req)).await.ok()? {
+            Ok(r) => r.into_inner(),
+            Err(s) if is_unregistered(&s) => {
+                let _ = self.register_once().await;
+                return None;
+            }
+            Err(_) => return None,
+        };
         if reply.fleet_finished {
             self.finished.store(true, Ordering::Relaxed);
         }

@@ -15,7 +15,7 @@ use coadapt_wire::pb::fleet_client::FleetClient;
 use tonic::transport::Channel;
 
 use super::{Session, block};
-use crate::{Backoff, is_permanent, status_error};
+use crate::{Backoff, is_permanent, is_unregistered, status_error};
 
 /// (payload, seq, finished)
 type Delivery<P> = (Option<P>, u64, bool);
@@ -96,6 +96,15 @@ impl<T: Polled> Receiver<T> for PollReceiver<T> {
                     return Err(TransportError::Closed);
                 }
                 Ok((None, _, false)) => self.backoff.reset(),
+                Err(s) if is_unregistered(&s) => {
+                    // The learner restarted or forgot us: register again (same session) and ask again.
+                    let conn = self.session.conn.clone();
+                    match block(async move { conn.register_once().await })? {
+                        Ok(()) => self.backoff.reset(),
+                        Err(s) if is_permanent(&s) => return Err(status_error(&s)),
+                        Err(_) => std::thread::sleep(self.backoff.next_delay().min(deadline.saturating_duration_since(Instant::now()))),
+                    }
+                }
                 Err(s) if is_permanent(&s) => return Err(status_error(&s)),
                 Err(_) if self.session.conn.is_finished() => return Err(TransportError::Closed),
                 // The learner is away: wait, then try again (the channel reconnects).

@@ -15,7 +15,7 @@ use tokio_stream::wrappers::ReceiverStream;
 
 use super::{Conn, Session, random_u64, runtime};
 use crate::frames::Frame;
-use crate::{Backoff, is_permanent, status_error};
+use crate::{Backoff, SESSION_HEADER, is_permanent, is_unregistered, refused_frame, status_error};
 
 #[derive(Debug)]
 struct Window<F> {
@@ -178,8 +178,33 @@ async fn run<F: Frame>(conn: Arc<Conn>, sender: u64, shared: Arc<Shared<F>>) {
     let cfg = conn.cfg.clone();
     let mut backoff = Backoff::new(cfg.reconnect_backoff_max);
     loop {
-        match stream_once(&conn, sender, &shared, &mut backoff).await {
+        let result = stream_once(&conn, sender, &shared, &mut backoff).await;
+        if let Err(s) = &result
+            && let Some(seq) = refused_frame(s)
+        {
+            // One frame refused (a chunk of an assignment we do not hold, say one a restarted
+            // learner issued again): drop it and go on with the rest.
+            let dropped = shared.lock().is_ok_and(|mut w| {
+                let front = w.pending.front().is_some_and(|f| f.seq() == seq);
+                if front {
+                    w.pending.pop_front();
+                }
+                front
+            });
+            if dropped {
+                eprintln!("coadapt-grpc: the learner refused {} {seq}: {}; dropped", F::PAYLOAD, s.message());
+                shared.room.notify_all();
+                continue;
+            }
+        }
+        match result {
             Ok(()) => return shared.end(None),
+            // The learner restarted or forgot us: register again (same session), then resend.
+            Err(s) if is_unregistered(&s) => match conn.register_once().await {
+                Err(s) if is_permanent(&s) => return shared.end(Some(Fatal::Invalid(status_error(&s).to_string()))),
+                Ok(()) => {}
+                Err(_) => tokio::time::sleep(backoff.next_delay()).await,
+            },
             Err(s) if is_permanent(&s) => return shared.end(Some(Fatal::Invalid(status_error(&s).to_string()))),
             Err(_) if conn.is_finished() => return shared.end(Some(Fatal::Closed)),
             // Closing with nothing left to deliver: the clean close is a courtesy that can
@@ -194,7 +219,10 @@ async fn run<F: Frame>(conn: Arc<Conn>, sender: u64, shared: Arc<Shared<F>>) {
 async fn stream_once<F: Frame>(conn: &Conn, sender: u64, shared: &Shared<F>, backoff: &mut Backoff) -> Result<(), tonic::Status> {
     let cfg = &conn.cfg;
     let (tx, rx) = mpsc::channel::<F>(cfg.send_window.max(1));
-    let opened = tokio::time::timeout(cfg.rpc_timeout, F::open(conn.client.clone(), ReceiverStream::new(rx)))
+    let mut req = tonic::Request::new(ReceiverStream::new(rx));
+    let session = conn.session.to_string().parse().map_err(|_| tonic::Status::internal("session metadata"))?;
+    req.metadata_mut().insert(SESSION_HEADER, session);
+    let opened = tokio::time::timeout(cfg.rpc_timeout, F::open(conn.client.clone(), req))
         .await
         .map_err(|_| tonic::Status::deadline_exceeded("opening the stream"))??;
     let mut acks = opened.into_inner();

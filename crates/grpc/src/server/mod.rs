@@ -1,6 +1,20 @@
 //! The learner's side: binds the port, serves Fleet, health and reflection on a runtime thread
 //! of its own, and hands the learner its channel ends.
+//!
+//! # Trust model
+//! A client registers a session (`Hello.session`, 64 random bits) and presents it in every
+//! later call: in `Beat` and `Poll`, and in the `coadapt-session` metadata of its push streams.
+//! The session is a capability token: whoever knows it acts as that client, and nothing else
+//! does. Every call must name a registered session of the right role (actors poll assignments
+//! and push experience, the optimiser polls design requests and pushes replies); an unknown
+//! session is refused with FAILED_PRECONDITION "register first". Sender ids, assignments and
+//! deliveries are bound to the session that first used or received them. A session silent
+//! for `GrpcConfig::session_idle_timeout` is forgotten. This keeps clients from taking or
+//! completing each other's work by guessing ids; it is not authentication: real
+//! authentication (TLS, tokens) is a later issue, and until then the port should only be
+//! reachable by the fleet.
 
+mod episodes;
 mod queues;
 mod service;
 mod topic;
@@ -17,7 +31,8 @@ use coadapt_wire::pb;
 use tokio::sync::watch;
 
 use crate::GrpcConfig;
-use queues::{Inbox, Outbox};
+use episodes::Episodes;
+use queues::{Inbox, InboxLimits, Outbox, Reason};
 
 /// Chunks the learner's experience queue holds before senders wait (their unacknowledged
 /// window then fills, and `send` waits in the actors: backpressure, not memory growth).
@@ -28,6 +43,31 @@ const INBOX_CAPACITY: usize = 4096;
 pub enum ClientRole {
     Actor,
     Optimizer,
+}
+
+/// What the learner refused or dropped from its clients, by reason, since it started.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Refusals {
+    /// Calls under a session that is not registered (never, or forgotten after silence).
+    pub unregistered: u64,
+    /// Calls of a session on the other role's queues, or a `Register` changing its role.
+    pub wrong_role: u64,
+    /// Registrations refused: `GrpcConfig::max_sessions` sessions are registered.
+    pub sessions_full: u64,
+    /// Frames under a sender id that another session uses.
+    pub foreign_sender: u64,
+    /// Frames of a new sender beyond `GrpcConfig::max_senders_per_session`.
+    pub too_many_senders: u64,
+    /// Frames whose sequence number jumps more than the send window ahead.
+    pub seq_jump: u64,
+    /// Chunks for an assignment held by another session or not handed out yet.
+    pub foreign_assignment: u64,
+    /// Chunks whose `end.length` or number of transitions is wrong or above the longest episode.
+    pub bad_length: u64,
+    /// Empty chunks not passed on (more than one per heartbeat for an episode).
+    pub empty_dropped: u64,
+    /// Chunks queued for an assignment before the learner issued it, dropped when it did.
+    pub purged: u64,
 }
 
 /// What the learner knows of one client, from its registration, heartbeats and polls.
@@ -57,7 +97,7 @@ pub(crate) struct ClientRecord {
 #[derive(Debug)]
 pub(crate) struct Hub {
     pub(crate) cfg: GrpcConfig,
-    pub(crate) experience: Arc<Inbox<ExperienceChunk>>,
+    pub(crate) experience: Arc<Inbox<ExperienceChunk, Episodes>>,
     pub(crate) replies: Arc<Inbox<DesignReply>>,
     pub(crate) assignments: Arc<Outbox<pb::Assignment>>,
     pub(crate) requests: Arc<Outbox<pb::DesignRequest>>,
@@ -66,9 +106,54 @@ pub(crate) struct Hub {
     pub(crate) clients: Mutex<HashMap<u64, ClientRecord>>,
     pub(crate) dims: Mutex<Option<Dims>>,
     pub(crate) shutdown: watch::Receiver<bool>,
+    pub(crate) refusals: Mutex<Refusals>,
 }
 
 impl Hub {
+    pub(crate) fn count(&self, reason: Reason, n: u64) {
+        let Ok(mut r) = self.refusals.lock() else { return };
+        let field = match reason {
+            Reason::Unregistered => &mut r.unregistered,
+            Reason::WrongRole => &mut r.wrong_role,
+            Reason::SessionsFull => &mut r.sessions_full,
+            Reason::ForeignSender => &mut r.foreign_sender,
+            Reason::TooManySenders => &mut r.too_many_senders,
+            Reason::SeqJump => &mut r.seq_jump,
+            Reason::ForeignAssignment => &mut r.foreign_assignment,
+            Reason::BadLength => &mut r.bad_length,
+            Reason::EmptyDropped => &mut r.empty_dropped,
+            Reason::Purged => &mut r.purged,
+        };
+        *field = field.saturating_add(n);
+    }
+
+    /// How long a session may be silent before it is forgotten.
+    pub(crate) fn idle_limit(&self) -> Duration {
+        self.cfg.session_idle_timeout.max(self.cfg.heartbeat.saturating_mul(3))
+    }
+
+    /// Forgets the sessions silent for longer than the idle limit, with their senders and
+    /// deliveries.
+    pub(crate) fn prune(&self, now: Instant) {
+        let idle = self.idle_limit();
+        let gone: Vec<u64> = match self.clients.lock() {
+            Ok(mut clients) => {
+                let gone: Vec<u64> = clients.iter().filter(|(_, r)| now.duration_since(r.last_seen) > idle).map(|(s, _)| *s).collect();
+                for s in &gone {
+                    clients.remove(s);
+                }
+                gone
+            }
+            Err(_) => return,
+        };
+        for s in gone {
+            self.experience.forget_session(s);
+            self.replies.forget_session(s);
+            self.assignments.forget(s);
+            self.requests.forget(s);
+        }
+    }
+
     fn finished_for(&self, role: ClientRole) -> bool {
         match role {
             ClientRole::Actor => self.assignments.is_finished(),
@@ -114,10 +199,16 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
     let (acting_pub, acting) = topic::topic(cfg.max_message_bytes);
     let (population_pub, population) = topic::topic(cfg.max_message_bytes);
     let (shutdown, shutdown_rx) = watch::channel(false);
+    let limits = InboxLimits {
+        capacity: INBOX_CAPACITY,
+        max_bytes: cfg.inbox_max_bytes,
+        window: u64::try_from(cfg.send_window).unwrap_or(u64::MAX),
+        max_senders: cfg.max_senders_per_session,
+    };
     let hub = Arc::new(Hub {
         cfg: cfg.clone(),
-        experience: Arc::new(Inbox::new(INBOX_CAPACITY)),
-        replies: Arc::new(Inbox::new(INBOX_CAPACITY)),
+        experience: Arc::new(Inbox::new(limits, Episodes::new(cfg.max_episode_steps, cfg.heartbeat))),
+        replies: Arc::new(Inbox::new(limits, ())),
         assignments: Arc::new(Outbox::new()),
         requests: Arc::new(Outbox::new()),
         acting,
@@ -125,10 +216,11 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
         clients: Mutex::new(HashMap::new()),
         dims: Mutex::new(None),
         shutdown: shutdown_rx.clone(),
+        refusals: Mutex::new(Refusals::default()),
     });
     let links = LearnerLinks {
         experience: Box::new(InboxReceiver(hub.experience.clone())),
-        assignments: Box::new(OutboxSender::<Assignment> { outbox: hub.assignments.clone() }),
+        assignments: Box::new(AssignmentSender { hub: hub.clone() }),
         acting_weights: Box::new(acting_pub),
         population_weights: Box::new(population_pub),
         design_requests: Box::new(OutboxSender::<DesignRequest> { outbox: hub.requests.clone() }),
@@ -137,6 +229,7 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
 
     let router = service::router(hub.clone(), &rt).map_err(|e| TransportError::Io(format!("building the services: {e}")))?;
     let (force, force_rx) = tokio::sync::oneshot::channel::<()>();
+    rt.spawn(prune_sessions(hub.clone(), shutdown_rx.clone()));
     let mut stop = shutdown_rx;
     let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
     let thread = std::thread::Builder::new()
@@ -191,6 +284,11 @@ impl LearnerServer {
             .collect();
         out.sort_by_key(|s| (s.role == ClientRole::Optimizer, s.id));
         out
+    }
+
+    /// What was refused or dropped so far, by reason.
+    pub fn refusals(&self) -> Refusals {
+        self.hub.refusals.lock().map(|r| *r).unwrap_or_default()
     }
 
     /// The actors seen, by id: liveness and the weights version each acts with.
@@ -249,11 +347,21 @@ impl Drop for LearnerServer {
     }
 }
 
+/// Forgets silent sessions every heartbeat until the server stops.
+async fn prune_sessions(hub: Arc<Hub>, mut stop: watch::Receiver<bool>) {
+    loop {
+        tokio::select! {
+            _ = tokio::time::sleep(hub.cfg.heartbeat) => hub.prune(Instant::now()),
+            _ = stop.wait_for(|s| *s) => return,
+        }
+    }
+}
+
 /// The learner's end of a queue from the clients.
 #[derive(Debug)]
-struct InboxReceiver<T>(Arc<Inbox<T>>);
+struct InboxReceiver<T, G>(Arc<Inbox<T, G>>);
 
-impl<T: Send> Receiver<T> for InboxReceiver<T> {
+impl<T: Send, G: queues::Gate<T>> Receiver<T> for InboxReceiver<T, G> {
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<T>, TransportError> {
         self.0.pop_timeout(timeout)
     }
@@ -277,5 +385,27 @@ where
 impl<T: Wire> Drop for OutboxSender<T> {
     fn drop(&mut self) {
         self.outbox.finish();
+    }
+}
+
+/// The learner's end of the assignment queue: an issued assignment is recorded with the
+/// experience queue's gate before any actor can take it.
+#[derive(Debug)]
+struct AssignmentSender {
+    hub: Arc<Hub>,
+}
+
+impl Sender<Assignment> for AssignmentSender {
+    fn send(&mut self, a: Assignment) -> Result<(), TransportError> {
+        let pb = a.to_pb();
+        let purged = self.hub.experience.issue(pb.id, pb.mode == pb::EpisodeMode::Train as i32);
+        self.hub.count(Reason::Purged, purged as u64);
+        self.hub.assignments.push(pb)
+    }
+}
+
+impl Drop for AssignmentSender {
+    fn drop(&mut self) {
+        self.hub.assignments.finish();
     }
 }

@@ -8,15 +8,16 @@ use coadapt_transport::Validate;
 use coadapt_wire::Wire;
 use coadapt_wire::pb;
 use coadapt_wire::pb::fleet_server::{Fleet, FleetServer};
+use prost::Message;
 use tokio::sync::{mpsc, watch};
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
-use super::queues::{Inbox, Offer, Outbox, Take};
+use super::queues::{Gate, Inbox, Incoming, Offer, Outbox, Reason, Take};
 use super::topic::Snapshot;
 use super::{ClientRecord, ClientRole, Hub};
 use crate::frames::Frame;
-use crate::{CONNECTION_WINDOW, PROTOCOL, STREAM_WINDOW};
+use crate::{CONNECTION_WINDOW, PROTOCOL, REFUSED_HEADER, REGISTER_HEADER, SESSION_HEADER, STREAM_WINDOW};
 
 type Acks = ReceiverStream<Result<pb::Ack, Status>>;
 
@@ -48,6 +49,10 @@ pub(super) fn router(
         .initial_connection_window_size(CONNECTION_WINDOW)
         .http2_keepalive_interval(Some(cfg.heartbeat))
         .http2_keepalive_timeout(Some(cfg.rpc_timeout))
+        // Bounds on what one connection may hold open or throw at us.
+        .max_concurrent_streams(cfg.max_concurrent_streams.max(1))
+        .http2_max_header_list_size(cfg.max_header_list_bytes)
+        .http2_max_pending_accept_reset_streams(Some(cfg.max_pending_reset_streams))
         .tcp_nodelay(true)
         .add_service(fleet)
         .add_service(health)
@@ -72,24 +77,37 @@ fn unavailable() -> Status {
     Status::unavailable("the learner is shutting down")
 }
 
+fn role_name(role: ClientRole) -> &'static str {
+    match role {
+        ClientRole::Actor => "an actor",
+        ClientRole::Optimizer => "an optimizer",
+    }
+}
+
+/// The session is not registered (never, or forgotten after silence, or the learner
+/// restarted): our clients register again when they see the marker.
+fn unregistered(session: u64) -> Status {
+    let mut s = Status::failed_precondition(format!("session: {session:#x} is not registered here: register first"));
+    s.metadata_mut().insert(REGISTER_HEADER, tonic::metadata::MetadataValue::from_static("first"));
+    s
+}
+
+/// The session a push stream belongs to, from its metadata.
+fn stream_session<T>(req: &Request<T>) -> Result<u64, Status> {
+    let Some(v) = req.metadata().get(SESSION_HEADER) else {
+        return Err(Status::failed_precondition(format!("metadata {SESSION_HEADER}: missing (register first, then name the session)")));
+    };
+    v.to_str()
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+        .ok_or_else(|| Status::invalid_argument(format!("metadata {SESSION_HEADER}: not a session number")))
+}
+
 impl FleetService {
-    /// Records that `session` is alive; a heartbeat from a session we do not know (we
-    /// restarted) registers it again.
-    fn touch(&self, session: u64, role: ClientRole, id: u64, weights_version: Option<u64>, left: bool) {
-        let Ok(mut clients) = self.hub.clients.lock() else { return };
-        let r = clients.entry(session).or_insert(ClientRecord {
-            role,
-            id,
-            last_seen: Instant::now(),
-            weights_version: 0,
-            told_finished: false,
-            left: false,
-        });
-        r.last_seen = Instant::now();
-        r.left = left;
-        if let Some(v) = weights_version {
-            r.weights_version = v;
-        }
+    /// Admits a call of `session` as `role`: it must be registered with that role. Records
+    /// that the session is alive.
+    fn caller(&self, session: u64, role: ClientRole) -> Result<(), Status> {
+        admit(&self.hub, session, role)
     }
 
     fn told_finished(&self, session: u64) {
@@ -100,17 +118,9 @@ impl FleetService {
         }
     }
 
-    fn seen(&self, session: u64) {
-        if let Ok(mut clients) = self.hub.clients.lock()
-            && let Some(r) = clients.get_mut(&session)
-        {
-            r.last_seen = Instant::now();
-        }
-    }
-
-    /// A long poll on `outbox`: (item, seq, finished).
-    async fn poll<T: Clone>(&self, outbox: &Outbox<T>, p: pb::Poll) -> Result<(Option<T>, u64, bool), Status> {
-        self.seen(p.session);
+    /// A long poll on `outbox` by a session of `role`: (item, seq, finished).
+    async fn poll<T: Clone>(&self, outbox: &Outbox<T>, role: ClientRole, p: &pb::Poll) -> Result<(Option<T>, u64, bool), Status> {
+        self.caller(p.session, role)?;
         if p.leaving {
             outbox.release(p.session, p.received);
             return Ok((None, 0, false));
@@ -129,10 +139,17 @@ impl FleetService {
         }
     }
 
-    /// Serves one client-to-learner stream: validate each frame, hand it to the inbox (a
-    /// resend is dropped there), acknowledge. While the learner's queue is full, repeat the
-    /// last acknowledgement every heartbeat so the client knows we are alive.
-    fn pump<F: Frame>(&self, inbox: Arc<Inbox<F::Item>>, mut frames: Streaming<F>) -> Acks {
+    /// Serves one client-to-learner stream of `session`: validate each frame, hand it to the
+    /// inbox (a resend is dropped there, a frame of another session's sender or assignment
+    /// refused), acknowledge. While the learner's queue is full, repeat the last
+    /// acknowledgement every heartbeat so the client knows we are alive.
+    fn pump<F: Frame, G: Gate<F::Item> + 'static>(
+        &self,
+        inbox: Arc<Inbox<F::Item, G>>,
+        session: u64,
+        role: ClientRole,
+        mut frames: Streaming<F>,
+    ) -> Acks {
         let (tx, rx) = mpsc::channel(64);
         let hub = self.hub.clone();
         tokio::spawn(async move {
@@ -155,32 +172,57 @@ impl FleetService {
                         return;
                     }
                 };
-                let item = match (fin, payload) {
-                    (true, _) => None,
+                // Still registered (a session forgotten mid-stream registers again).
+                if let Err(status) = admit(&hub, session, role) {
+                    let _ = tx.send(Err(status)).await;
+                    return;
+                }
+                let (item, bytes) = match (fin, payload) {
+                    (true, _) => (None, 0),
                     (false, None) => {
                         let _ = tx.send(Err(Status::invalid_argument(format!("frame {seq}: {}: missing", F::PAYLOAD)))).await;
                         return;
                     }
-                    (false, Some(pb)) => match check::<F>(&hub, pb) {
-                        Ok(x) => Some(x),
-                        Err(why) => {
-                            let _ = tx.send(Err(Status::invalid_argument(format!("frame {seq}: {}.{why}", F::PAYLOAD)))).await;
+                    (false, Some(pb)) => {
+                        let bytes = pb.encoded_len();
+                        match check::<F>(&hub, pb) {
+                            Ok(x) => (Some(x), bytes),
+                            Err(why) => {
+                                let _ = tx.send(Err(Status::invalid_argument(format!("frame {seq}: {}.{why}", F::PAYLOAD)))).await;
+                                return;
+                            }
+                        }
+                    }
+                };
+                let mut incoming = Incoming { sender, session, seq, item, bytes };
+                loop {
+                    let offered = inbox.offer_wait(incoming, hub.cfg.heartbeat).await;
+                    let (offer, back) = match offered {
+                        Ok(x) => x,
+                        Err(e) => {
+                            let _ = tx.send(Err(Status::internal(e.to_string()))).await;
                             return;
                         }
-                    },
-                };
-                let mut item = item;
-                loop {
-                    match inbox.offer_wait(sender, seq, item, hub.cfg.heartbeat).await {
-                        Ok(Offer::Full(back)) => {
-                            item = back;
+                    };
+                    incoming = back;
+                    match offer {
+                        Offer::Full(_) => {
                             if tx.send(Ok(pb::Ack { acked: inbox.acked(sender) })).await.is_err() {
                                 return;
                             }
                         }
-                        Ok(_) => break,
-                        Err(e) => {
-                            let _ = tx.send(Err(Status::internal(e.to_string()))).await;
+                        Offer::Accepted | Offer::Duplicate => break,
+                        Offer::Skipped(reason) => {
+                            hub.count(reason, 1);
+                            break;
+                        }
+                        Offer::Refused(r) => {
+                            hub.count(r.reason, 1);
+                            let mut status = Status::new(r.code, format!("frame {seq}: {}", r.message));
+                            if r.frame_only {
+                                status.metadata_mut().insert(REFUSED_HEADER, seq.into());
+                            }
+                            let _ = tx.send(Err(status)).await;
                             return;
                         }
                     }
@@ -196,6 +238,24 @@ impl FleetService {
         });
         ReceiverStream::new(rx)
     }
+}
+
+/// See [`FleetService::caller`].
+fn admit(hub: &Hub, session: u64, role: ClientRole) -> Result<(), Status> {
+    let Ok(mut clients) = hub.clients.lock() else { return Err(Status::internal("client table lock poisoned")) };
+    let Some(r) = clients.get_mut(&session) else {
+        drop(clients);
+        hub.count(Reason::Unregistered, 1);
+        return Err(unregistered(session));
+    };
+    if r.role != role {
+        let why = format!("role: session {session:#x} is registered as {}, not {}", role_name(r.role), role_name(role));
+        drop(clients);
+        hub.count(Reason::WrongRole, 1);
+        return Err(Status::permission_denied(why));
+    }
+    r.last_seen = Instant::now();
+    Ok(())
 }
 
 /// Decodes with validation, then checks the robot's dimensions if the learner declared them.
@@ -220,7 +280,45 @@ impl Fleet for FleetService {
         if h.protocol != PROTOCOL {
             return Err(Status::failed_precondition(format!("this learner speaks protocol {PROTOCOL}, not {}", h.protocol)));
         }
-        self.touch(h.session, role, h.actor_id, None, false);
+        let now = Instant::now();
+        let known = self.hub.clients.lock().map(|c| c.contains_key(&h.session)).unwrap_or(false);
+        if !known {
+            self.hub.prune(now);
+        }
+        let refused = {
+            let Ok(mut clients) = self.hub.clients.lock() else { return Err(Status::internal("client table lock poisoned")) };
+            let n = clients.len();
+            match clients.get_mut(&h.session) {
+                // Registering again (a lost answer, a forgotten session) keeps the role.
+                Some(r) if r.role != role => Some((
+                    Reason::WrongRole,
+                    Status::permission_denied(format!("role: session {:#x} is registered as {}", h.session, role_name(r.role))),
+                )),
+                Some(r) => {
+                    r.last_seen = now;
+                    r.left = false;
+                    r.id = h.actor_id;
+                    None
+                }
+                None if n >= self.hub.cfg.max_sessions => Some((
+                    Reason::SessionsFull,
+                    Status::resource_exhausted(format!(
+                        "sessions: {n} registered, the most this learner serves (GrpcConfig::max_sessions)"
+                    )),
+                )),
+                None => {
+                    clients.insert(
+                        h.session,
+                        ClientRecord { role, id: h.actor_id, last_seen: now, weights_version: 0, told_finished: false, left: false },
+                    );
+                    None
+                }
+            }
+        };
+        if let Some((reason, status)) = refused {
+            self.hub.count(reason, 1);
+            return Err(status);
+        }
         Ok(Response::new(pb::Welcome {
             fleet: self.hub.cfg.fleet.clone(),
             protocol: PROTOCOL,
@@ -231,7 +329,13 @@ impl Fleet for FleetService {
     async fn heartbeat(&self, req: Request<pb::Beat>) -> Result<Response<pb::BeatReply>, Status> {
         let b = req.into_inner();
         let role = role_of(b.role)?;
-        self.touch(b.session, role, b.actor_id, Some(b.weights_version), b.leaving);
+        self.caller(b.session, role)?;
+        if let Ok(mut clients) = self.hub.clients.lock()
+            && let Some(r) = clients.get_mut(&b.session)
+        {
+            r.weights_version = b.weights_version;
+            r.left = b.leaving;
+        }
         let fleet_finished = self.hub.finished_for(role);
         if fleet_finished {
             self.told_finished(b.session);
@@ -246,13 +350,17 @@ impl Fleet for FleetService {
     type PushExperienceStream = Acks;
 
     async fn push_experience(&self, req: Request<Streaming<pb::ExperienceFrame>>) -> Result<Response<Acks>, Status> {
-        Ok(Response::new(self.pump(self.hub.experience.clone(), req.into_inner())))
+        let session = stream_session(&req)?;
+        self.caller(session, ClientRole::Actor)?;
+        Ok(Response::new(self.pump(self.hub.experience.clone(), session, ClientRole::Actor, req.into_inner())))
     }
 
     type PushDesignRepliesStream = Acks;
 
     async fn push_design_replies(&self, req: Request<Streaming<pb::DesignReplyFrame>>) -> Result<Response<Acks>, Status> {
-        Ok(Response::new(self.pump(self.hub.replies.clone(), req.into_inner())))
+        let session = stream_session(&req)?;
+        self.caller(session, ClientRole::Optimizer)?;
+        Ok(Response::new(self.pump(self.hub.replies.clone(), session, ClientRole::Optimizer, req.into_inner())))
     }
 
     type WatchWeightsStream = ReceiverStream<Result<pb::WeightsUpdate, Status>>;
@@ -270,12 +378,17 @@ impl Fleet for FleetService {
     }
 
     async fn next_assignment(&self, req: Request<pb::Poll>) -> Result<Response<pb::AssignmentDelivery>, Status> {
-        let (assignment, seq, finished) = self.poll(&self.hub.assignments, req.into_inner()).await?;
+        let p = req.into_inner();
+        let (assignment, seq, finished) = self.poll(&self.hub.assignments, ClientRole::Actor, &p).await?;
+        if let Some(a) = &assignment {
+            // From now on its experience is accepted from this session only.
+            self.hub.experience.deliver(a.id, p.session, a.mode == pb::EpisodeMode::Train as i32);
+        }
         Ok(Response::new(pb::AssignmentDelivery { assignment, seq, finished }))
     }
 
     async fn next_design_request(&self, req: Request<pb::Poll>) -> Result<Response<pb::DesignRequestDelivery>, Status> {
-        let (request, seq, finished) = self.poll(&self.hub.requests, req.into_inner()).await?;
+        let (request, seq, finished) = self.poll(&self.hub.requests, ClientRole::Optimizer, &req.into_inner()).await?;
         Ok(Response::new(pb::DesignRequestDelivery { request, seq, finished }))
     }
 }
