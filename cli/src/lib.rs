@@ -27,6 +27,7 @@ pub mod confirm;
 pub mod env_serve;
 pub mod fleet;
 pub mod launch;
+pub mod metrics;
 pub mod plot;
 pub mod progress;
 pub mod render;

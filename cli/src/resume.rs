@@ -20,6 +20,7 @@ const MAY_CHANGE: &[&str] = &[
     "snapshot",
     "remote",
     "sim-threads",
+    "metrics",
 ];
 
 fn may_change(path: &str) -> bool {

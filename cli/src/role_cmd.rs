@@ -68,6 +68,10 @@ pub struct LearnerArgs {
     /// Override fleet.listen: the gRPC address to serve on (port 0: any free port).
     #[arg(long)]
     pub listen: Option<String>,
+    /// Serve Prometheus metrics on this address (`GET /metrics`; overrides
+    /// metrics.learner-listen).
+    #[arg(long)]
+    pub metrics: Option<String>,
     /// Continue the run in --out from its newest sound snapshot (a damaged one is skipped,
     /// naming what is wrong); an --out without a run starts one. For restarts by systemd or
     /// Kubernetes: the same command line starts and resumes.
@@ -96,6 +100,10 @@ pub struct OptimizerArgs {
     /// Override fleet.connect: the learner's gRPC address.
     #[arg(long)]
     pub connect: Option<String>,
+    /// Serve Prometheus metrics on this address (`GET /metrics`; overrides
+    /// metrics.optimizer-listen).
+    #[arg(long)]
+    pub metrics: Option<String>,
     /// Keep the optimiser's state here (optimizer-state.json, written after every reply) and
     /// continue from it when it exists, so a restarted optimiser answers as the one that died.
     #[arg(long)]
@@ -107,6 +115,9 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     let (mut cfg, name) = args.role.load()?;
     if let Some(l) = args.listen {
         cfg.fleet.listen = l;
+    }
+    if let Some(m) = args.metrics {
+        cfg.metrics.learner_listen = m;
     }
     let dir = match args.out {
         Some(d) => d,
@@ -155,6 +166,9 @@ pub fn actor(args: ActorArgs) -> anyhow::Result<()> {
 /// `coadapt optimizer`.
 pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
     let (mut cfg, _) = args.role.load()?;
+    if let Some(m) = args.metrics {
+        cfg.metrics.optimizer_listen = m;
+    }
     if let Some(c) = args.connect {
         cfg.fleet.connect = c;
     }

@@ -218,6 +218,7 @@ pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>
             let what = if *mode == ResetMode::Eval { "the evaluation after episode" } else { "episode" };
             eprintln!("{what} {}/{episodes_in_design} of design {} awaits a reset: {confirm} --reset", episode + 1, design_index + 1);
         }
+        RunEvent::Stats(_) => {}
         RunEvent::ResetConfirmed { design_index, episode, mode } => {
             resume(&mut waiting_since);
             eprintln!("{}: reset confirmed", prototype::reset_name(*mode, *episode, *design_index));
@@ -276,7 +277,16 @@ pub fn learner(
     };
     std::fs::write(dir.join("config.toml"), toml::to_string(cfg)?).context("writing config.toml")?;
     // The operator may answer from another directory: name the run directory in full.
-    let mut on_event = progress_printer(cfg, &std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()));
+    let mut print = progress_printer(cfg, &std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()));
+    let stats = std::sync::Arc::new(std::sync::Mutex::new(coadapt::Stats::default()));
+    if !cfg.metrics.learner_listen.is_empty() {
+        let at = crate::metrics::serve(&cfg.metrics.learner_listen, crate::metrics::Source::Learner(stats.clone()))?;
+        eprintln!("learner: metrics on http://{at}/metrics");
+    }
+    let mut on_event = |e: &RunEvent<'_>| match e {
+        RunEvent::Stats(s) => *stats.lock().unwrap_or_else(|e| e.into_inner()) = **s,
+        e => print(e),
+    };
     let outcome = coadapt::run(
         &cfg.schedule,
         &cfg.learner,
@@ -345,6 +355,10 @@ pub fn optimizer(
         None
     };
     let mut opt = Optimizer::new(cfg.optimizer.clone(), ospec, sim.as_mut().map(|s| s as &mut dyn RolloutEvaluator), cfg.seed)?;
+    if !cfg.metrics.optimizer_listen.is_empty() {
+        let at = crate::metrics::serve(&cfg.metrics.optimizer_listen, crate::metrics::Source::Optimizer(opt.counters()))?;
+        eprintln!("optimizer: metrics on http://{at}/metrics");
+    }
     let store = match state_dir {
         Some(d) => {
             let store = StateFile::in_dir(d).with_context(|| format!("creating {}", d.display()))?;

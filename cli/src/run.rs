@@ -57,6 +57,9 @@ pub struct RunConfig {
     pub remote: crate::roles::RemoteEnvConfig,
     /// Snapshots of the whole run for `--resume` (`every-episodes`, `keep`).
     pub snapshot: coadapt_learner::snapshot::SnapshotConfig,
+    /// Prometheus `/metrics` of the learner and the optimiser (`learner-listen`,
+    /// `optimizer-listen`; empty: off).
+    pub metrics: crate::metrics::MetricsConfig,
 }
 
 impl Default for RunConfig {
@@ -76,6 +79,7 @@ impl Default for RunConfig {
             optimizer: OptimizerConfig::default(),
             remote: crate::roles::RemoteEnvConfig::default(),
             snapshot: coadapt_learner::snapshot::SnapshotConfig::default(),
+            metrics: crate::metrics::MetricsConfig::default(),
         }
     }
 }

@@ -215,6 +215,21 @@ pub struct Optimizer<'a> {
     pub(crate) requests: u64,
     /// Every reply so far, by request ([`crate::resume`]).
     pub(crate) replies: std::collections::BTreeMap<crate::resume::RequestKey, crate::resume::StoredReply>,
+    counters: std::sync::Arc<Counters>,
+}
+
+/// What `/metrics` shows of the optimiser (updated as it serves; read from another thread).
+#[derive(Debug, Default)]
+pub struct Counters {
+    /// Requests answered by a search.
+    pub searched: std::sync::atomic::AtomicU64,
+    /// Requests answered from the stored replies (sent again by the learner).
+    pub answered_again: std::sync::atomic::AtomicU64,
+    /// Design rollouts spent by the simulation baselines.
+    pub rollouts: std::sync::atomic::AtomicU64,
+    /// Seconds of the last search and of all, as `f64` bits.
+    pub last_seconds_bits: std::sync::atomic::AtomicU64,
+    pub total_seconds_bits: std::sync::atomic::AtomicU64,
 }
 
 impl std::fmt::Debug for Optimizer<'_> {
@@ -249,7 +264,18 @@ impl<'a> Optimizer<'a> {
             )),
             _ => None,
         };
-        Ok(Self { rng: rng(seed, 0x4f50_5449), cfg, spec, evaluator, es, es_best: None, seed, requests: 0, replies: Default::default() })
+        Ok(Self {
+            rng: rng(seed, 0x4f50_5449),
+            cfg,
+            spec,
+            evaluator,
+            es,
+            es_best: None,
+            seed,
+            requests: 0,
+            replies: Default::default(),
+            counters: Default::default(),
+        })
     }
 
     fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, String> {
@@ -267,6 +293,11 @@ impl<'a> Optimizer<'a> {
             self.spec.bounds.dim(),
         )
         .map_err(|e| e.to_string())
+    }
+
+    /// The counters for `/metrics`.
+    pub fn counters(&self) -> std::sync::Arc<Counters> {
+        self.counters.clone()
     }
 
     /// Chooses the design of `req` with population weights `w`.
@@ -426,11 +457,22 @@ pub fn run(
         let key = crate::resume::RequestKey::of(&req, dims.design);
         if let Some(r) = opt.replies.get(&key) {
             eprintln!("optimizer: design {} was answered before; sending the same reply", req.index);
+            opt.counters.answered_again.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             links.replies.send(r.reply(req.index))?;
             continue;
         }
         let Some(w) = newest_or_stop(links.weights.as_mut(), req.weights_version, shutdown)? else { break };
+        let t = std::time::Instant::now();
         let reply = opt.choose(&req, &w)?;
+        {
+            use std::sync::atomic::Ordering::Relaxed;
+            let (c, secs) = (&opt.counters, t.elapsed().as_secs_f64());
+            c.searched.fetch_add(1, Relaxed);
+            c.rollouts.fetch_add(reply.design_rollouts, Relaxed);
+            c.last_seconds_bits.store(secs.to_bits(), Relaxed);
+            let total = f64::from_bits(c.total_seconds_bits.load(Relaxed)) + secs;
+            c.total_seconds_bits.store(total.to_bits(), Relaxed);
+        }
         opt.replies.insert(key, crate::resume::StoredReply::of(&reply));
         if let Some(s) = store {
             s.save(&opt.state().map_err(OptimizerError::Config)?)

@@ -210,6 +210,37 @@ pub enum RunEvent<'a> {
         episode: usize,
         mode: ResetMode,
     },
+    /// The learner's counters, after every episode and snapshot (for `/metrics`).
+    Stats(&'a Stats),
+}
+
+/// What `/metrics` shows of the learner.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stats {
+    /// The design being trained (0-based).
+    pub design: usize,
+    /// Episodes finished in the run (all starts of the learner).
+    pub episodes: u64,
+    /// Environment steps of training episodes.
+    pub steps: u64,
+    pub time: LearnerTime,
+    pub replay_population: usize,
+    pub replay_species: usize,
+    pub start_states: usize,
+    pub updates_population: u64,
+    pub updates_individual: u64,
+    /// The last episode's policy lag.
+    pub policy_lag: u64,
+    /// Snapshots taken by this start, their total seconds, the last one's size and time
+    /// (seconds since the Unix epoch; 0: none yet).
+    pub snapshots: u64,
+    pub snapshot_seconds: f64,
+    pub snapshot_bytes: u64,
+    pub snapshot_unix: f64,
+    /// Starts of the learner that resumed this run.
+    pub resumes: u64,
+    /// Seconds the last design request took.
+    pub design_request_seconds: f64,
 }
 
 /// What a finished (or interrupted) run leaves.
@@ -294,6 +325,7 @@ pub fn run(
         silence: (t > 0.0).then(|| Duration::from_secs_f64(t)),
         reissue: flow.reissue_silent_episodes,
         rejected_in_a_row: 0,
+        last_request_seconds: 0.0,
         pending: Vec::new(),
         time: LearnerTime::default(),
         dir: &dir,
@@ -302,8 +334,9 @@ pub fn run(
     let mut p = match snaps.resume.take() {
         Some(mut inp) => {
             l.fear.load_state(&mut inp)?;
-            let p: resume::Progress = inp.get("progress")?;
+            let mut p: resume::Progress = inp.get("progress")?;
             l.restore(&p);
+            p.resumes += 1;
             p
         }
         None => resume::Progress::start(),
@@ -388,6 +421,7 @@ pub fn run(
             };
             out.episode(&ep)?;
             on_event(&RunEvent::Episode { row: &ep, episodes_in_design: n });
+            on_event(&RunEvent::Stats(&l.stats(index, p.global + 1, p.steps, c.policy_lag, snaps, p.resumes)));
             written += 1;
             p.global += 1;
             since_snapshot += 1;
@@ -418,6 +452,7 @@ pub fn run(
             p.design = index + 1;
             p.seconds = seconds_before + start.elapsed().as_secs_f64();
             l.snapshot(&mut p, out, snaps, &format!("design {index} end"))?;
+            on_event(&RunEvent::Stats(&l.stats(index, p.global, p.steps, 0, snaps, p.resumes)));
         }
         if interrupted || shutdown.load(Ordering::Relaxed) {
             stopped = true;

@@ -64,6 +64,8 @@ pub(super) struct Learner<'a> {
     pub(super) reissue: bool,
     /// Episodes rejected for magnitudes since the last accepted one.
     pub(super) rejected_in_a_row: u32,
+    /// Seconds the last design request took.
+    pub(super) last_request_seconds: f64,
     pub(super) pending: Vec<Pending>,
     pub(super) time: LearnerTime,
     /// The run directory (the operator's files live there).
@@ -391,6 +393,7 @@ impl Learner<'_> {
             break Ok(Some(reply));
         };
         self.time.waiting += t.elapsed().as_secs_f64();
+        self.last_request_seconds = t.elapsed().as_secs_f64();
         result
     }
 }

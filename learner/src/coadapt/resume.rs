@@ -37,6 +37,8 @@ pub struct Snapshots {
     /// Size of the newest snapshot (bytes) and when it was taken.
     pub last_bytes: u64,
     pub last_at: Option<Instant>,
+    /// The newest snapshot's time, seconds since the Unix epoch (0: none yet).
+    pub last_unix: f64,
 }
 
 impl Snapshots {
@@ -78,6 +80,9 @@ pub(super) struct Progress {
     pub time: LearnerTime,
     /// Seconds since the run started (episodes.csv's `seconds` goes on from it).
     pub seconds: f64,
+    /// Learner starts that resumed the run.
+    #[serde(default)]
+    pub resumes: u64,
 }
 
 impl Progress {
@@ -99,6 +104,7 @@ impl Progress {
             next_assignment: 0,
             time: LearnerTime::default(),
             seconds: 0.0,
+            resumes: 0,
         }
     }
 }
@@ -146,6 +152,30 @@ impl Learner<'_> {
         snaps.seconds += t.elapsed().as_secs_f64();
         snaps.last_bytes = std::fs::read_dir(&dir)?.filter_map(|e| e.ok()?.metadata().ok()).map(|m| m.len()).sum();
         snaps.last_at = Some(Instant::now());
+        snaps.last_unix = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64());
         Ok(())
+    }
+
+    /// The counters for `/metrics`.
+    pub(super) fn stats(&self, design: usize, episodes: u64, steps: u64, policy_lag: u64, snaps: &Snapshots, resumes: u64) -> super::Stats {
+        use crate::fear::ActingPolicy::{Individual, Population};
+        super::Stats {
+            design,
+            episodes,
+            steps,
+            time: self.time,
+            replay_population: self.fear.population_transitions(),
+            replay_species: self.fear.species_transitions(),
+            start_states: self.fear.start_states(),
+            updates_population: self.fear.agent(Population).updates(),
+            updates_individual: self.fear.agent(Individual).updates(),
+            policy_lag,
+            snapshots: snaps.taken,
+            snapshot_seconds: snaps.seconds,
+            snapshot_bytes: snaps.last_bytes,
+            snapshot_unix: snaps.last_unix,
+            resumes,
+            design_request_seconds: self.last_request_seconds,
+        }
     }
 }
