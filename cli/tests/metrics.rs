@@ -42,7 +42,7 @@ fn learner_and_optimizer_metrics_are_scraped_during_a_run() {
     let config = dir.join("c.toml");
     std::fs::write(&config, toml::to_string(&c).unwrap()).unwrap();
     let out = dir.join("run");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+    let child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
         .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap()])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
