@@ -128,6 +128,9 @@ impl FleetConfig {
                 let addr: SocketAddr =
                     self.listen.parse().with_context(|| format!("fleet.listen: {:?} is not an address like 0.0.0.0:50051", self.listen))?;
                 let mut grpc = self.grpc()?;
+                // The id the learner's snapshots carry too; a client that sees it change drops
+                // what it holds from the older start.
+                grpc.run_id = Some(crate::resume::run_id());
                 if let Some(n) = max_episode_steps {
                     grpc.max_episode_steps = n as u64;
                 }

@@ -28,9 +28,29 @@
 //! Every RPC has a deadline; streams are kept honest by keep-alive messages every heartbeat.
 //! A learner that does not know a client's session (it restarted, or forgot the client after
 //! a long silence) says so, and the client registers the same session again and carries on.
-//! Delivery is exactly once while the learner lives; across a learner crash, messages it had
-//! stored but whose acknowledgement was lost with it go again to its successor. Assignments
-//! still queued when the learner ends are dropped with it (nobody would learn from them).
+//! Delivery is exactly once while the learner lives. Assignments still queued when the learner
+//! ends are dropped with it (nobody would learn from them).
+//!
+//! Learner starts. Every start of the learner has a run id ([`GrpcConfig::run_id`], drawn if
+//! not given; a learner resumed from a snapshot is a new start), which `Welcome` and
+//! `BeatReply` carry and the answers of WatchWeights and the long polls name in their
+//! `coadapt-run` metadata. A client remembers the run id of its registration and stamps with
+//! it what it keeps of that start: heartbeats, polls (whose `received` numbers that start's
+//! deliveries), weight watches (whose `min_version` is that start's) and push streams (whose
+//! frames were sent for it). A learner refuses a call stamped with another start's run id like
+//! one of an unknown session (counted in [`Refusals::other_run`]), and nothing reaches its role
+//! code from it. When a registration comes back with another run id, the client drops
+//! everything of the old start at once: its cached weights (a subscriber then waits for the new
+//! start's, whatever their version numbers), every unacknowledged experience and design-reply
+//! frame (their senders number afresh from 1), and what its long polls received; it says so in
+//! one line on stderr ("learner restarted (run id X -> Y): dropping N unacknowledged frames and
+//! weights version V"). The resumed learner issues the old start's unfinished episodes and
+//! design requests again itself. So a message the old start had not acknowledged is lost with
+//! it, and what the role code sends before its client has heard of the new start (at most a
+//! heartbeat or a retry later) is dropped too. A server that comes back with the *same* run id
+//! is the same start: clients keep what they hold and resend what it had not acknowledged (it
+//! drops duplicates). Until the client has registered with the new start, receives return
+//! `Ok(None)` as while the learner is away, never anything of the old start.
 
 use std::time::Duration;
 
@@ -44,8 +64,9 @@ pub use server::{ActorStatus, ClientRole, LearnerServer, Refusals, serve_learner
 
 /// The protocol version in `Hello`/`Welcome`; a learner refuses clients of another one.
 /// Version 2: every call names a registered session of the right role, push streams in their
-/// `coadapt-session` metadata.
-pub const PROTOCOL: u32 = 2;
+/// `coadapt-session` metadata. Version 3: learner starts have run ids, and clients stamp what
+/// they keep of one start with its run id (see the failure model).
+pub const PROTOCOL: u32 = 3;
 
 /// Settings of both ends; a fleet's learner and clients should use the same.
 #[derive(Clone, Debug)]
@@ -88,6 +109,10 @@ pub struct GrpcConfig {
     /// Streams a connection may open and reset before the learner has served them (the HTTP/2
     /// rapid-reset guard); beyond it the connection is closed.
     pub max_pending_reset_streams: usize,
+    /// The learner's only: the run id of this learner start (a resumed learner is a new start
+    /// and needs a new one). `None` (or 0): [`serve_learner`] draws a random one, see
+    /// [`LearnerServer::run_id`]. Clients ignore it; they learn the run id when they register.
+    pub run_id: Option<u64>,
 }
 
 impl Default for GrpcConfig {
@@ -108,6 +133,7 @@ impl Default for GrpcConfig {
             max_concurrent_streams: 64,
             max_header_list_bytes: 16 << 10,
             max_pending_reset_streams: 32,
+            run_id: None,
         }
     }
 }
@@ -156,8 +182,12 @@ impl Backoff {
 
 /// The request metadata naming the session of a push stream (decimal).
 pub(crate) const SESSION_HEADER: &str = "coadapt-session";
+/// The request metadata of a push stream naming the learner start its frames belong to, and the
+/// response metadata of WatchWeights and the long polls naming the start that answers (decimal).
+pub(crate) const RUN_HEADER: &str = "coadapt-run";
 /// Metadata of a FAILED_PRECONDITION: the session is not registered (the learner restarted or
-/// forgot it); the client registers again and retries.
+/// forgot it), or the call is stamped with another learner start's run id; the client registers
+/// again (and so learns the current run id) and retries.
 pub(crate) const REGISTER_HEADER: &str = "coadapt-register";
 
 /// Metadata of a PERMISSION_DENIED that refuses one frame only (a chunk of an assignment this
@@ -170,6 +200,11 @@ pub(crate) fn refused_frame(status: &tonic::Status) -> Option<u64> {
         return None;
     }
     status.metadata().get(REFUSED_HEADER)?.to_str().ok()?.parse().ok()
+}
+
+/// The run id in a response's `coadapt-run` metadata (0: none).
+pub(crate) fn run_of(md: &tonic::metadata::MetadataMap) -> u64 {
+    md.get(RUN_HEADER).and_then(|v| v.to_str().ok()).and_then(|v| v.parse().ok()).unwrap_or(0)
 }
 
 /// The learner does not know our session (see [`REGISTER_HEADER`]).
@@ -187,6 +222,18 @@ pub(crate) fn is_permanent(status: &tonic::Status) -> bool {
             status.code(),
             Code::InvalidArgument | Code::OutOfRange | Code::ResourceExhausted | Code::FailedPrecondition | Code::PermissionDenied
         )
+}
+
+/// 64 random bits, never 0 (sessions, sender ids, run ids).
+pub(crate) fn random_u64() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u64(COUNTER.fetch_add(1, Ordering::Relaxed));
+    h.write_u32(std::process::id());
+    h.write_u128(std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0));
+    h.finish().max(1)
 }
 
 pub(crate) fn status_error(status: &tonic::Status) -> TransportError {

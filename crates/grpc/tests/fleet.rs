@@ -146,10 +146,13 @@ fn the_learner_sees_its_actors_and_their_weights_version() {
     assert!(!server.actors()[0].alive, "actor 11 left");
 }
 
+/// The server goes away and comes back for the same learner start (the same run id): clients
+/// keep what they hold and resend what was not acknowledged. (A new start, with another run id,
+/// is `run_id.rs`'s: there they drop it.)
 #[test]
 fn actors_reconnect_to_a_restarted_learner() {
-    let cfg = common::cfg();
-    let (mut learner, server, endpoint) = common::learner();
+    let cfg = coadapt_grpc::GrpcConfig { run_id: Some(0x5A3E_0001), ..common::cfg() };
+    let (mut learner, server, endpoint) = common::learner_with(&cfg);
     let addr = server.local_addr();
     let mut actor = actor_links(&endpoint, 5, &cfg).expect("actor");
     learner.acting_weights.publish(weights(1, 100)).expect("publish");
@@ -173,7 +176,7 @@ fn actors_reconnect_to_a_restarted_learner() {
         actor.experience.send(chunk(i)).expect("accepted into the window while the learner is away");
     }
 
-    let (mut learner, server) = serve_learner(addr, &cfg).expect("a new learner on the same port");
+    let (mut learner, server) = serve_learner(addr, &cfg).expect("the same learner start on the same port");
     for v in 2..=5 {
         learner.acting_weights.publish(weights(v, 100)).expect("publish");
     }

@@ -62,12 +62,12 @@ impl Peer {
 
     fn beat(&self, role: pb::Role, leaving: bool) -> Result<pb::BeatReply, Status> {
         let mut c = self.client.clone();
-        let beat = pb::Beat { session: self.session, role: role as i32, actor_id: self.actor_id, weights_version: 0, leaving };
+        let beat = pb::Beat { session: self.session, role: role as i32, actor_id: self.actor_id, weights_version: 0, leaving, run_id: 0 };
         rt().block_on(async move { c.heartbeat(beat).await.map(|r| r.into_inner()) })
     }
 
     fn poll(&self, wait_ms: u32, received: u64, leaving: bool) -> pb::Poll {
-        pb::Poll { session: self.session, received, wait_ms, leaving }
+        pb::Poll { session: self.session, received, wait_ms, leaving, run_id: 0 }
     }
 
     fn next_assignment(&self, wait_ms: u32, received: u64, leaving: bool) -> Result<pb::AssignmentDelivery, Status> {
@@ -422,7 +422,8 @@ fn streams_per_connection_are_limited() {
         .collect();
     std::thread::sleep(Duration::from_millis(300));
     let mut c = actor.client.clone();
-    let beat = pb::Beat { session: actor.session, role: pb::Role::Actor as i32, actor_id: 1, weights_version: 0, leaving: false };
+    let beat =
+        pb::Beat { session: actor.session, role: pb::Role::Actor as i32, actor_id: 1, weights_version: 0, leaving: false, run_id: 0 };
     let fifth = rt().block_on(async move { tokio::time::timeout(Duration::from_millis(400), c.heartbeat(beat)).await });
     assert!(fifth.is_err(), "a fifth call ran beside four open ones on one connection: {fifth:?}");
     for p in polls {
@@ -522,7 +523,8 @@ fn a_refused_chunk_does_not_end_an_honest_sender() {
 }
 
 /// A restarted learner knows no session: our clients register again (same session) and go on,
-/// the optimiser's replies included.
+/// the optimiser's replies included (those sent once it knows the new start: what it sent for
+/// the old start is dropped, see run_id.rs).
 #[test]
 fn clients_register_again_with_a_restarted_learner() {
     let cfg = common::cfg();
@@ -532,6 +534,13 @@ fn clients_register_again_with_a_restarted_learner() {
     drop(server);
     drop(learner);
     let (mut learner, server) = coadapt_grpc::serve_learner(addr, &cfg).expect("a new learner on the same port");
+    let t = Instant::now();
+    while !server.clients().iter().any(|c| c.role == coadapt_grpc::ClientRole::Optimizer) {
+        assert!(t.elapsed() < Duration::from_secs(10), "the optimiser did not register again");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Its heartbeat has read the answer (and so the new run id).
+    std::thread::sleep(Duration::from_millis(300));
     let reply = coadapt_transport::DesignReply {
         index: 0,
         design: vec![1.0, 2.0],

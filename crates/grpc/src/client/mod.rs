@@ -7,9 +7,8 @@ mod upstream;
 mod weights;
 
 use std::future::Future;
-use std::hash::{BuildHasher, Hasher};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::time::{Duration, Instant};
 
 use coadapt_transport::{ActorLinks, OptimizerLinks, TransportError};
@@ -18,7 +17,7 @@ use coadapt_wire::pb::fleet_client::FleetClient;
 use tokio::runtime::Runtime;
 use tonic::transport::{Channel, Endpoint};
 
-use crate::{Backoff, CONNECTION_WINDOW, GrpcConfig, PROTOCOL, STREAM_WINDOW, is_permanent, is_unregistered, status_error};
+use crate::{Backoff, CONNECTION_WINDOW, GrpcConfig, PROTOCOL, STREAM_WINDOW, is_permanent, is_unregistered, random_u64, status_error};
 
 static RUNTIME: OnceLock<Runtime> = OnceLock::new();
 
@@ -48,15 +47,6 @@ where
     rx.recv().map_err(|_| TransportError::Io("the gRPC client runtime dropped a call".into()))
 }
 
-fn random_u64() -> u64 {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
-    h.write_u64(COUNTER.fetch_add(1, Ordering::Relaxed));
-    h.write_u32(std::process::id());
-    h.write_u128(std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0));
-    h.finish().max(1)
-}
-
 /// One client's connection and identity, shared by its channel ends.
 #[derive(Debug)]
 pub(crate) struct Conn {
@@ -69,9 +59,78 @@ pub(crate) struct Conn {
     pub(crate) finished: AtomicBool,
     /// The newest weights version handed to the role (reported in heartbeats).
     pub(crate) weights_version: AtomicU64,
+    /// The run id of the learner start we last registered with (0: none yet). What the channel
+    /// ends keep is stamped with it.
+    run_id: AtomicU64,
+    /// The channel ends' state that belongs to one learner start, dropped when the learner
+    /// restarts. Its lock also orders the adoption of a new run id.
+    ends: Mutex<Vec<Weak<dyn StartBound>>>,
+}
+
+/// What a channel end keeps of one learner start (unacknowledged frames, cached weights).
+pub(crate) trait StartBound: Send + Sync {
+    /// From now on the end belongs to learner start `run_id`: if it belonged to another, it
+    /// drops what it kept of that one. Returns what was dropped.
+    fn restart(&self, run_id: u64) -> Dropped;
+}
+
+/// What a channel end dropped when the learner restarted.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Dropped {
+    pub(crate) frames: usize,
+    pub(crate) weights_version: Option<u64>,
 }
 
 impl Conn {
+    /// The run id of the learner start we last registered with.
+    pub(crate) fn run_id(&self) -> u64 {
+        self.run_id.load(Ordering::Acquire)
+    }
+
+    /// Binds a channel end's state to the current learner start and to every later one.
+    pub(crate) fn attach(&self, end: Weak<dyn StartBound>) {
+        let Ok(mut ends) = self.ends.lock() else { return };
+        ends.retain(|e| e.strong_count() > 0);
+        if let Some(e) = end.upgrade() {
+            e.restart(self.run_id());
+        }
+        ends.push(end);
+    }
+
+    /// A registration was answered by learner start `run_id`. If we were registered with
+    /// another start, every channel end drops what it kept of it (the resumed learner issues
+    /// that work again itself, and numbers its weights and deliveries afresh).
+    fn adopt(&self, run_id: u64) {
+        if run_id == 0 {
+            return;
+        }
+        let Ok(ends) = self.ends.lock() else { return };
+        let old = self.run_id();
+        if old == run_id {
+            return;
+        }
+        let mut dropped = Dropped::default();
+        for end in ends.iter().filter_map(Weak::upgrade) {
+            let d = end.restart(run_id);
+            dropped.frames += d.frames;
+            dropped.weights_version = dropped.weights_version.max(d.weights_version);
+        }
+        self.weights_version.store(0, Ordering::Relaxed);
+        // Only now: whoever sees the new run id finds every end moved to it.
+        self.run_id.store(run_id, Ordering::Release);
+        if old != 0 {
+            let who = match self.role {
+                pb::Role::Actor => format!("actor {}", self.actor_id),
+                _ => "optimizer".to_string(),
+            };
+            eprintln!(
+                "coadapt-grpc: {who}: learner restarted (run id {old:016x} -> {run_id:016x}): dropping {} unacknowledged frames and weights version {}",
+                dropped.frames,
+                dropped.weights_version.unwrap_or(0)
+            );
+        }
+    }
+
     pub(crate) fn is_finished(&self) -> bool {
         self.finished.load(Ordering::Relaxed)
     }
@@ -83,6 +142,7 @@ impl Conn {
             actor_id: self.actor_id,
             weights_version: self.weights_version.load(Ordering::Relaxed),
             leaving,
+            run_id: self.run_id(),
         }
     }
 }
@@ -134,6 +194,8 @@ fn connect(endpoint: &str, cfg: &GrpcConfig, role: pb::Role, actor_id: u64) -> R
         actor_id,
         finished: AtomicBool::new(false),
         weights_version: AtomicU64::new(0),
+        run_id: AtomicU64::new(0),
+        ends: Mutex::new(Vec::new()),
     });
     block(register(conn.clone()))??;
     let heartbeat = rt.spawn(heartbeats(conn.clone())).abort_handle();
@@ -161,7 +223,8 @@ async fn register(conn: Arc<Conn>) -> Result<(), TransportError> {
 }
 
 impl Conn {
-    /// One registration of our session (again, after the learner said it does not know it).
+    /// One registration of our session (again, after the learner said it does not know it, or
+    /// that we stamped a call with another start's run id): learns the learner start's run id.
     pub(crate) async fn register_once(&self) -> Result<(), tonic::Status> {
         let cfg = &self.cfg;
         let hello = pb::Hello {
@@ -183,6 +246,7 @@ impl Conn {
                         w.fleet, w.protocol, cfg.fleet
                     )));
                 }
+                self.adopt(w.run_id);
                 Ok(())
             }
             Ok(Err(s)) => Err(s),
@@ -204,6 +268,12 @@ impl Conn {
             }
             Err(_) => return None,
         };
+        if reply.run_id != self.run_id() {
+            // Another learner start answers (one that knows our session from another channel
+            // end's registration): learn its run id before believing its versions.
+            let _ = self.register_once().await;
+            return None;
+        }
         if reply.fleet_finished {
             self.finished.store(true, Ordering::Relaxed);
         }

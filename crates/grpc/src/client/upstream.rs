@@ -2,10 +2,12 @@
 //! frame in a window of unacknowledged frames and returns; a background task streams the
 //! window and drops what the learner acknowledges. After a reconnect it sends the whole
 //! window again (the learner drops what it already has), so an accepted message survives a
-//! learner that restarts, and `send` only waits when the window is full.
+//! lost connection, and `send` only waits when the window is full. The window belongs to one
+//! learner start: streams name its run id, and when the learner restarts as another start the
+//! window is dropped and numbered afresh (the new start issues that work again itself).
 
 use std::collections::VecDeque;
-use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, Weak};
 use std::time::Instant;
 
 use coadapt_transport::{Sender, TransportError};
@@ -13,9 +15,9 @@ use coadapt_wire::Wire;
 use tokio::sync::{Notify, mpsc};
 use tokio_stream::wrappers::ReceiverStream;
 
-use super::{Conn, Session, random_u64, runtime};
+use super::{Conn, Dropped, Session, StartBound, runtime};
 use crate::frames::Frame;
-use crate::{Backoff, SESSION_HEADER, is_permanent, is_unregistered, refused_frame, status_error};
+use crate::{Backoff, RUN_HEADER, SESSION_HEADER, is_permanent, is_unregistered, random_u64, refused_frame, status_error};
 
 #[derive(Debug)]
 struct Window<F> {
@@ -28,6 +30,8 @@ struct Window<F> {
     done: bool,
     /// Why sends are refused from now on.
     fatal: Option<Fatal>,
+    /// The learner start the frames belong to.
+    run_id: u64,
 }
 
 #[derive(Clone, Debug)]
@@ -52,6 +56,24 @@ struct Shared<F> {
     room: Condvar,
     /// New frames, or closing.
     work: Notify,
+}
+
+impl<F: Frame> StartBound for Shared<F> {
+    fn restart(&self, run_id: u64) -> Dropped {
+        let Ok(mut w) = self.window.lock() else { return Dropped::default() };
+        if w.run_id == run_id {
+            return Dropped::default();
+        }
+        let frames = w.pending.len();
+        w.pending.clear();
+        w.next_seq = 1;
+        w.run_id = run_id;
+        drop(w);
+        self.room.notify_all();
+        // The stream of the old start ends.
+        self.work.notify_one();
+        Dropped { frames, weights_version: None }
+    }
 }
 
 impl<F> Shared<F> {
@@ -81,10 +103,11 @@ pub(crate) struct UpstreamSender<F: Frame> {
 impl<F: Frame> UpstreamSender<F> {
     pub(crate) fn start(session: Arc<Session>) -> Result<Self, TransportError> {
         let shared = Arc::new(Shared {
-            window: Mutex::new(Window { pending: VecDeque::new(), next_seq: 1, closing: false, done: false, fatal: None }),
+            window: Mutex::new(Window { pending: VecDeque::new(), next_seq: 1, closing: false, done: false, fatal: None, run_id: 0 }),
             room: Condvar::new(),
             work: Notify::new(),
         });
+        session.conn.attach(Arc::downgrade(&shared) as Weak<dyn StartBound>);
         let sender = random_u64();
         let task = runtime()?.spawn(run::<F>(session.conn.clone(), sender, shared.clone())).abort_handle();
         Ok(Self { shared, sender, task, session })
@@ -178,7 +201,12 @@ async fn run<F: Frame>(conn: Arc<Conn>, sender: u64, shared: Arc<Shared<F>>) {
     let cfg = conn.cfg.clone();
     let mut backoff = Backoff::new(cfg.reconnect_backoff_max);
     loop {
-        let result = stream_once(&conn, sender, &shared, &mut backoff).await;
+        let result = match stream_once(&conn, sender, &shared, &mut backoff).await {
+            Ok(Streamed::Closed) => Ok(()),
+            // The window was dropped for a new learner start: stream the new one at once.
+            Ok(Streamed::Restarted) => continue,
+            Err(s) => Err(s),
+        };
         if let Err(s) = &result
             && let Some(seq) = refused_frame(s)
         {
@@ -215,13 +243,25 @@ async fn run<F: Frame>(conn: Arc<Conn>, sender: u64, shared: Arc<Shared<F>>) {
     }
 }
 
-/// Streams the window until the clean close is acknowledged (`Ok`) or the stream fails.
-async fn stream_once<F: Frame>(conn: &Conn, sender: u64, shared: &Shared<F>, backoff: &mut Backoff) -> Result<(), tonic::Status> {
+/// How a stream of the window ended well.
+enum Streamed {
+    /// The clean close was acknowledged.
+    Closed,
+    /// The window now belongs to another learner start.
+    Restarted,
+}
+
+/// Streams the window until the clean close is acknowledged or the window is dropped for a new
+/// learner start (`Ok`), or the stream fails.
+async fn stream_once<F: Frame>(conn: &Conn, sender: u64, shared: &Shared<F>, backoff: &mut Backoff) -> Result<Streamed, tonic::Status> {
     let cfg = &conn.cfg;
     let (tx, rx) = mpsc::channel::<F>(cfg.send_window.max(1));
     let mut req = tonic::Request::new(ReceiverStream::new(rx));
     let session = conn.session.to_string().parse().map_err(|_| tonic::Status::internal("session metadata"))?;
     req.metadata_mut().insert(SESSION_HEADER, session);
+    // The learner refuses the stream if it is another start than the window's.
+    let run = shared.window.lock().map_err(|_| tonic::Status::internal("send window lock poisoned"))?.run_id;
+    req.metadata_mut().insert(RUN_HEADER, run.into());
     let opened = tokio::time::timeout(cfg.rpc_timeout, F::open(conn.client.clone(), req))
         .await
         .map_err(|_| tonic::Status::deadline_exceeded("opening the stream"))??;
@@ -234,6 +274,9 @@ async fn stream_once<F: Frame>(conn: &Conn, sender: u64, shared: &Shared<F>, bac
         work.as_mut().enable();
         let (next, outstanding) = {
             let w = shared.window.lock().map_err(|_| tonic::Status::internal("send window lock poisoned"))?;
+            if w.run_id != run {
+                return Ok(Streamed::Restarted);
+            }
             let acked = w.pending.front().map_or(w.next_seq - 1, |f| f.seq() - 1);
             (next_frame(&w, sender, sent.max(acked)), sent > acked)
         };
@@ -255,11 +298,14 @@ async fn stream_once<F: Frame>(conn: &Conn, sender: u64, shared: &Shared<F>, bac
                 last_ack = tokio::time::Instant::now();
                 backoff.reset();
                 if let Ok(mut w) = shared.window.lock() {
+                    if w.run_id != run {
+                        return Ok(Streamed::Restarted);
+                    }
                     while w.pending.front().is_some_and(|f| f.seq() <= ack.acked) {
                         w.pending.pop_front();
                     }
                     if w.closing && w.pending.is_empty() && ack.acked >= w.next_seq {
-                        return Ok(());
+                        return Ok(Streamed::Closed);
                     }
                 }
                 shared.room.notify_all();

@@ -1,17 +1,19 @@
 //! A weight subscriber: a background task keeps a WatchWeights stream open (reopening it
 //! after a failure, asking only for versions newer than it has) and stores the newest decoded
-//! version; `wait_for` reads it like the in-process topic.
+//! version; `wait_for` reads it like the in-process topic. What it stores belongs to one
+//! learner start: a restarted learner (another run id) numbers its versions afresh, so the
+//! stored version is dropped and the subscriber waits for the new start's, whatever its number.
 
 use std::sync::atomic::Ordering;
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::time::{Duration, Instant};
 
 use coadapt_transport::{Subscriber, TransportError, Weights};
 use coadapt_wire::Wire;
 use coadapt_wire::pb;
 
-use super::{Conn, Session, block, runtime};
-use crate::{Backoff, is_permanent};
+use super::{Conn, Dropped, Session, StartBound, block, runtime};
+use crate::{Backoff, is_permanent, run_of};
 
 #[derive(Debug, Default)]
 struct Latest {
@@ -20,6 +22,8 @@ struct Latest {
     closed: bool,
     /// A version that failed validation, reported once.
     error: Option<String>,
+    /// The learner start `weights` belongs to.
+    run_id: u64,
 }
 
 #[derive(Debug, Default)]
@@ -41,6 +45,20 @@ impl Shared {
     }
 }
 
+impl StartBound for Shared {
+    fn restart(&self, run_id: u64) -> Dropped {
+        let Ok(mut l) = self.latest.lock() else { return Dropped::default() };
+        if l.run_id == run_id {
+            return Dropped::default();
+        }
+        l.run_id = run_id;
+        let old = l.weights.take().map(|w| w.version);
+        drop(l);
+        self.changed.notify_all();
+        Dropped { frames: 0, weights_version: old }
+    }
+}
+
 #[derive(Debug)]
 pub(crate) struct WeightsSubscriber {
     shared: Arc<Shared>,
@@ -52,6 +70,7 @@ pub(crate) struct WeightsSubscriber {
 impl WeightsSubscriber {
     pub(crate) fn start(session: Arc<Session>, topic: pb::WeightsTopic) -> Result<Self, TransportError> {
         let shared = Arc::new(Shared::default());
+        session.conn.attach(Arc::downgrade(&shared) as Weak<dyn StartBound>);
         let task = runtime()?.spawn(follow(session.conn.clone(), topic, shared.clone())).abort_handle();
         Ok(Self { shared, task, session, topic })
     }
@@ -122,12 +141,30 @@ async fn follow(conn: Arc<Conn>, topic: pb::WeightsTopic, shared: Arc<Shared>) {
     let idle = cfg.heartbeat * 2 + cfg.rpc_timeout;
     let mut backoff = Backoff::new(cfg.reconnect_backoff_max);
     loop {
-        let min_version = shared.version().map_or(0, |v| v + 1);
-        let mut req = tonic::Request::new(pb::WatchRequest { topic: topic as i32, min_version });
+        // Versions of the start we hold weights of (the learner ignores them if it is another).
+        let (min_version, run_id) = match shared.latest.lock() {
+            Ok(l) => (l.weights.as_ref().map_or(0, |w| w.version + 1), l.run_id),
+            Err(_) => return,
+        };
+        let mut req = tonic::Request::new(pb::WatchRequest { topic: topic as i32, min_version, run_id });
         req.set_timeout(cfg.rpc_timeout);
         let mut client = conn.client.clone();
         match tokio::time::timeout(cfg.rpc_timeout, client.watch_weights(req)).await {
             Ok(Ok(stream)) => {
+                // (0: not stamped, taken as the start we registered with.)
+                let run = match run_of(stream.metadata()) {
+                    0 => conn.run_id(),
+                    run => run,
+                };
+                if run != conn.run_id() {
+                    // Another learner start than the one we registered with: learn its run id
+                    // (dropping the old start's weights) before taking any of its versions.
+                    let _ = conn.register_once().await;
+                    if run != conn.run_id() {
+                        tokio::time::sleep(backoff.next_delay()).await;
+                    }
+                    continue;
+                }
                 let mut stream = stream.into_inner();
                 loop {
                     let update = match tokio::time::timeout(idle, stream.message()).await {
@@ -142,7 +179,9 @@ async fn follow(conn: Arc<Conn>, topic: pb::WeightsTopic, shared: Arc<Shared>) {
                     if let Some(w) = update.weights {
                         match Weights::from_pb(w) {
                             Ok(w) => shared.update(|l| {
-                                if l.weights.as_ref().is_none_or(|old| old.version < w.version) {
+                                // Checked under the lock a restart takes: never a version of
+                                // a start we no longer belong to.
+                                if l.run_id == run && l.weights.as_ref().is_none_or(|old| old.version < w.version) {
                                     l.weights = Some(Arc::new(w));
                                 }
                             }),

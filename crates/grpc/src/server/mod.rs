@@ -68,6 +68,9 @@ pub struct Refusals {
     pub empty_dropped: u64,
     /// Chunks queued for an assignment before the learner issued it, dropped when it did.
     pub purged: u64,
+    /// Calls stamped with another learner start's run id (clients of a predecessor that have
+    /// not registered with this start yet); they register again and drop that start's state.
+    pub other_run: u64,
 }
 
 /// What the learner knows of one client, from its registration, heartbeats and polls.
@@ -97,6 +100,8 @@ pub(crate) struct ClientRecord {
 #[derive(Debug)]
 pub(crate) struct Hub {
     pub(crate) cfg: GrpcConfig,
+    /// This learner start's run id (never 0).
+    pub(crate) run_id: u64,
     pub(crate) experience: Arc<Inbox<ExperienceChunk, Episodes>>,
     pub(crate) replies: Arc<Inbox<DesignReply>>,
     pub(crate) assignments: Arc<Outbox<pb::Assignment>>,
@@ -123,6 +128,7 @@ impl Hub {
             Reason::BadLength => &mut r.bad_length,
             Reason::EmptyDropped => &mut r.empty_dropped,
             Reason::Purged => &mut r.purged,
+            Reason::OtherRun => &mut r.other_run,
         };
         *field = field.saturating_add(n);
     }
@@ -179,7 +185,8 @@ pub struct LearnerServer {
 }
 
 /// Binds `addr` (port 0 picks one) and serves the fleet; returns the learner's channel ends
-/// and the server handle.
+/// and the server handle. The server speaks for the learner start `cfg.run_id` (a random one
+/// if `None`): clients that registered with another start drop what they kept of it.
 pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks, LearnerServer), TransportError> {
     let io = |e: std::io::Error| TransportError::Io(format!("learner server on {addr}: {e}"));
     let listener = std::net::TcpListener::bind(addr).map_err(io)?;
@@ -207,6 +214,7 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
     };
     let hub = Arc::new(Hub {
         cfg: cfg.clone(),
+        run_id: cfg.run_id.filter(|&r| r != 0).unwrap_or_else(crate::random_u64),
         experience: Arc::new(Inbox::new(limits, Episodes::new(cfg.max_episode_steps, cfg.heartbeat))),
         replies: Arc::new(Inbox::new(limits, ())),
         assignments: Arc::new(Outbox::new()),
@@ -259,6 +267,12 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
 impl LearnerServer {
     pub fn local_addr(&self) -> SocketAddr {
         self.local_addr
+    }
+
+    /// The run id of the learner start this server speaks for (`GrpcConfig::run_id`, or the
+    /// one drawn for it).
+    pub fn run_id(&self) -> u64 {
+        self.hub.run_id
     }
 
     /// Every client seen, newest session per (role, id).

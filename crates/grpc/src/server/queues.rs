@@ -26,6 +26,7 @@ pub(crate) enum Reason {
     BadLength,
     EmptyDropped,
     Purged,
+    OtherRun,
 }
 
 /// A frame refused: the stream ends with this status.
@@ -164,8 +165,8 @@ impl<T, G> InboxState<T, G> {
 ///
 /// A sender id is bound to the session that used it first; a frame more than the send window
 /// beyond the sender's last one is refused (so no one can make a sender's future frames look
-/// like resends). A sender's first frame here may have any number: after a learner restart,
-/// clients resend their windows from where they were.
+/// like resends). A sender's first frame here may have any number: after the server comes back
+/// for the same learner start (same run id), clients resend their windows from where they were.
 #[derive(Debug)]
 pub(crate) struct Inbox<T, G = ()> {
     state: Mutex<InboxState<T, G>>,

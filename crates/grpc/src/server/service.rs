@@ -17,7 +17,7 @@ use super::queues::{Gate, Inbox, Incoming, Offer, Outbox, Reason, Take};
 use super::topic::Snapshot;
 use super::{ClientRecord, ClientRole, Hub};
 use crate::frames::Frame;
-use crate::{CONNECTION_WINDOW, PROTOCOL, REFUSED_HEADER, REGISTER_HEADER, SESSION_HEADER, STREAM_WINDOW};
+use crate::{CONNECTION_WINDOW, PROTOCOL, REFUSED_HEADER, REGISTER_HEADER, RUN_HEADER, SESSION_HEADER, STREAM_WINDOW};
 
 type Acks = ReceiverStream<Result<pb::Ack, Status>>;
 
@@ -92,6 +92,39 @@ fn unregistered(session: u64) -> Status {
     s
 }
 
+/// A call stamped with another learner start's run id: the client registers again, which tells
+/// it the current run id (and it drops what it kept of the old start).
+fn other_run(hub: &Hub, claimed: u64) -> Status {
+    hub.count(Reason::OtherRun, 1);
+    let mut s = Status::failed_precondition(format!(
+        "run id {claimed:#x}: this is learner start {:#x} (the learner restarted): register again",
+        hub.run_id
+    ));
+    s.metadata_mut().insert(REGISTER_HEADER, tonic::metadata::MetadataValue::from_static("first"));
+    s
+}
+
+/// Admits what a client stamped with run id `claimed` (0: not stamped).
+fn same_run(hub: &Hub, claimed: u64) -> Result<(), Status> {
+    if claimed == 0 || claimed == hub.run_id { Ok(()) } else { Err(other_run(hub, claimed)) }
+}
+
+/// The run id a push stream's frames belong to, from its metadata (0: not named).
+fn stream_run<T>(req: &Request<T>) -> Result<u64, Status> {
+    let Some(v) = req.metadata().get(RUN_HEADER) else { return Ok(0) };
+    v.to_str()
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+        .ok_or_else(|| Status::invalid_argument(format!("metadata {RUN_HEADER}: not a run id")))
+}
+
+/// An answer stamped with this learner start's run id.
+fn stamped<T>(hub: &Hub, body: T) -> Response<T> {
+    let mut r = Response::new(body);
+    r.metadata_mut().insert(RUN_HEADER, hub.run_id.into());
+    r
+}
+
 /// The session a push stream belongs to, from its metadata.
 fn stream_session<T>(req: &Request<T>) -> Result<u64, Status> {
     let Some(v) = req.metadata().get(SESSION_HEADER) else {
@@ -121,6 +154,8 @@ impl FleetService {
     /// A long poll on `outbox` by a session of `role`: (item, seq, finished).
     async fn poll<T: Clone>(&self, outbox: &Outbox<T>, role: ClientRole, p: &pb::Poll) -> Result<(Option<T>, u64, bool), Status> {
         self.caller(p.session, role)?;
+        // `received` numbers another start's deliveries: it must not confirm one of ours.
+        same_run(&self.hub, p.run_id)?;
         if p.leaving {
             outbox.release(p.session, p.received);
             return Ok((None, 0, false));
@@ -323,6 +358,7 @@ impl Fleet for FleetService {
             fleet: self.hub.cfg.fleet.clone(),
             protocol: PROTOCOL,
             max_message_bytes: self.hub.cfg.max_message_bytes as u64,
+            run_id: self.hub.run_id,
         }))
     }
 
@@ -330,6 +366,7 @@ impl Fleet for FleetService {
         let b = req.into_inner();
         let role = role_of(b.role)?;
         self.caller(b.session, role)?;
+        same_run(&self.hub, b.run_id)?;
         if let Ok(mut clients) = self.hub.clients.lock()
             && let Some(r) = clients.get_mut(&b.session)
         {
@@ -344,6 +381,7 @@ impl Fleet for FleetService {
             fleet_finished,
             acting_version: self.hub.acting.borrow().version,
             population_version: self.hub.population.borrow().version,
+            run_id: self.hub.run_id,
         }))
     }
 
@@ -352,6 +390,7 @@ impl Fleet for FleetService {
     async fn push_experience(&self, req: Request<Streaming<pb::ExperienceFrame>>) -> Result<Response<Acks>, Status> {
         let session = stream_session(&req)?;
         self.caller(session, ClientRole::Actor)?;
+        same_run(&self.hub, stream_run(&req)?)?;
         Ok(Response::new(self.pump(self.hub.experience.clone(), session, ClientRole::Actor, req.into_inner())))
     }
 
@@ -360,6 +399,7 @@ impl Fleet for FleetService {
     async fn push_design_replies(&self, req: Request<Streaming<pb::DesignReplyFrame>>) -> Result<Response<Acks>, Status> {
         let session = stream_session(&req)?;
         self.caller(session, ClientRole::Optimizer)?;
+        same_run(&self.hub, stream_run(&req)?)?;
         Ok(Response::new(self.pump(self.hub.replies.clone(), session, ClientRole::Optimizer, req.into_inner())))
     }
 
@@ -372,9 +412,11 @@ impl Fleet for FleetService {
             Ok(pb::WeightsTopic::Population) => self.hub.population.clone(),
             _ => return Err(Status::invalid_argument(format!("topic: {} is not acting (1) or population (2)", w.topic))),
         };
+        // Versions of another start are no measure of ours: send our newest, whatever its number.
+        let min_version = if w.run_id == 0 || w.run_id == self.hub.run_id { w.min_version } else { 0 };
         let (tx, rx) = mpsc::channel(1);
-        tokio::spawn(watch_topic(topic, w.min_version, self.hub.cfg.heartbeat, self.hub.shutdown.clone(), tx));
-        Ok(Response::new(ReceiverStream::new(rx)))
+        tokio::spawn(watch_topic(topic, min_version, self.hub.cfg.heartbeat, self.hub.shutdown.clone(), tx));
+        Ok(stamped(&self.hub, ReceiverStream::new(rx)))
     }
 
     async fn next_assignment(&self, req: Request<pb::Poll>) -> Result<Response<pb::AssignmentDelivery>, Status> {
@@ -384,12 +426,12 @@ impl Fleet for FleetService {
             // From now on its experience is accepted from this session only.
             self.hub.experience.deliver(a.id, p.session, a.mode == pb::EpisodeMode::Train as i32);
         }
-        Ok(Response::new(pb::AssignmentDelivery { assignment, seq, finished }))
+        Ok(stamped(&self.hub, pb::AssignmentDelivery { assignment, seq, finished }))
     }
 
     async fn next_design_request(&self, req: Request<pb::Poll>) -> Result<Response<pb::DesignRequestDelivery>, Status> {
         let (request, seq, finished) = self.poll(&self.hub.requests, ClientRole::Optimizer, &req.into_inner()).await?;
-        Ok(Response::new(pb::DesignRequestDelivery { request, seq, finished }))
+        Ok(stamped(&self.hub, pb::DesignRequestDelivery { request, seq, finished }))
     }
 }
 
