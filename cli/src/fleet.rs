@@ -48,6 +48,10 @@ pub struct FleetConfig {
     pub connect: String,
     /// gRPC: the deadline of every call (seconds).
     pub rpc_timeout_secs: f64,
+    /// gRPC: the learner's health goes NOT_SERVING after this many seconds without progress
+    /// (no episode back, no design chosen; waits for an operator do not count), so that a
+    /// probe restarts it. Longer than the slowest episode and design search.
+    pub health_stall_secs: f64,
     /// `coadapt run`: restarts of one crashed process (the learner resumes from its newest
     /// snapshot, an actor or the optimiser starts again) allowed within `restart-window-secs`;
     /// one more and the supervisor gives up on it (on the learner: the run stops).
@@ -68,6 +72,7 @@ impl Default for FleetConfig {
             listen: "0.0.0.0:50051".into(),
             connect: "http://127.0.0.1:50051".into(),
             rpc_timeout_secs: 10.0,
+            health_stall_secs: 1800.0,
             max_restarts: 10,
             restart_window_secs: 600.0,
             max_actors: 64,

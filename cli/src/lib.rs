@@ -26,6 +26,7 @@ pub mod bench_transport;
 pub mod confirm;
 pub mod env_serve;
 pub mod fleet;
+pub mod health;
 pub mod launch;
 pub mod metrics;
 pub mod plot;

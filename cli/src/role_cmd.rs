@@ -3,7 +3,7 @@
 //! same run config; flags override its `[fleet]` table.
 
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::bail;
 use clap::Args;
@@ -129,8 +129,22 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps))?;
     eprintln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
+    let stop_health = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let health = match &guard {
+        crate::fleet::LearnerGuard::Grpc(server) => {
+            let stall = Duration::try_from_secs_f64(cfg.fleet.health_stall_secs).ok().filter(|d| !d.is_zero()).ok_or_else(|| {
+                anyhow::anyhow!("fleet.health-stall-secs: {} is not a positive number of seconds", cfg.fleet.health_stall_secs)
+            })?;
+            Some(crate::health::watch(server.health(), stall, stop_health.clone())?)
+        }
+        crate::fleet::LearnerGuard::None => None,
+    };
     let start = Instant::now();
     let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown, args.resume);
+    stop_health.store(true, std::sync::atomic::Ordering::Relaxed);
+    if let Some(h) = health {
+        let _ = h.join();
+    }
     // Closing the channels tells actors and optimiser the run is over.
     drop(links);
     let mut outcome = result?;

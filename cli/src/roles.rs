@@ -283,9 +283,12 @@ pub fn learner(
         let at = crate::metrics::serve(&cfg.metrics.learner_listen, crate::metrics::Source::Learner(stats.clone()))?;
         eprintln!("learner: metrics on http://{at}/metrics");
     }
-    let mut on_event = |e: &RunEvent<'_>| match e {
-        RunEvent::Stats(s) => *stats.lock().unwrap_or_else(|e| e.into_inner()) = **s,
-        e => print(e),
+    let mut on_event = |e: &RunEvent<'_>| {
+        crate::health::observe(e);
+        match e {
+            RunEvent::Stats(s) => *stats.lock().unwrap_or_else(|e| e.into_inner()) = **s,
+            e => print(e),
+        }
     };
     let outcome = coadapt::run(
         &cfg.schedule,

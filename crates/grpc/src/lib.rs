@@ -60,7 +60,7 @@ mod server;
 
 pub use client::{actor_links, optimizer_links};
 pub use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks, TransportError};
-pub use server::{ActorStatus, ClientRole, LearnerServer, Refusals, serve_learner};
+pub use server::{ActorStatus, ClientRole, HealthSwitch, LearnerServer, Refusals, serve_learner};
 
 /// The protocol version in `Hello`/`Welcome`; a learner refuses clients of another one.
 /// Version 2: every call names a registered session of the right role, push streams in their

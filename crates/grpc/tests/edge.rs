@@ -241,3 +241,28 @@ fn large_weights_and_many_chunks_cross_loopback() {
     }
     drop(producer.join().expect("producer"));
 }
+
+#[test]
+fn the_health_switch_turns_the_learner_not_serving_and_back() {
+    use tonic_health::pb::health_check_response::ServingStatus;
+    use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
+
+    let (_learner, server, endpoint) = common::learner();
+    let switch = server.health();
+    let check = |want: ServingStatus| {
+        let endpoint = endpoint.clone();
+        rt().block_on(async move {
+            let channel = tonic::transport::Channel::from_shared(endpoint).expect("endpoint").connect().await.expect("connect");
+            let mut health = HealthClient::new(channel);
+            for service in ["", "coadapt.v1.Fleet"] {
+                let status = health.check(HealthCheckRequest { service: service.into() }).await.expect("health check").into_inner().status;
+                assert_eq!(status, want as i32, "service {service:?}");
+            }
+        })
+    };
+    check(ServingStatus::Serving);
+    switch.set_serving(false);
+    check(ServingStatus::NotServing);
+    switch.set_serving(true);
+    check(ServingStatus::Serving);
+}

@@ -179,6 +179,8 @@ impl Hub {
 pub struct LearnerServer {
     local_addr: SocketAddr,
     hub: Arc<Hub>,
+    health: tonic_health::server::HealthReporter,
+    handle: tokio::runtime::Handle,
     shutdown: watch::Sender<bool>,
     force: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -235,7 +237,8 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
         design_replies: Box::new(InboxReceiver(hub.replies.clone())),
     };
 
-    let router = service::router(hub.clone(), &rt).map_err(|e| TransportError::Io(format!("building the services: {e}")))?;
+    let (router, health) = service::router(hub.clone(), &rt).map_err(|e| TransportError::Io(format!("building the services: {e}")))?;
+    let handle = rt.handle().clone();
     let (force, force_rx) = tokio::sync::oneshot::channel::<()>();
     rt.spawn(prune_sessions(hub.clone(), shutdown_rx.clone()));
     let mut stop = shutdown_rx;
@@ -261,12 +264,45 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
             rt.shutdown_timeout(Duration::from_millis(200));
         })
         .map_err(io)?;
-    Ok((links, LearnerServer { local_addr, hub, shutdown, force: Some(force), thread: Some(thread) }))
+    Ok((links, LearnerServer { local_addr, hub, health, handle, shutdown, force: Some(force), thread: Some(thread) }))
+}
+
+/// Sets grpc.health.v1 of a learner server for the whole server (`""`, what probes ask by
+/// default) and for `coadapt.v1.Fleet`: NOT_SERVING when the learner cannot make progress, so
+/// an orchestrator's probe restarts it.
+#[derive(Clone)]
+pub struct HealthSwitch {
+    reporter: tonic_health::server::HealthReporter,
+    handle: tokio::runtime::Handle,
+}
+
+impl std::fmt::Debug for HealthSwitch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HealthSwitch").finish_non_exhaustive()
+    }
+}
+
+impl HealthSwitch {
+    /// Call from outside the server's runtime (it blocks on it briefly).
+    pub fn set_serving(&self, serving: bool) {
+        use tonic_health::ServingStatus::{NotServing, Serving};
+        let status = if serving { Serving } else { NotServing };
+        let h = self.reporter.clone();
+        self.handle.block_on(async move {
+            h.set_service_status("", status).await;
+            h.set_service_status("coadapt.v1.Fleet", status).await;
+        });
+    }
 }
 
 impl LearnerServer {
     pub fn local_addr(&self) -> SocketAddr {
         self.local_addr
+    }
+
+    /// The server's health switch, for a watchdog thread.
+    pub fn health(&self) -> HealthSwitch {
+        HealthSwitch { reporter: self.health.clone(), handle: self.handle.clone() }
     }
 
     /// The run id of the learner start this server speaks for (`GrpcConfig::run_id`, or the

@@ -26,12 +26,13 @@ type Acks = ReceiverStream<Result<pb::Ack, Status>>;
 pub(super) fn router(
     hub: Arc<Hub>,
     rt: &tokio::runtime::Runtime,
-) -> Result<tonic::transport::server::Router, tonic_reflection::server::Error> {
+) -> Result<(tonic::transport::server::Router, tonic_health::server::HealthReporter), tonic_reflection::server::Error> {
     let cfg = hub.cfg.clone();
     let fleet = FleetServer::new(FleetService { hub })
         .max_decoding_message_size(cfg.max_message_bytes)
         .max_encoding_message_size(cfg.max_message_bytes);
     let (health_reporter, health) = tonic_health::server::health_reporter();
+    let reporter = health_reporter.clone();
     // Serving before the first client can ask.
     let (set, is_set) = std::sync::mpsc::sync_channel(1);
     rt.spawn(async move {
@@ -44,7 +45,7 @@ pub(super) fn router(
             .register_encoded_file_descriptor_set(coadapt_wire::FILE_DESCRIPTOR_SET)
             .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
     };
-    Ok(tonic::transport::Server::builder()
+    let router = tonic::transport::Server::builder()
         .initial_stream_window_size(STREAM_WINDOW)
         .initial_connection_window_size(CONNECTION_WINDOW)
         .http2_keepalive_interval(Some(cfg.heartbeat))
@@ -57,7 +58,8 @@ pub(super) fn router(
         .add_service(fleet)
         .add_service(health)
         .add_service(reflection().build_v1()?)
-        .add_service(reflection().build_v1alpha()?))
+        .add_service(reflection().build_v1alpha()?);
+    Ok((router, reporter))
 }
 
 #[derive(Debug)]
