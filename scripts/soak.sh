@@ -4,21 +4,25 @@
 # (VmHWM) of every process, its open file descriptors, and /dev/shm use; then Ctrl-C and a
 # summary of the first and last samples per role. Growth that does not level off is a leak.
 #
-#   usage: scripts/soak.sh [--transport shm|grpc] [--actors 8] [--minutes 30] [--every 30] [--out DIR]
+#   usage: scripts/soak.sh [--transport shm|grpc] [--actors 8] [--minutes 30] [--every 30] [--flow async|lock-step] [--out DIR]
+#
+# --flow lock-step: one episode out at a time (the other actors wait on their polls), about one
+# core; async (the default): every actor busy.
 #
 # Writes DIR/samples.csv (time_s,role,pid,rss_kb,hwm_kb,fds,shm_kb) and DIR/summary.txt; the run
 # itself goes to DIR/run. Uses the release binary (built first).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-transport=shm actors=8 minutes=30 every=30 out=""
+transport=shm actors=8 minutes=30 every=30 flow=async out=""
 while [ $# -gt 0 ]; do
   case $1 in
     --transport) transport=$2; shift 2 ;;
     --actors) actors=$2; shift 2 ;;
     --minutes) minutes=$2; shift 2 ;;
     --every) every=$2; shift 2 ;;
+    --flow) flow=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
-    -h|--help) sed -n 2,11p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,14p "$0"; exit 0 ;;
     *) echo "soak: unknown argument $1" >&2; exit 2 ;;
   esac
 done
@@ -29,7 +33,7 @@ cargo build --release -q -p coadapt
 bin=target/release/coadapt
 # The tiny protocol, made endless (many designs), async flow so every actor is busy, small
 # snapshots every 5 episodes.
-python3 scripts/config_with.py configs/half-cheetah-tiny.toml schedule.designs=100000 'flow.mode="async"' \
+python3 scripts/config_with.py configs/half-cheetah-tiny.toml schedule.designs=100000 "flow.mode=\"$flow\"" \
   learner.population-capacity=100000 learner.species-capacity=20000 \
   snapshot.every-episodes=5 landscape-grid=0 > "$out/soak.toml"
 RAYON_NUM_THREADS=1 "$bin" run --config "$out/soak.toml" --out "$out/run" --transport "$transport" --actors "$actors" \
@@ -68,7 +72,7 @@ rows = list(csv.DictReader(open(f"{out}/samples.csv")))
 by = collections.defaultdict(list)
 for r in rows:
     by[r["role"]].append(r)
-print(f"soak: {transport}, {actors} actors, {minutes} min, {episodes} episodes; first and last sample per process")
+print(f"soak: {transport}, {actors} actors, {minutes} min, {episodes} episodes, {len(rows)} samples; first and last sample per process")
 print("| process | RSS first -> last (MB) | peak RSS last (MB) | fds first -> last |")
 print("|---|---|---|---|")
 for role in sorted(by, key=lambda r: (r != "learner", r != "optimizer", len(r), r)):
