@@ -51,8 +51,15 @@ fn answer(mut s: TcpStream, source: &Source) -> std::io::Result<()> {
     s.set_write_timeout(Some(Duration::from_secs(2)))?;
     let mut buf = [0u8; 4096];
     let mut got = 0;
-    // The request line and headers, up to the blank line (at most 4 KiB).
+    // The request line and headers, up to the blank line (at most 4 KiB, within 2 s in all: a
+    // client sending a byte at a time must not hold the only responder thread).
+    let deadline = std::time::Instant::now() + Duration::from_secs(2);
     while got < buf.len() {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        s.set_read_timeout(Some(left))?;
         let n = s.read(&mut buf[got..])?;
         if n == 0 {
             break;
