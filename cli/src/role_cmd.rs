@@ -104,7 +104,7 @@ pub struct OptimizerArgs {
     /// metrics.optimizer-listen).
     #[arg(long)]
     pub metrics: Option<String>,
-    /// Keep the optimiser's state here (optimizer-state.json, written after every reply) and
+    /// Keep the optimiser's state here (optimizer-state.jsonl, a line appended after every reply) and
     /// continue from it when it exists, so a restarted optimiser answers as the one that died.
     #[arg(long)]
     pub state_dir: Option<PathBuf>,

@@ -260,7 +260,7 @@ pub fn learner(
             for why in &skipped {
                 eprintln!("learner: skipped snapshot {why}");
             }
-            let (rows, bytes) = coadapt::resume_rows(&state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
+            let at = coadapt::resume_point(&state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
             eprintln!(
                 "learner: resuming {} from {} ({}; written by run id {}), run id {run_id}",
                 dir.display(),
@@ -270,7 +270,7 @@ pub fn learner(
             );
             snaps.resume = Some(state);
             snaps.next_sequence = manifest.sequence + 1;
-            RunWriter::resume(dir, rows, bytes).with_context(|| format!("reopening run directory {}", dir.display()))?
+            RunWriter::resume(dir, at).with_context(|| format!("reopening run directory {}", dir.display()))?
         }
     } else {
         RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
@@ -365,13 +365,13 @@ pub fn optimizer(
     let store = match state_dir {
         Some(d) => {
             let store = StateFile::in_dir(d).with_context(|| format!("creating {}", d.display()))?;
-            let (state, skipped) = store.load();
+            let (state, skipped) = store.load().with_context(|| format!("reading {}", store.path().display()))?;
             for why in &skipped {
-                eprintln!("optimizer: skipped state {why}");
+                eprintln!("optimizer: state: {why}");
             }
-            if let Some(s) = state {
-                let n = s.replies.len();
-                opt.restore(s).map_err(|e| anyhow::anyhow!("{}: {e}", store.path().display()))?;
+            if let Some((s, replies)) = state {
+                let n = replies.len();
+                opt.restore(s, replies).map_err(|e| anyhow::anyhow!("{}: {e}", store.path().display()))?;
                 eprintln!("optimizer: continuing from {} ({n} replies so far)", store.path().display());
             }
             Some(store)

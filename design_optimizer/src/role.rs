@@ -441,7 +441,7 @@ pub const RANDOM_DRAWS: usize = 10_000;
 /// Serves design requests until the learner closes the queue (`Ok`) or `shutdown` is set. A
 /// request answered before (the learner sent it again after a deadline, or a resumed learner
 /// asks again) gets the same reply without a new search. With `store`, the optimiser's state
-/// is written there after every reply, before it is sent.
+/// is appended there after every reply, before it is sent.
 pub fn run(
     opt: &mut Optimizer<'_>,
     links: &mut OptimizerLinks,
@@ -473,11 +473,12 @@ pub fn run(
             let total = f64::from_bits(c.total_seconds_bits.load(Relaxed)) + secs;
             c.total_seconds_bits.store(total.to_bits(), Relaxed);
         }
-        opt.replies.insert(key, crate::resume::StoredReply::of(&reply));
+        let stored = crate::resume::StoredReply::of(&reply);
         if let Some(s) = store {
-            s.save(&opt.state().map_err(OptimizerError::Config)?)
+            s.append(key, &stored, &opt.state().map_err(OptimizerError::Config)?)
                 .map_err(|e| OptimizerError::Config(format!("writing {}: {e}", s.path().display())))?;
         }
+        opt.replies.insert(key, stored);
         links.replies.send(reply)?;
         served += 1;
     }

@@ -41,7 +41,7 @@ use serde::{Deserialize, Serialize};
 use crate::fear::{FearLearner, FearLearnerConfig};
 use crate::flow::{Completed, FlowConfig, LearnerTime};
 use crate::prototype::{Outcome, ResetMode};
-use crate::run_dir::{DesignRow, EpisodeRow, RunWriter};
+use crate::run_dir::{DesignRow, EpisodeRow, RunWriter, WrittenSoFar};
 use crate::snapshot::{SnapshotError, StateIn};
 use driver::Learner;
 
@@ -256,11 +256,11 @@ pub struct RunOutcome {
     pub time: LearnerTime,
 }
 
-/// The rows of `designs.csv` and the length of `episodes.csv` at the snapshot `inp`, to open
-/// the run directory with [`RunWriter::resume`] before [`run`] continues from it.
-pub fn resume_rows(inp: &StateIn) -> Result<(Vec<DesignRow>, u64), SnapshotError> {
+/// Where the CSV files stood at the snapshot `inp`, to open the run directory with
+/// [`RunWriter::resume`] before [`run`] continues from it.
+pub fn resume_point(inp: &StateIn) -> Result<WrittenSoFar, SnapshotError> {
     let p: resume::Progress = inp.get("progress")?;
-    Ok((p.written, p.episodes_bytes))
+    Ok(p.written)
 }
 
 /// Runs the whole co-adaptation, or continues it from `snapshots.resume`. `initial` replaces
@@ -336,6 +336,7 @@ pub fn run(
             l.fear.load_state(&mut inp)?;
             let mut p: resume::Progress = inp.get("progress")?;
             l.restore(&p);
+            l.rejected = p.rebuild(out.read_designs()?);
             p.resumes += 1;
             p
         }

@@ -2,11 +2,13 @@
 //! `episodes.csv` (one row per episode), so an interrupted run keeps everything it finished,
 //! and the checkpoints of both network pairs.
 //!
-//! `episodes.csv` is appended to and flushed row by row. `designs.csv` is held in memory and
-//! written whole (to a `.tmp` file, then renamed over it) whenever a row is added or
-//! replaced: a design waiting for its prototype (`schedule.confirm-designs`) shows as a row with
-//! `prototype = awaiting` and no episodes, which its final row replaces when the design ends,
-//! and a reader never sees half a file.
+//! `episodes.csv` is appended to and flushed row by row. `designs.csv` is appended to as well:
+//! only the rows of the newest design index are still open (a design waiting for its prototype,
+//! `schedule.confirm-designs`, shows as a row with `prototype = awaiting` and no episodes, which
+//! its final row replaces when the design ends), so an update cuts the file back to the end of
+//! the closed rows and writes the open ones again. The cost of a row stays constant however long
+//! the run (a file rewritten whole grows O(designs) per update), and memory holds the open rows
+//! only; a resumed run reads the closed rows back once ([`read_designs`]).
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
@@ -91,11 +93,25 @@ pub fn join_design(d: &[f32]) -> String {
 #[derive(Debug)]
 pub struct RunWriter {
     dir: PathBuf,
-    /// Every row of `designs.csv`, in order.
-    designs: Vec<DesignRow>,
+    /// Bytes of `designs.csv` that hold its header and the closed rows (of designs before the
+    /// newest index): never written again.
+    designs_closed: u64,
+    /// The rows of the newest design index, in order, written after the closed bytes.
+    designs_open: Vec<DesignRow>,
     episodes: BufWriter<File>,
     /// Bytes of `episodes.csv` written so far (a snapshot records it; a resume cuts back to it).
     episodes_bytes: u64,
+}
+
+/// Where the run directory's files stood at a snapshot.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WrittenSoFar {
+    /// Bytes of `designs.csv` holding its header and the closed rows.
+    pub designs_closed: u64,
+    /// The open rows, written after them.
+    pub designs_open: Vec<DesignRow>,
+    /// Bytes of `episodes.csv`.
+    pub episodes_bytes: u64,
 }
 
 /// Writes `text` to `path` through `path.tmp` (fsynced) and a rename, so a reader sees the old
@@ -111,6 +127,90 @@ pub fn write_atomically(path: &Path, text: &str) -> io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
+/// `rows` as lines of `designs.csv`. A real CSV writer: a text field with a comma, a quote or a
+/// newline is quoted, so no value can forge a row (plain fields are written as they are).
+fn design_lines(rows: &[DesignRow]) -> io::Result<Vec<u8>> {
+    let mut w = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(Vec::new());
+    for r in rows {
+        w.write_record([
+            r.index.to_string(),
+            r.kind.clone(),
+            join_design(&r.design),
+            r.episodes.to_string(),
+            opt(r.best_eval_return),
+            opt(r.last_eval_return),
+            opt(r.predicted_objective),
+            r.design_rollouts.to_string(),
+            r.method.clone(),
+            r.prototype.clone(),
+        ])
+        .map_err(io::Error::other)?;
+    }
+    w.into_inner().map_err(|e| io::Error::other(e.to_string()))
+}
+
+/// The rows in the first `bytes` bytes of the `designs.csv` at `path` (the closed rows of a
+/// snapshot), every number as written (Rust's shortest round-trip form, so exact).
+pub fn read_designs(path: &Path, bytes: u64) -> io::Result<Vec<DesignRow>> {
+    let text = std::fs::read(path)?;
+    let Some(text) = usize::try_from(bytes).ok().and_then(|b| text.get(..b)) else {
+        return Err(io::Error::other(format!(
+            "{} has {} bytes, fewer than the {bytes} the snapshot recorded: it was changed after the snapshot",
+            path.display(),
+            text.len()
+        )));
+    };
+    let bad = |line: u64, field: &str, why: &dyn std::fmt::Display| {
+        io::Error::other(format!("{} line {line}: column {field}: {why}", path.display()))
+    };
+    let mut rows = Vec::new();
+    let mut rd = csv::ReaderBuilder::new().has_headers(true).from_reader(text);
+    for rec in rd.records() {
+        let rec = rec.map_err(|e| io::Error::other(format!("{}: {e}", path.display())))?;
+        let line = rec.position().map_or(0, |p| p.line());
+        let field = |i: usize| rec.get(i).unwrap_or("");
+        let num = |i: usize, name: &str| field(i).parse::<u64>().map_err(|e| bad(line, name, &e));
+        let real = |i: usize, name: &str| -> io::Result<Option<f32>> {
+            match field(i) {
+                "" => Ok(None),
+                v => v.parse::<f32>().map(Some).map_err(|e| bad(line, name, &e)),
+            }
+        };
+        let design = if field(2).is_empty() {
+            Vec::new()
+        } else {
+            field(2).split(';').map(|v| v.parse::<f32>().map_err(|e| bad(line, "design", &e))).collect::<io::Result<_>>()?
+        };
+        rows.push(DesignRow {
+            index: num(0, "index")? as usize,
+            kind: field(1).into(),
+            design,
+            episodes: num(3, "episodes")? as usize,
+            best_eval_return: real(4, "best_eval_return")?,
+            last_eval_return: real(5, "last_eval_return")?,
+            predicted_objective: real(6, "predicted_objective")?,
+            design_rollouts: num(7, "design_rollouts")?,
+            method: field(8).into(),
+            prototype: field(9).into(),
+        });
+    }
+    Ok(rows)
+}
+
+/// Cuts the file at `path` back to `len` bytes, refusing one that is shorter.
+fn cut(path: &Path, len: u64) -> io::Result<()> {
+    let f = File::options().write(true).open(path)?;
+    let have = f.metadata()?.len();
+    if have < len {
+        return Err(io::Error::other(format!(
+            "{} has {have} bytes, fewer than the {len} the snapshot recorded: it was changed after the snapshot",
+            path.display()
+        )));
+    }
+    f.set_len(len)?;
+    f.sync_all()
+}
+
 impl RunWriter {
     /// Creates `dir` (and `dir/checkpoints`) and both CSV files with their headers.
     pub fn create(dir: &Path) -> io::Result<Self> {
@@ -119,32 +219,47 @@ impl RunWriter {
         let header = format!("{EPISODES_HEADER}\n");
         episodes.write_all(header.as_bytes())?;
         episodes.flush()?;
-        let w = Self { dir: dir.to_path_buf(), designs: Vec::new(), episodes, episodes_bytes: header.len() as u64 };
-        w.write_designs()?;
+        let designs_header = format!("{DESIGNS_HEADER}\n");
+        write_atomically(&dir.join("designs.csv"), &designs_header)?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            designs_closed: designs_header.len() as u64,
+            designs_open: Vec::new(),
+            episodes,
+            episodes_bytes: header.len() as u64,
+        })
+    }
+
+    /// Opens the run directory `dir` of a run resumed from a snapshot: both CSV files are cut
+    /// back to where they stood (`at`), so the rows after the snapshot, which the resumed run
+    /// writes again, appear once.
+    pub fn resume(dir: &Path, at: WrittenSoFar) -> io::Result<Self> {
+        std::fs::create_dir_all(dir.join("checkpoints"))?;
+        let path = dir.join("episodes.csv");
+        cut(&path, at.episodes_bytes)?;
+        let episodes = BufWriter::new(File::options().append(true).open(&path)?);
+        cut(&dir.join("designs.csv"), at.designs_closed)?;
+        let w = Self {
+            dir: dir.to_path_buf(),
+            designs_closed: at.designs_closed,
+            designs_open: at.designs_open,
+            episodes,
+            episodes_bytes: at.episodes_bytes,
+        };
+        w.write_open_designs()?;
         Ok(w)
     }
 
-    /// Opens the run directory `dir` of a run resumed from a snapshot: `episodes.csv` is cut
-    /// back to its first `episodes_bytes` bytes and `designs.csv` rewritten with `designs`, so
-    /// the rows after the snapshot, which the resumed run writes again, appear once.
-    pub fn resume(dir: &Path, designs: Vec<DesignRow>, episodes_bytes: u64) -> io::Result<Self> {
-        std::fs::create_dir_all(dir.join("checkpoints"))?;
-        let path = dir.join("episodes.csv");
-        let f = File::options().write(true).open(&path)?;
-        let len = f.metadata()?.len();
-        if len < episodes_bytes {
-            return Err(io::Error::other(format!(
-                "{} has {len} bytes, fewer than the {episodes_bytes} the snapshot recorded: it was changed after the snapshot",
-                path.display()
-            )));
-        }
-        f.set_len(episodes_bytes)?;
-        f.sync_all()?;
-        drop(f);
-        let episodes = BufWriter::new(File::options().append(true).open(&path)?);
-        let w = Self { dir: dir.to_path_buf(), designs, episodes, episodes_bytes };
-        w.write_designs()?;
-        Ok(w)
+    /// Where the files stand (for a snapshot; call [`RunWriter::sync`] first).
+    pub fn written_so_far(&self) -> WrittenSoFar {
+        WrittenSoFar { designs_closed: self.designs_closed, designs_open: self.designs_open.clone(), episodes_bytes: self.episodes_bytes }
+    }
+
+    /// Every row of `designs.csv`, read back from the file (a resume does this once).
+    pub fn read_designs(&self) -> io::Result<Vec<DesignRow>> {
+        let mut rows = read_designs(&self.dir.join("designs.csv"), self.designs_closed)?;
+        rows.extend(self.designs_open.iter().cloned());
+        Ok(rows)
     }
 
     /// Bytes of `episodes.csv` so far.
@@ -201,44 +316,28 @@ impl RunWriter {
         File::open(&root).and_then(|f| f.sync_all()).map_err(io)
     }
 
-    /// The rows of `designs.csv` so far.
-    pub fn designs(&self) -> &[DesignRow] {
-        &self.designs
-    }
-
     /// Adds `r` to `designs.csv`, or replaces the row of the same design that is still open
     /// (any but a rejected one: a rejected proposal keeps its row, and the next proposal for
-    /// the same index gets a new one), and writes the file again.
+    /// the same index gets a new one). A row of a newer index closes the rows before it.
     pub fn design(&mut self, r: &DesignRow) -> io::Result<()> {
-        match self.designs.iter().rposition(|d| d.index == r.index && d.prototype != PROTOTYPE_REJECTED) {
-            Some(i) => self.designs[i] = r.clone(),
-            None => self.designs.push(r.clone()),
+        if self.designs_open.last().is_some_and(|d| d.index != r.index) {
+            self.designs_closed += design_lines(&self.designs_open)?.len() as u64;
+            self.designs_open.clear();
         }
-        self.write_designs()
+        match self.designs_open.iter().rposition(|d| d.prototype != PROTOTYPE_REJECTED) {
+            Some(i) => self.designs_open[i] = r.clone(),
+            None => self.designs_open.push(r.clone()),
+        }
+        self.write_open_designs()
     }
 
-    fn write_designs(&self) -> io::Result<()> {
-        // A real CSV writer: a text field with a comma, a quote or a newline is quoted, so no
-        // value can forge a row (plain fields are written as they are).
-        let mut w = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(Vec::new());
-        w.write_record(DESIGNS_HEADER.split(',')).map_err(io::Error::other)?;
-        for r in &self.designs {
-            w.write_record([
-                r.index.to_string(),
-                r.kind.clone(),
-                join_design(&r.design),
-                r.episodes.to_string(),
-                opt(r.best_eval_return),
-                opt(r.last_eval_return),
-                opt(r.predicted_objective),
-                r.design_rollouts.to_string(),
-                r.method.clone(),
-                r.prototype.clone(),
-            ])
-            .map_err(io::Error::other)?;
-        }
-        let bytes = w.into_inner().map_err(|e| io::Error::other(e.to_string()))?;
-        write_atomically(&self.dir.join("designs.csv"), &String::from_utf8_lossy(&bytes))
+    /// Cuts `designs.csv` back to its closed rows and writes the open ones after them, fsynced.
+    fn write_open_designs(&self) -> io::Result<()> {
+        let f = File::options().write(true).open(self.dir.join("designs.csv"))?;
+        f.set_len(self.designs_closed)?;
+        let mut f = File::options().append(true).open(self.dir.join("designs.csv"))?;
+        f.write_all(&design_lines(&self.designs_open)?)?;
+        f.sync_all()
     }
 
     pub fn episode(&mut self, r: &EpisodeRow) -> io::Result<()> {
@@ -258,5 +357,85 @@ impl RunWriter {
         self.episodes.write_all(line.as_bytes())?;
         self.episodes_bytes += line.len() as u64;
         self.episodes.flush()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(index: usize, episodes: usize, prototype: &str) -> DesignRow {
+        DesignRow {
+            index,
+            kind: "exploit".into(),
+            design: vec![0.1 * index as f32 + 1.0 / 3.0, f32::MIN_POSITIVE, 7.0],
+            episodes,
+            best_eval_return: (episodes > 0).then_some(-1.0 / 7.0),
+            last_eval_return: None,
+            predicted_objective: Some(123.456_79),
+            design_rollouts: 3,
+            method: "pso-q, \"odd\"\nmethod".into(),
+            prototype: prototype.into(),
+        }
+    }
+
+    fn tempdir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("coadapt-run-dir-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    /// What `designs.csv` must hold: the header and `rows`.
+    fn whole(rows: &[DesignRow]) -> String {
+        format!("{DESIGNS_HEADER}\n{}", String::from_utf8(design_lines(rows).unwrap()).unwrap())
+    }
+
+    #[test]
+    fn designs_csv_is_appended_and_the_open_rows_replaced() {
+        let dir = tempdir("append");
+        let mut w = RunWriter::create(&dir).unwrap();
+        let path = dir.join("designs.csv");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), whole(&[]));
+        w.design(&row(0, 3, "")).unwrap();
+        // Design 1: awaiting, rejected; the next proposal awaiting, then confirmed and trained.
+        w.design(&row(1, 0, PROTOTYPE_AWAITING)).unwrap();
+        w.design(&row(1, 0, PROTOTYPE_REJECTED)).unwrap();
+        w.design(&row(1, 0, PROTOTYPE_AWAITING)).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            whole(&[row(0, 3, ""), row(1, 0, PROTOTYPE_REJECTED), row(1, 0, PROTOTYPE_AWAITING)])
+        );
+        w.design(&row(1, 2, PROTOTYPE_CONFIRMED)).unwrap();
+        w.design(&row(2, 2, "")).unwrap();
+        let all = [row(0, 3, ""), row(1, 0, PROTOTYPE_REJECTED), row(1, 2, PROTOTYPE_CONFIRMED), row(2, 2, "")];
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), whole(&all));
+        // Read back exactly, quoted text and every f32 bit included.
+        assert_eq!(w.read_designs().unwrap(), all);
+        let at = w.written_so_far();
+        assert_eq!(at.designs_open, [row(2, 2, "")]);
+        // Rows written after a snapshot are cut off by a resume from it.
+        w.design(&row(3, 1, "")).unwrap();
+        drop(w);
+        let w = RunWriter::resume(&dir, at).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), whole(&all));
+        assert_eq!(w.read_designs().unwrap(), all);
+    }
+
+    #[test]
+    fn a_damaged_designs_csv_is_named_not_a_panic() {
+        let dir = tempdir("damaged");
+        let mut w = RunWriter::create(&dir).unwrap();
+        w.design(&row(0, 3, "")).unwrap();
+        w.design(&row(1, 3, "")).unwrap();
+        w.design(&row(2, 3, "")).unwrap();
+        let at = w.written_so_far();
+        let path = dir.join("designs.csv");
+        let text = std::fs::read_to_string(&path).unwrap().replacen(";7", ";seven", 1);
+        std::fs::write(&path, &text).unwrap();
+        let e = read_designs(&path, at.designs_closed + 4).unwrap_err().to_string();
+        assert!(e.contains("line 2: column design"), "{e}");
+        std::fs::write(&path, &text[..20]).unwrap();
+        let e = RunWriter::resume(&dir, at).unwrap_err().to_string();
+        assert!(e.contains("fewer than the"), "{e}");
     }
 }

@@ -16,7 +16,7 @@ use super::CoadaptError;
 use super::driver::Learner;
 use crate::fear::ActingPolicy;
 use crate::flow::LearnerTime;
-use crate::run_dir::{DesignRow, RunWriter};
+use crate::run_dir::{DesignRow, RunWriter, WrittenSoFar};
 use crate::snapshot::{self, SnapshotConfig, StateIn};
 
 /// The snapshots of one learner start.
@@ -62,14 +62,15 @@ pub(super) struct Progress {
     /// The design in progress, or the next one to choose.
     pub design: usize,
     pub in_design: Option<InDesign>,
-    /// Finished designs.
+    /// Finished designs (not in the snapshot: read back from `designs.csv`, see
+    /// [`Progress::rebuild`]).
+    #[serde(skip)]
     pub rows: Vec<DesignRow>,
-    pub rejected: Vec<DesignRow>,
-    /// Every row of `designs.csv`.
-    pub written: Vec<DesignRow>,
-    pub episodes_bytes: u64,
-    #[serde(with = "crate::snapshot::bits::vec")]
+    /// The designs chosen so far, concatenated (sent with every design request; rebuilt).
+    #[serde(skip)]
     pub chosen: Vec<f32>,
+    /// Where the CSV files stood: a snapshot's size does not grow with the number of designs.
+    pub written: WrittenSoFar,
     pub global: u64,
     pub steps: u64,
     pub acting_version: u64,
@@ -91,10 +92,8 @@ impl Progress {
             design: 0,
             in_design: None,
             rows: Vec::new(),
-            rejected: Vec::new(),
-            written: Vec::new(),
-            episodes_bytes: 0,
             chosen: Vec::new(),
+            written: WrittenSoFar::default(),
             global: 0,
             steps: 0,
             acting_version: 0,
@@ -109,10 +108,30 @@ impl Progress {
     }
 }
 
+impl Progress {
+    /// Rebuilds what the snapshot leaves out from `written`, every row of `designs.csv` at the
+    /// snapshot: the finished designs, the designs chosen (and the one in progress), and the
+    /// operator's rejections (returned).
+    pub fn rebuild(&mut self, written: Vec<DesignRow>) -> Vec<DesignRow> {
+        let mut rejected = Vec::new();
+        for r in written {
+            if r.prototype == crate::run_dir::PROTOTYPE_REJECTED {
+                rejected.push(r);
+            } else if r.index < self.design {
+                self.chosen.extend_from_slice(&r.design);
+                self.rows.push(r);
+            }
+        }
+        if let Some(d) = &self.in_design {
+            self.chosen.extend_from_slice(&d.row.design);
+        }
+        rejected
+    }
+}
+
 impl Learner<'_> {
     /// Fills in the counters this side keeps.
     pub(super) fn progress(&self, p: &mut Progress) {
-        p.rejected = self.rejected.clone();
         p.acting_version = self.acting_version;
         p.acting_which = self.acting_which;
         p.acting_dirty = self.acting_dirty;
@@ -124,7 +143,6 @@ impl Learner<'_> {
     /// Restores the counters of `p` (the acting weights are published again under their
     /// version before the next episode: new actors have none).
     pub(super) fn restore(&mut self, p: &Progress) {
-        self.rejected = p.rejected.clone();
         self.acting_version = p.acting_version;
         self.acting_which = p.acting_which;
         self.acting_dirty = p.acting_dirty;
@@ -140,8 +158,7 @@ impl Learner<'_> {
         let t = Instant::now();
         self.progress(p);
         out.sync()?;
-        p.written = out.designs().to_vec();
-        p.episodes_bytes = out.episodes_bytes();
+        p.written = out.written_so_far();
         let seq = snaps.next_sequence;
         let dir = snapshot::write(&root, seq, &snaps.run_id, label, snaps.cfg.keep, |o| {
             self.fear.save_state(o)?;
