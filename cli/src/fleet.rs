@@ -62,6 +62,11 @@ pub struct FleetConfig {
     /// Shared memory: most actors at once (sizes the channels' port tables; every process of
     /// a fleet must agree, so it lives in the shared config).
     pub max_actors: usize,
+    /// gRPC: TCP connections one remote address may hold open on the learner at once (each
+    /// actor or optimiser process needs one); one more is closed as it is accepted and counted.
+    pub max_connections_per_peer: usize,
+    /// gRPC: TCP connections open on the learner at once, from all peers.
+    pub max_connections: usize,
 }
 
 impl Default for FleetConfig {
@@ -76,6 +81,8 @@ impl Default for FleetConfig {
             max_restarts: 10,
             restart_window_secs: 600.0,
             max_actors: 64,
+            max_connections_per_peer: 128,
+            max_connections: 1024,
         }
     }
 }
@@ -109,7 +116,17 @@ impl FleetConfig {
             .ok()
             .filter(|d| !d.is_zero())
             .ok_or_else(|| anyhow::anyhow!("fleet.rpc-timeout-secs: {t} is not a positive number of seconds"))?;
-        let mut cfg = coadapt_grpc::GrpcConfig { rpc_timeout, ..coadapt_grpc::GrpcConfig::default() };
+        for (name, v) in [("max-connections-per-peer", self.max_connections_per_peer), ("max-connections", self.max_connections)] {
+            if v == 0 {
+                anyhow::bail!("fleet.{name}: 0 would refuse every connection; at least 1");
+            }
+        }
+        let mut cfg = coadapt_grpc::GrpcConfig {
+            rpc_timeout,
+            max_connections_per_peer: self.max_connections_per_peer,
+            max_connections: self.max_connections,
+            ..coadapt_grpc::GrpcConfig::default()
+        };
         // Clients of another fleet are refused at registration.
         if !self.name.is_empty() {
             cfg.fleet = self.name.clone();

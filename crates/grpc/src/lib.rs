@@ -60,6 +60,7 @@ mod server;
 
 pub use client::{actor_links, optimizer_links};
 pub use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks, TransportError};
+pub use server::peers::{LimitedIncoming, LimitedStream, PeerLimits};
 pub use server::{ActorStatus, ClientRole, HealthSwitch, LearnerServer, Refusals, serve_learner};
 
 /// The protocol version in `Hello`/`Welcome`; a learner refuses clients of another one.
@@ -104,6 +105,11 @@ pub struct GrpcConfig {
     pub max_episode_steps: u64,
     /// HTTP/2 streams (calls) one connection may have open at once on the learner.
     pub max_concurrent_streams: u32,
+    /// TCP connections one remote address may hold open on the learner at once; one more is
+    /// closed as it is accepted (a client needs one; a host of many actors one per actor).
+    pub max_connections_per_peer: usize,
+    /// TCP connections open on the learner at once, from all peers.
+    pub max_connections: usize,
     /// Largest HTTP/2 header list (bytes) the learner accepts on a call.
     pub max_header_list_bytes: u32,
     /// Streams a connection may open and reset before the learner has served them (the HTTP/2
@@ -131,6 +137,8 @@ impl Default for GrpcConfig {
             inbox_max_bytes: 256 << 20,
             max_episode_steps: 1_000_000,
             max_concurrent_streams: 64,
+            max_connections_per_peer: 128,
+            max_connections: 1024,
             max_header_list_bytes: 16 << 10,
             max_pending_reset_streams: 32,
             run_id: None,

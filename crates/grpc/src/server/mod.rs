@@ -15,6 +15,7 @@
 //! reachable by the fleet.
 
 mod episodes;
+pub mod peers;
 mod queues;
 mod service;
 mod topic;
@@ -71,6 +72,11 @@ pub struct Refusals {
     /// Calls stamped with another learner start's run id (clients of a predecessor that have
     /// not registered with this start yet); they register again and drop that start's state.
     pub other_run: u64,
+    /// Connections closed as they were accepted: their host held
+    /// `GrpcConfig::max_connections_per_peer` already.
+    pub connections_per_peer: u64,
+    /// Connections closed as they were accepted: `GrpcConfig::max_connections` were open.
+    pub connections_total: u64,
 }
 
 /// What the learner knows of one client, from its registration, heartbeats and polls.
@@ -179,6 +185,7 @@ impl Hub {
 pub struct LearnerServer {
     local_addr: SocketAddr,
     hub: Arc<Hub>,
+    peers: Arc<peers::PeerLimits>,
     health: tonic_health::server::HealthReporter,
     handle: tokio::runtime::Handle,
     shutdown: watch::Sender<bool>,
@@ -242,7 +249,8 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
     let (force, force_rx) = tokio::sync::oneshot::channel::<()>();
     rt.spawn(prune_sessions(hub.clone(), shutdown_rx.clone()));
     let mut stop = shutdown_rx;
-    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
+    let peers = peers::PeerLimits::new(cfg.max_connections_per_peer, cfg.max_connections);
+    let incoming = peers::LimitedIncoming::new(listener, peers.clone(), "coadapt-grpc learner");
     let thread = std::thread::Builder::new()
         .name("coadapt-grpc-learner".into())
         .spawn(move || {
@@ -264,7 +272,7 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
             rt.shutdown_timeout(Duration::from_millis(200));
         })
         .map_err(io)?;
-    Ok((links, LearnerServer { local_addr, hub, health, handle, shutdown, force: Some(force), thread: Some(thread) }))
+    Ok((links, LearnerServer { local_addr, hub, peers, health, handle, shutdown, force: Some(force), thread: Some(thread) }))
 }
 
 /// Sets grpc.health.v1 of a learner server for the whole server (`""`, what probes ask by
@@ -338,7 +346,11 @@ impl LearnerServer {
 
     /// What was refused or dropped so far, by reason.
     pub fn refusals(&self) -> Refusals {
-        self.hub.refusals.lock().map(|r| *r).unwrap_or_default()
+        use std::sync::atomic::Ordering::Relaxed;
+        let mut r = self.hub.refusals.lock().map(|r| *r).unwrap_or_default();
+        r.connections_per_peer = self.peers.refused_per_peer.load(Relaxed);
+        r.connections_total = self.peers.refused_total.load(Relaxed);
+        r
     }
 
     /// The actors seen, by id: liveness and the weights version each acts with.
