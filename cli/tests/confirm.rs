@@ -243,3 +243,54 @@ fn ctrl_c_while_a_prototype_is_awaited_ends_the_run_with_a_summary() {
     let o = confirm(&out, &[]);
     assert!(text(&o.stderr).contains("the run stopped while it waited"), "{}", text(&o.stderr));
 }
+
+/// A run killed (SIGKILL, a power cut) while a prototype is awaited, after the operator had
+/// rejected a proposal: `--resume` goes back to the newest snapshot (the end of the design
+/// before), asks again for the same designs (the optimiser's stored replies), and the operator
+/// answers as before; the run completes with the rows of a run never stopped.
+#[test]
+fn a_run_killed_while_a_prototype_is_awaited_resumes_and_asks_again_for_the_same_designs() {
+    let out = tmpdir("killed");
+    let cfg = confirming_config("killed");
+    let run = |resume: bool| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_coadapt"));
+        if resume {
+            c.args(["run", "--resume", out.to_str().unwrap(), "--transport", "in-process"]);
+        } else {
+            c.args(["run", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"]);
+        }
+        c.stdout(Stdio::piped()).stderr(std::fs::File::create(out.with_extension(format!("{resume}.log"))).unwrap()).spawn().unwrap()
+    };
+    let mut child = run(false);
+    awaiting(&out, 0, 1, &mut child);
+    assert!(confirm(&out, &[]).status.success());
+    awaiting(&out, 1, 1, &mut child);
+    assert!(confirm(&out, &[]).status.success());
+    let first = awaiting(&out, 2, 1, &mut child);
+    assert!(confirm(&out, &["--reject"]).status.success());
+    let second = awaiting(&out, 2, 2, &mut child);
+    child.kill().unwrap();
+    child.wait().unwrap();
+
+    let mut child = run(true);
+    let again = awaiting(&out, 2, 1, &mut child);
+    assert_eq!(again.design, first.design, "a resumed run proposed another design 3");
+    assert!(confirm(&out, &["--reject"]).status.success());
+    assert_eq!(awaiting(&out, 2, 2, &mut child).design, second.design, "the next-best design changed");
+    assert!(confirm(&out, &[]).status.success());
+    awaiting(&out, 3, 1, &mut child);
+    assert!(confirm(&out, &[]).status.success());
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success());
+    let summary: serde_json::Value = serde_json::from_str(text(&o.stdout).trim()).unwrap();
+    assert_eq!((summary["designs"].as_u64(), summary["interrupted"].as_bool()), (Some(4), Some(false)), "{summary}");
+    let csv = std::fs::read_to_string(out.join("designs.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    let col = |name: &str| {
+        let i = rows[0].iter().position(|h| *h == name).unwrap();
+        rows[1..].iter().map(|r| r[i]).collect::<Vec<_>>()
+    };
+    assert_eq!(col("index"), ["0", "1", "2", "2", "3"], "{csv}");
+    assert_eq!(col("prototype"), ["confirmed", "confirmed", "rejected", "confirmed", "confirmed"]);
+    assert_eq!(col("episodes"), ["2", "2", "0", "1", "1"]);
+}

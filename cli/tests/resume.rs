@@ -260,3 +260,36 @@ fn a_resume_that_would_change_what_the_run_learns_is_refused_naming_the_key() {
     assert_eq!(rows(&out.join("designs.csv")), 5);
     assert_eq!(rows(&out.join("episodes.csv")), 2 * 3 + 3 * 2);
 }
+
+/// Ctrl-C in the middle of a design stops the run at once with a snapshot of where it stood
+/// (taken when no episode is out); `--resume` continues from it to the rows of a run never
+/// stopped.
+#[test]
+fn a_run_stopped_with_ctrl_c_mid_design_resumes_to_the_rows_of_a_run_never_stopped() {
+    let dir = tmpdir("ctrl-c");
+    let c = config();
+    let want = reference(&dir, &c);
+    let mut rng = kill_seed();
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let stderr = dir.join("stderr.txt");
+    let run = coadapt(&["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"], &stderr);
+    let at = 1 + draw(&mut rng, 12);
+    wait_until("episode rows", &stderr, || rows(&out.join("episodes.csv")) >= at);
+    assert!(Command::new("kill").args(["-INT", &run.id().to_string()]).status().unwrap().success());
+    let o = run.wait_with_output().unwrap();
+    let log = std::fs::read_to_string(&stderr).unwrap_or_default();
+    assert!(o.status.success(), "{log}");
+    let summary: serde_json::Value = serde_json::from_str(String::from_utf8_lossy(&o.stdout).lines().last().unwrap()).unwrap();
+    assert_eq!(summary["interrupted"], true, "{summary}");
+    let stopped_at = rows(&out.join("episodes.csv"));
+    assert!(stopped_at < 14, "the run went on to the end after Ctrl-C: {stopped_at} episodes");
+    let stderr2 = dir.join("stderr-resume.txt");
+    let o = coadapt(&["run", "--resume", out.to_str().unwrap(), "--transport", "in-process"], &stderr2).wait_with_output().unwrap();
+    let log2 = std::fs::read_to_string(&stderr2).unwrap_or_default();
+    assert!(o.status.success(), "{log2}");
+    assert!(log2.contains("learner: resuming"), "{log2}");
+    let got = tables(&out);
+    assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
+    assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
+}

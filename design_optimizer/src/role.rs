@@ -458,7 +458,10 @@ pub fn run(
         if let Some(r) = opt.replies.get(&key) {
             eprintln!("optimizer: design {} was answered before; sending the same reply", req.index);
             opt.counters.answered_again.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            links.replies.send(r.reply(req.index))?;
+            match links.replies.send(r.reply(req.index)) {
+                Err(_) if shutdown.load(std::sync::atomic::Ordering::Relaxed) => break,
+                r => r?,
+            }
             continue;
         }
         let Some(w) = newest_or_stop(links.weights.as_mut(), req.weights_version, shutdown)? else { break };
@@ -479,7 +482,12 @@ pub fn run(
                 .map_err(|e| OptimizerError::Config(format!("writing {}: {e}", s.path().display())))?;
         }
         opt.replies.insert(key, stored);
-        links.replies.send(reply)?;
+        match links.replies.send(reply) {
+            // Stopping (Ctrl-C) while a search ran: the learner has gone already and the
+            // reply is kept in the state for its resume.
+            Err(_) if shutdown.load(std::sync::atomic::Ordering::Relaxed) => break,
+            r => r?,
+        }
         served += 1;
     }
     Ok(served)
