@@ -293,3 +293,40 @@ fn a_run_stopped_with_ctrl_c_mid_design_resumes_to_the_rows_of_a_run_never_stopp
     assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
     assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
 }
+
+/// Over shared memory there is no run id: instead no actor or optimiser outlives the learner
+/// start it served (their channels close when it dies), so nothing of a dead start (an
+/// assignment id, an acknowledgement) can reach the next one. A learner killed with SIGKILL
+/// under a fleet started by hand: the actor and the optimiser end by themselves.
+#[test]
+fn over_shared_memory_no_process_outlives_a_killed_learner() {
+    let dir = tmpdir("shm-alone");
+    let mut c = config();
+    c.schedule.designs = 1000;
+    c.optimizer.pso.particles = 40;
+    c.optimizer.pso.iterations = 5;
+    let config = write_config(&dir, &c);
+    let fleet = format!("coadapt-test-{}-alone", std::process::id());
+    let cfg = config.to_str().unwrap();
+    let out = dir.join("run");
+    let learner =
+        coadapt(&["learner", "--config", cfg, "--transport", "shm", "--fleet", &fleet, "--out", out.to_str().unwrap()], &dir.join("l.txt"));
+    let mut others = vec![
+        coadapt(&["optimizer", "--config", cfg, "--transport", "shm", "--fleet", &fleet], &dir.join("o.txt")),
+        coadapt(&["actor", "--config", cfg, "--transport", "shm", "--fleet", &fleet, "--id", "0"], &dir.join("a.txt")),
+    ];
+    // Past the initial designs: the optimiser has answered.
+    wait_until("design 3 to start", &dir.join("l.txt"), || rows(&out.join("episodes.csv")) >= 8);
+    kill9(learner.id());
+    let t = Instant::now();
+    for p in &mut others {
+        loop {
+            if p.try_wait().unwrap().is_some() {
+                break;
+            }
+            assert!(t.elapsed() < Duration::from_secs(60), "a process of the fleet outlived its learner by a minute");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    eprintln!("the fleet ended {:.1} s after its learner", t.elapsed().as_secs_f64());
+}
