@@ -309,7 +309,7 @@ fn over_shared_memory_no_process_outlives_a_killed_learner() {
     let fleet = format!("coadapt-test-{}-alone", std::process::id());
     let cfg = config.to_str().unwrap();
     let out = dir.join("run");
-    let learner =
+    let mut learner =
         coadapt(&["learner", "--config", cfg, "--transport", "shm", "--fleet", &fleet, "--out", out.to_str().unwrap()], &dir.join("l.txt"));
     let mut others = vec![
         coadapt(&["optimizer", "--config", cfg, "--transport", "shm", "--fleet", &fleet], &dir.join("o.txt")),
@@ -318,6 +318,7 @@ fn over_shared_memory_no_process_outlives_a_killed_learner() {
     // Past the initial designs: the optimiser has answered.
     wait_until("design 3 to start", &dir.join("l.txt"), || rows(&out.join("episodes.csv")) >= 8);
     kill9(learner.id());
+    learner.wait().unwrap();
     let t = Instant::now();
     for p in &mut others {
         loop {
