@@ -4,16 +4,18 @@
 # (VmHWM) of every process, its open file descriptors, and /dev/shm use; then Ctrl-C and a
 # summary of the first and last samples per role. Growth that does not level off is a leak.
 #
-#   usage: scripts/soak.sh [--transport shm|grpc] [--actors 8] [--minutes 30] [--every 30] [--flow async|lock-step] [--out DIR]
+#   usage: scripts/soak.sh [--transport shm|grpc] [--actors 8] [--minutes 30] [--every 30] [--flow async|lock-step]
+#                          [--episodes-per-design 2] [--out DIR]
 #
 # --flow lock-step: one episode out at a time (the other actors wait on their polls), about one
-# core; async (the default): every actor busy.
+# core; async (the default): every actor busy. --episodes-per-design: many episodes per design
+# tell growth per episode from growth per design.
 #
 # Writes DIR/samples.csv (time_s,role,pid,rss_kb,hwm_kb,fds,shm_kb) and DIR/summary.txt; the run
 # itself goes to DIR/run. Uses the release binary (built first).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-transport=shm actors=8 minutes=30 every=30 flow=async out=""
+transport=shm actors=8 minutes=30 every=30 flow=async per_design=2 out=""
 while [ $# -gt 0 ]; do
   case $1 in
     --transport) transport=$2; shift 2 ;;
@@ -21,8 +23,9 @@ while [ $# -gt 0 ]; do
     --minutes) minutes=$2; shift 2 ;;
     --every) every=$2; shift 2 ;;
     --flow) flow=$2; shift 2 ;;
+    --episodes-per-design) per_design=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
-    -h|--help) sed -n 2,14p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,17p "$0"; exit 0 ;;
     *) echo "soak: unknown argument $1" >&2; exit 2 ;;
   esac
 done
@@ -34,6 +37,7 @@ bin=target/release/coadapt
 # The tiny protocol, made endless (many designs), async flow so every actor is busy, small
 # snapshots every 5 episodes.
 python3 scripts/config_with.py configs/half-cheetah-tiny.toml schedule.designs=100000 "flow.mode=\"$flow\"" \
+  schedule.episodes-per-design="$per_design" \
   learner.population-capacity=100000 learner.species-capacity=20000 \
   snapshot.every-episodes=5 landscape-grid=0 > "$out/soak.toml"
 RAYON_NUM_THREADS=1 "$bin" run --config "$out/soak.toml" --out "$out/run" --transport "$transport" --actors "$actors" \

@@ -27,6 +27,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut own = fds.clone();
     own.file.retain(|f| f.package().starts_with("coadapt."));
     std::fs::write(out.join("coadapt_descriptor.bin"), prost::Message::encode_to_vec(&own))?;
+    let mut inference = fds.clone();
+    inference.file.retain(|f| f.package() == "inference");
+    std::fs::write(out.join("inference_descriptor.bin"), prost::Message::encode_to_vec(&inference))?;
     tonic_prost_build::configure().bytes(".coadapt").compile_fds(fds)?;
     Ok(())
 }

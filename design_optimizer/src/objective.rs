@@ -241,8 +241,44 @@ impl DesignObjective {
     }
 
     fn evaluate_chunk(&self, designs: &[f32], mode: QMode, out: &mut [f32], ws: &mut ObjectiveWorkspace) {
+        let n = self.n_states;
+        self.rows(designs, mode, out.len(), ws);
+        for (o, qs) in out.iter_mut().zip(ws.q.chunks_exact(n)) {
+            *o = qs.iter().sum::<f32>() / n as f32;
+        }
+    }
+
+    /// Scores `designs` (`particles x design_dim`) on this thread: the objective into `mean`
+    /// and its standard deviation over the start states into `spread` (both `particles`), in
+    /// chunks of about `chunk_rows` rows.
+    pub fn evaluate_with_spread(
+        &self,
+        designs: &[f32],
+        mode: QMode,
+        chunk_rows: usize,
+        mean: &mut [f32],
+        spread: &mut [f32],
+        ws: &mut ObjectiveWorkspace,
+    ) {
+        let (p, n) = (mean.len(), self.n_states);
+        assert_eq!(designs.len(), p * self.design_dim, "designs are not particles x design_dim");
+        assert_eq!(spread.len(), p, "spread is not one per particle");
+        let per_chunk = (chunk_rows / n).max(1);
+        for ((m, s), d) in mean.chunks_mut(per_chunk).zip(spread.chunks_mut(per_chunk)).zip(designs.chunks(per_chunk * self.design_dim)) {
+            self.rows(d, mode, m.len(), ws);
+            for ((m, s), qs) in m.iter_mut().zip(s.iter_mut()).zip(ws.q.chunks_exact(n)) {
+                let mu = qs.iter().map(|&v| f64::from(v)).sum::<f64>() / n as f64;
+                let var = qs.iter().map(|&v| (f64::from(v) - mu).powi(2)).sum::<f64>() / n as f64;
+                *m = mu as f32;
+                *s = var.sqrt() as f32;
+            }
+        }
+    }
+
+    /// The value of every (particle, start state) row into `ws.q` (`particles x n_states`).
+    fn rows(&self, designs: &[f32], mode: QMode, particles: usize, ws: &mut ObjectiveWorkspace) {
         let (n, act) = (self.n_states, self.act_dim);
-        let rows = out.len() * n;
+        let rows = particles * n;
         let ObjectiveWorkspace { h_actor, h_critic, actions, design_part, q, act_pi, act_q } = ws;
         h_actor.resize(rows * self.actor.width, 0.0);
         self.first_layer(&self.actor, designs, h_actor, design_part, false);
@@ -279,9 +315,6 @@ impl DesignObjective {
                     }
                 }
             }
-        }
-        for (o, qs) in out.iter_mut().zip(q.chunks_exact(n)) {
-            *o = qs.iter().sum::<f32>() / n as f32;
         }
     }
 }

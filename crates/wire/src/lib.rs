@@ -43,10 +43,19 @@ pub mod google {
     }
 }
 
+/// The Open Inference Protocol (KServe v2), package `inference` (`proto/inference`).
+#[allow(clippy::all, missing_debug_implementations)]
+pub mod inference {
+    tonic::include_proto!("inference");
+}
+
 pub mod tensor;
 
 /// The encoded file descriptors of every coadapt service, for gRPC reflection.
 pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/coadapt_descriptor.bin"));
+
+/// The encoded file descriptor of the Open Inference Protocol, for gRPC reflection.
+pub const INFERENCE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/inference_descriptor.bin"));
 
 /// A message that could not be accepted.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,0 +1,28 @@
+//! Design queries for clients in any language: `coadapt.v1.DesignService`
+//! (`proto/coadapt/v1/design.proto`) and the design critic as the Open Inference Protocol model
+//! `design-critic` (`inference.GRPCInferenceService`, `proto/inference/grpc_predict_v2.proto`),
+//! so Triton's and KServe's clients work unchanged.
+//!
+//! # Layout
+//! - `model`: [`DesignModel`], the thesis's Eq. 5.6 over fixed population networks and a fixed
+//!   start-state batch (the optimiser's [`DesignObjective`](coadapt_design_optimizer::objective::DesignObjective)),
+//!   with its spread over the start states; [`ModelSource`], where a server gets the current
+//!   model and the run's history (a finished run's files, or a running learner).
+//! - `design`: the DesignService handlers; `inference`: the Open Inference Protocol handlers.
+//!   Both validate every request before use and answer a malformed one with
+//!   `INVALID_ARGUMENT` naming the field.
+//! - `server`: [`serve`], one tonic server for both, with health per service and reflection
+//!   (v1 and v1alpha), connections per peer limited as on the fleet's port, and every
+//!   computation on a bounded pool of blocking threads ([`ServeConfig::max_concurrent`]) so
+//!   that queries cannot starve the process that serves them.
+
+mod design;
+mod inference;
+mod model;
+mod server;
+
+pub use model::{DesignModel, HistoryPage, HistoryRow, ModelSource, StaticSource};
+pub use server::{DesignServer, ServeConfig, serve};
+
+/// The model name of the design critic in the Open Inference Protocol.
+pub const MODEL_NAME: &str = "design-critic";

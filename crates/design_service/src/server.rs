@@ -1,0 +1,185 @@
+//! One tonic server for the DesignService and the Open Inference Protocol.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use coadapt_design_optimizer::objective::ObjectiveWorkspace;
+use coadapt_grpc::{LimitedIncoming, PeerLimits};
+use coadapt_wire::inference::grpc_inference_service_server::GrpcInferenceServiceServer;
+use coadapt_wire::pb::design_service_server::DesignServiceServer;
+use tokio::sync::{Semaphore, watch};
+use tonic::Status;
+
+use crate::design::Design;
+use crate::inference::Inference;
+use crate::model::{DesignModel, ModelSource};
+
+/// The server's bounds.
+#[derive(Clone, Debug)]
+pub struct ServeConfig {
+    /// Most designs one Score or ModelInfer call may carry.
+    pub max_score_batch: usize,
+    /// Most rows one History call returns.
+    pub history_page: usize,
+    /// Scoring calls computed at once (each on one blocking thread); more wait their turn, so
+    /// queries take at most this many cores from the process.
+    pub max_concurrent: usize,
+    /// The server's deadline for any call.
+    pub rpc_timeout: Duration,
+    /// Largest message, either way.
+    pub max_message_bytes: usize,
+    /// TCP connections one remote address may hold open.
+    pub max_connections_per_peer: usize,
+    /// TCP connections open in all.
+    pub max_connections: usize,
+}
+
+impl Default for ServeConfig {
+    fn default() -> Self {
+        Self {
+            max_score_batch: 10_000,
+            history_page: 1000,
+            max_concurrent: 1,
+            rpc_timeout: Duration::from_secs(30),
+            max_message_bytes: 16 << 20,
+            max_connections_per_peer: 64,
+            max_connections: 256,
+        }
+    }
+}
+
+/// What the handlers share.
+#[derive(Debug)]
+pub(crate) struct Shared {
+    pub(crate) source: Arc<dyn ModelSource>,
+    pub(crate) cfg: ServeConfig,
+    permits: Semaphore,
+}
+
+impl Shared {
+    /// The current model, or UNAVAILABLE.
+    pub(crate) fn model(&self) -> Result<Arc<DesignModel>, Status> {
+        self.source.model().ok_or_else(|| Status::unavailable("no population networks yet: the run has not trained them"))
+    }
+
+    /// Eq. 5.6 and its spread for `designs` (checked), on the bounded pool.
+    pub(crate) async fn score(&self, m: Arc<DesignModel>, designs: Vec<f32>) -> Result<(Vec<f32>, Vec<f32>), Status> {
+        let _permit = self.permits.acquire().await.map_err(|_| Status::unavailable("the server is stopping"))?;
+        tokio::task::spawn_blocking(move || {
+            let n = designs.len() / m.design_dim().max(1);
+            let (mut mean, mut spread) = (vec![0.0; n], vec![0.0; n]);
+            m.score(&designs, &mut mean, &mut spread, &mut ObjectiveWorkspace::default());
+            (mean, spread)
+        })
+        .await
+        .map_err(|e| Status::internal(format!("scoring failed: {e}")))
+    }
+}
+
+/// `values` as a design of `m`, or INVALID_ARGUMENT naming `field`: its length, a value that
+/// is not finite or outside the design box (the critic knows nothing there).
+pub(crate) fn check_design(values: &[f32], m: &DesignModel, field: &str) -> Result<(), Status> {
+    let dim = m.design_dim();
+    if values.len() != dim {
+        return Err(Status::invalid_argument(format!(
+            "{field}: {} values; the design has {dim} dimensions ({})",
+            values.len(),
+            m.names.join(", ")
+        )));
+    }
+    for (j, &v) in values.iter().enumerate() {
+        let (lo, hi) = (m.bounds.low[j], m.bounds.high[j]);
+        if !(v.is_finite() && v >= lo && v <= hi) {
+            return Err(Status::invalid_argument(format!("{field}[{j}] ({}): {v} is outside the design box [{lo}, {hi}]", m.names[j])));
+        }
+    }
+    Ok(())
+}
+
+/// A running server; dropping it stops it.
+#[derive(Debug)]
+pub struct DesignServer {
+    local_addr: SocketAddr,
+    shutdown: watch::Sender<bool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl DesignServer {
+    pub fn local_addr(&self) -> SocketAddr {
+        self.local_addr
+    }
+}
+
+impl Drop for DesignServer {
+    fn drop(&mut self) {
+        let _ = self.shutdown.send(true);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Binds `addr` (port 0 picks one) and serves the DesignService and the Open Inference
+/// Protocol from `source`, with grpc.health.v1 (per service and overall) and reflection.
+pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -> std::io::Result<DesignServer> {
+    let listener = std::net::TcpListener::bind(addr)?;
+    listener.set_nonblocking(true)?;
+    let local_addr = listener.local_addr()?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .max_blocking_threads(cfg.max_concurrent.max(1))
+        .thread_name("coadapt-design-service")
+        .enable_all()
+        .build()?;
+    let listener = {
+        let _in = rt.enter();
+        tokio::net::TcpListener::from_std(listener)?
+    };
+    let limits = PeerLimits::new(cfg.max_connections_per_peer, cfg.max_connections);
+    let incoming = LimitedIncoming::new(listener, limits, "coadapt design service");
+    let shared = Arc::new(Shared { source, permits: Semaphore::new(cfg.max_concurrent.max(1)), cfg: cfg.clone() });
+    let max = cfg.max_message_bytes;
+    let design = DesignServiceServer::new(Design { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max);
+    let inference =
+        GrpcInferenceServiceServer::new(Inference { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max);
+    let reflection = || {
+        tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(coadapt_wire::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(coadapt_wire::INFERENCE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    };
+    let (v1, v1alpha) =
+        (reflection().build_v1().map_err(std::io::Error::other)?, reflection().build_v1alpha().map_err(std::io::Error::other)?);
+    let (reporter, health) = tonic_health::server::health_reporter();
+    let ready = shared.source.model().is_some();
+    rt.block_on(async {
+        for name in ["", "coadapt.v1.DesignService", "inference.GRPCInferenceService"] {
+            let status = if ready { tonic_health::ServingStatus::Serving } else { tonic_health::ServingStatus::NotServing };
+            reporter.set_service_status(name, status).await;
+        }
+    });
+    let router = tonic::transport::Server::builder()
+        .timeout(cfg.rpc_timeout)
+        .max_concurrent_streams(64)
+        .http2_max_pending_accept_reset_streams(Some(32))
+        .add_service(design)
+        .add_service(inference)
+        .add_service(health)
+        .add_service(v1)
+        .add_service(v1alpha);
+    let (shutdown, mut stop) = watch::channel(false);
+    let thread = std::thread::Builder::new().name("coadapt-design-service".into()).spawn(move || {
+        let _reporter = reporter;
+        rt.block_on(async move {
+            let graceful = async move {
+                let _ = stop.wait_for(|s| *s).await;
+            };
+            if let Err(e) = router.serve_with_incoming_shutdown(incoming, graceful).await {
+                eprintln!("coadapt design service: stopped: {e}");
+            }
+        });
+        rt.shutdown_timeout(Duration::from_millis(200));
+    })?;
+    Ok(DesignServer { local_addr, shutdown, thread: Some(thread) })
+}

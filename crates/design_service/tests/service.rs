@@ -1,0 +1,289 @@
+//! The DesignService and the Open Inference Protocol over a real server on port 0: values
+//! against a plain forward pass of the networks, ModelInfer equal to Score, every malformed
+//! request answered INVALID_ARGUMENT naming its field, History paged on whole designs, health
+//! and reflection.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::sync::Arc;
+
+use coadapt_core::BoxSpace;
+use coadapt_design_optimizer::objective::QMode;
+use coadapt_design_service::{DesignModel, HistoryRow, ServeConfig, StaticSource, serve};
+use coadapt_nn::Mlp;
+use coadapt_wire::inference as oip;
+use coadapt_wire::inference::grpc_inference_service_client::GrpcInferenceServiceClient;
+use coadapt_wire::pb;
+use coadapt_wire::pb::design_service_client::DesignServiceClient;
+use rand::Rng;
+use tonic::Code;
+use tonic::transport::Channel;
+
+const STATE: usize = 5;
+const DIM: usize = 3;
+const ACT: usize = 2;
+const STATES: usize = 7;
+
+struct Nets {
+    policy: Mlp,
+    phi: Vec<f32>,
+    critic: Mlp,
+    theta: Vec<f32>,
+    starts: Vec<f32>,
+}
+
+fn nets() -> Nets {
+    let mut rng = coadapt_core::rng(7, 0);
+    let obs = STATE + DIM;
+    let policy = Mlp::new(&[obs, 16, 16, 2 * ACT]).unwrap();
+    let critic = Mlp::new(&[obs + ACT, 16, 16, 1]).unwrap();
+    let (mut phi, mut theta) = (policy.zeros(), critic.zeros());
+    // A last layer as large as the hidden ones: values far from zero, so a mistake shows.
+    policy.init(&mut phi, 0.5, &mut rng);
+    critic.init(&mut theta, 0.5, &mut rng);
+    let starts = (0..STATES * obs).map(|_| rng.random_range(-1.0..1.0)).collect();
+    Nets { policy, phi, critic, theta, starts }
+}
+
+/// Eq. 5.6 by plain forward passes: for each start state, the design put in its design
+/// columns, the policy's mean squashed by tanh, Q1 of that; mean and standard deviation over
+/// the states.
+fn reference(n: &Nets, design: &[f32]) -> (f32, f32) {
+    let obs = STATE + DIM;
+    let mut qs = Vec::new();
+    for s in n.starts.chunks_exact(obs) {
+        let mut x = s.to_vec();
+        x[STATE..].copy_from_slice(design);
+        let mut act = n.policy.activations(1);
+        let out = n.policy.forward(&n.phi, &x, 1, &mut act);
+        let a: Vec<f32> = out[..ACT].iter().map(|m| m.tanh()).collect();
+        let xa: Vec<f32> = x.iter().chain(&a).copied().collect();
+        let mut act = n.critic.activations(1);
+        qs.push(f64::from(n.critic.forward(&n.theta, &xa, 1, &mut act)[0]));
+    }
+    let mu = qs.iter().sum::<f64>() / qs.len() as f64;
+    let sd = (qs.iter().map(|q| (q - mu).powi(2)).sum::<f64>() / qs.len() as f64).sqrt();
+    (mu as f32, sd as f32)
+}
+
+fn row(index: usize, prototype: &str) -> HistoryRow {
+    HistoryRow {
+        index,
+        kind: if index == 0 { "initial" } else { "exploit" }.into(),
+        design: vec![1.0, 1.0 + index as f32 / 10.0, 1.0],
+        episodes: if prototype == "rejected" { 0 } else { 3 },
+        best_eval_return: (prototype != "rejected").then_some(10.0 + index as f32),
+        last_eval_return: None,
+        predicted_objective: (index > 0).then_some(5.5),
+        design_rollouts: 0,
+        method: if index == 0 { "fixed" } else { "pso-q" }.into(),
+        prototype: prototype.into(),
+    }
+}
+
+fn server(cfg: ServeConfig) -> (coadapt_design_service::DesignServer, Nets) {
+    let n = nets();
+    let model = DesignModel::new(
+        "toy".into(),
+        vec!["thigh".into(), "shin".into(), "foot".into()],
+        BoxSpace::new(vec![0.5; DIM], vec![2.0; DIM]).unwrap(),
+        42,
+        "run-1".into(),
+        (&n.policy, &n.phi, &n.critic, &[&n.theta]),
+        &n.starts,
+        STATE,
+        QMode::First,
+    )
+    .unwrap();
+    let history = vec![row(0, ""), row(1, "rejected"), row(1, "confirmed"), row(2, "")];
+    let s = serve("127.0.0.1:0".parse().unwrap(), cfg, Arc::new(StaticSource { model: Arc::new(model), history })).unwrap();
+    (s, n)
+}
+
+fn rt() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap()
+}
+
+async fn channel(s: &coadapt_design_service::DesignServer) -> Channel {
+    Channel::from_shared(format!("http://{}", s.local_addr())).unwrap().connect().await.unwrap()
+}
+
+fn designs(v: &[[f32; DIM]]) -> pb::ScoreRequest {
+    pb::ScoreRequest { designs: v.iter().map(|d| pb::Design { values: d.to_vec() }).collect() }
+}
+
+#[track_caller]
+fn invalid<T: std::fmt::Debug>(r: Result<tonic::Response<T>, tonic::Status>, field: &str) {
+    let s = r.expect_err("accepted");
+    assert_eq!(s.code(), Code::InvalidArgument, "{s:?}");
+    assert!(s.message().starts_with(field), "{:?} does not name {field:?}", s.message());
+}
+
+#[test]
+fn score_and_model_infer_give_eq_5_6_of_the_networks() {
+    let (s, n) = server(ServeConfig::default());
+    rt().block_on(async {
+        let ch = channel(&s).await;
+        let mut d = DesignServiceClient::new(ch.clone());
+        let info = d.info(pb::InfoRequest {}).await.unwrap().into_inner();
+        assert_eq!((info.robot.as_str(), info.weights_version, info.start_states, info.max_score_batch), ("toy", 42, 7, 10_000));
+        assert_eq!(
+            info.dimensions.iter().map(|x| (x.name.as_str(), x.low, x.high)).collect::<Vec<_>>(),
+            [("thigh", 0.5, 2.0), ("shin", 0.5, 2.0), ("foot", 0.5, 2.0)]
+        );
+        let batch = [[1.0, 1.0, 1.0], [0.5, 2.0, 1.3], [2.0, 0.5, 0.7], [1.7, 1.1, 2.0]];
+        let got = d.score(designs(&batch)).await.unwrap().into_inner();
+        assert_eq!((got.weights_version, got.start_states, got.scores.len()), (42, 7, 4));
+        let mut distinct = Vec::new();
+        for (x, sc) in batch.iter().zip(&got.scores) {
+            let (mu, sd) = reference(&n, x);
+            assert!((sc.objective - mu).abs() <= 1e-4 * (1.0 + mu.abs()), "objective {} vs {mu} for {x:?}", sc.objective);
+            assert!((sc.spread - sd).abs() <= 1e-4 * (1.0 + sd.abs()), "spread {} vs {sd} for {x:?}", sc.spread);
+            distinct.push(sc.objective);
+        }
+        distinct.dedup();
+        assert_eq!(distinct.len(), 4, "the designs score alike: {distinct:?}");
+
+        // The same values through the Open Inference Protocol, typed and raw.
+        let mut i = GrpcInferenceServiceClient::new(ch);
+        let flat: Vec<f32> = batch.iter().flatten().copied().collect();
+        let input = |contents| oip::model_infer_request::InferInputTensor {
+            name: "design".into(),
+            datatype: "FP32".into(),
+            shape: vec![4, DIM as i64],
+            parameters: Default::default(),
+            contents,
+        };
+        let typed = oip::ModelInferRequest {
+            model_name: "design-critic".into(),
+            id: "q1".into(),
+            inputs: vec![input(Some(oip::InferTensorContents { fp32_contents: flat.clone(), ..Default::default() }))],
+            ..Default::default()
+        };
+        let r = i.model_infer(typed.clone()).await.unwrap().into_inner();
+        assert_eq!((r.id.as_str(), r.model_version.as_str(), r.outputs[0].shape.as_slice()), ("q1", "42", &[4, 1][..]));
+        let values = &r.outputs[0].contents.as_ref().unwrap().fp32_contents;
+        assert_eq!(values, &got.scores.iter().map(|s| s.objective).collect::<Vec<_>>());
+        let raw = oip::ModelInferRequest {
+            inputs: vec![input(None)],
+            raw_input_contents: vec![flat.iter().flat_map(|v| v.to_le_bytes()).collect()],
+            ..typed.clone()
+        };
+        let r = i.model_infer(raw).await.unwrap().into_inner();
+        let back: Vec<f32> = r.raw_output_contents[0].chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+        assert_eq!(&back, values);
+
+        let meta = i
+            .model_metadata(oip::ModelMetadataRequest { name: "design-critic".into(), version: String::new() })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!((meta.inputs[0].name.as_str(), meta.inputs[0].shape.as_slice()), ("design", &[-1, 3][..]));
+        assert_eq!((meta.outputs[0].name.as_str(), meta.outputs[0].shape.as_slice()), ("value", &[-1, 1][..]));
+        assert!(i.server_live(oip::ServerLiveRequest {}).await.unwrap().into_inner().live);
+        assert!(i.server_ready(oip::ServerReadyRequest {}).await.unwrap().into_inner().ready);
+        assert!(
+            i.model_ready(oip::ModelReadyRequest { name: "design-critic".into(), version: "42".into() }).await.unwrap().into_inner().ready
+        );
+        let e = i.model_ready(oip::ModelReadyRequest { name: "nope".into(), version: String::new() }).await.unwrap_err();
+        assert_eq!(e.code(), Code::NotFound);
+    });
+}
+
+#[test]
+fn malformed_requests_are_refused_naming_the_field() {
+    let (s, _) = server(ServeConfig { max_score_batch: 5, ..ServeConfig::default() });
+    rt().block_on(async {
+        let ch = channel(&s).await;
+        let mut d = DesignServiceClient::new(ch.clone());
+        invalid(d.score(designs(&[])).await, "designs: empty");
+        invalid(d.score(designs(&[[1.0; DIM]; 6])).await, "designs: 6 designs, at most 5");
+        let short = pb::ScoreRequest { designs: vec![pb::Design { values: vec![1.0; DIM] }, pb::Design { values: vec![1.0; 2] }] };
+        invalid(d.score(short).await, "designs[1].values: 2 values");
+        invalid(d.score(designs(&[[1.0, 1.0, 2.5]])).await, "designs[0].values[2] (foot): 2.5 is outside the design box");
+        invalid(d.score(designs(&[[f32::NAN, 1.0, 1.0]])).await, "designs[0].values[0] (thigh)");
+
+        let mut i = GrpcInferenceServiceClient::new(ch);
+        let req = |shape: Vec<i64>, n: usize| oip::ModelInferRequest {
+            model_name: "design-critic".into(),
+            inputs: vec![oip::model_infer_request::InferInputTensor {
+                name: "design".into(),
+                datatype: "FP32".into(),
+                shape,
+                parameters: Default::default(),
+                contents: Some(oip::InferTensorContents { fp32_contents: vec![1.0; n], ..Default::default() }),
+            }],
+            ..Default::default()
+        };
+        invalid(i.model_infer(req(vec![2, 4], 8)).await, "inputs[0].shape");
+        invalid(i.model_infer(req(vec![6, 3], 18)).await, "inputs[0].shape: [6, 3]: N must be 1 to 5");
+        invalid(i.model_infer(req(vec![2, 3], 5)).await, "inputs[0].contents.fp32_contents: 5 values");
+        let mut r = req(vec![1, 3], 0);
+        r.inputs[0].contents = None;
+        r.raw_input_contents = vec![vec![0; 11]];
+        invalid(i.model_infer(r).await, "raw_input_contents[0]: 11 bytes");
+        let mut r = req(vec![1, 3], 3);
+        r.inputs[0].datatype = "FP64".into();
+        invalid(i.model_infer(r).await, "inputs[0].datatype");
+        let mut r = req(vec![1, 3], 3);
+        r.outputs = vec![oip::model_infer_request::InferRequestedOutputTensor { name: "q".into(), parameters: Default::default() }];
+        invalid(i.model_infer(r).await, "outputs[0].name");
+        let mut r = req(vec![1, 3], 3);
+        r.model_name = "other".into();
+        assert_eq!(i.model_infer(r).await.unwrap_err().code(), Code::NotFound);
+        let mut r = req(vec![1, 3], 3);
+        r.model_version = "41".into();
+        assert_eq!(i.model_infer(r).await.unwrap_err().code(), Code::NotFound);
+    });
+}
+
+#[test]
+fn history_pages_end_on_whole_designs() {
+    let (s, _) = server(ServeConfig::default());
+    rt().block_on(async {
+        let mut d = DesignServiceClient::new(channel(&s).await);
+        let p = d.history(pb::HistoryRequest { from_index: 0, max_rows: 2 }).await.unwrap().into_inner();
+        // Rows 0 and 1 (rejected) fit the page; design 1's final row comes with them.
+        assert_eq!(
+            p.designs.iter().map(|r| (r.index, r.prototype.as_str())).collect::<Vec<_>>(),
+            [(0, ""), (1, "rejected"), (1, "confirmed")]
+        );
+        assert_eq!((p.next_index, p.more), (2, true));
+        assert_eq!(p.designs[0].design.as_ref().unwrap().values, [1.0, 1.0, 1.0]);
+        assert_eq!(
+            (p.designs[2].best_eval_return, p.designs[2].predicted_objective, p.designs[0].predicted_objective),
+            (Some(11.0), Some(5.5), None)
+        );
+        let p = d.history(pb::HistoryRequest { from_index: p.next_index, max_rows: 0 }).await.unwrap().into_inner();
+        assert_eq!((p.designs.len(), p.designs[0].index, p.more), (1, 2, false));
+    });
+}
+
+#[test]
+fn health_and_reflection_name_both_services() {
+    use tonic_health::pb::health_check_response::ServingStatus;
+    use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
+    use tonic_reflection::pb::v1::ServerReflectionRequest;
+    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
+    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
+    let (s, _) = server(ServeConfig::default());
+    rt().block_on(async {
+        let ch = channel(&s).await;
+        let mut health = HealthClient::new(ch.clone());
+        for service in ["", "coadapt.v1.DesignService", "inference.GRPCInferenceService"] {
+            let st = health.check(HealthCheckRequest { service: service.into() }).await.unwrap().into_inner().status;
+            assert_eq!(st, ServingStatus::Serving as i32, "{service:?}");
+        }
+        let mut reflection = ServerReflectionClient::new(ch);
+        let req = ServerReflectionRequest { host: String::new(), message_request: Some(MessageRequest::ListServices(String::new())) };
+        let mut answers = reflection.server_reflection_info(tokio_stream::iter(vec![req])).await.unwrap().into_inner();
+        let Some(MessageResponse::ListServicesResponse(list)) = answers.message().await.unwrap().unwrap().message_response else {
+            panic!("not a service list")
+        };
+        let names: Vec<_> = list.service.into_iter().map(|s| s.name).collect();
+        for want in ["coadapt.v1.DesignService", "inference.GRPCInferenceService", "grpc.health.v1.Health"] {
+            assert!(names.iter().any(|n| n == want), "{want} missing from {names:?}");
+        }
+    });
+}
