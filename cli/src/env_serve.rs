@@ -54,7 +54,7 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
 /// How long open streams may take to finish after Ctrl-C or SIGTERM.
 const GRACE: std::time::Duration = std::time::Duration::from_secs(2);
 
-async fn wait_for_signal() {
+pub(crate) async fn wait_for_signal() {
     let ctrl_c = tokio::signal::ctrl_c();
     #[cfg(unix)]
     {

@@ -17,6 +17,7 @@
 //!   environments over dm_env_rpc).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
+//! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol).
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
@@ -36,6 +37,7 @@ pub mod resume;
 pub mod role_cmd;
 pub mod roles;
 pub mod run;
+pub mod serve;
 pub mod train;
 
 use clap::{Parser, Subcommand};
@@ -59,6 +61,7 @@ pub enum Command {
     Train(train::TrainArgs),
     Render(render::RenderArgs),
     EnvServe(env_serve::EnvServeArgs),
+    Serve(serve::ServeArgs),
     /// Run benchmarks; each prints one JSON line per figure.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -76,6 +79,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Train(args) => train::run(args),
         Command::Render(args) => render::run(args),
         Command::EnvServe(args) => env_serve::run(args),
+        Command::Serve(args) => serve::run(args),
         Command::Bench(cmd) => bench::run(cmd),
     }
 }

@@ -263,6 +263,12 @@ pub fn resume_point(inp: &StateIn) -> Result<WrittenSoFar, SnapshotError> {
     Ok(p.written)
 }
 
+/// The population networks' version at the snapshot `inp` (what the design service reports).
+pub fn population_version(inp: &StateIn) -> Result<u64, SnapshotError> {
+    let p: resume::Progress = inp.get("progress")?;
+    Ok(p.population_version)
+}
+
 /// Runs the whole co-adaptation, or continues it from `snapshots.resume`. `initial` replaces
 /// an empty `initial-designs`.
 pub fn run(

@@ -1,0 +1,131 @@
+//! `coadapt serve RUN_DIR`: a run's design critic for clients in any language, from its newest
+//! snapshot and its designs.csv: `coadapt.v1.DesignService` and the Open Inference Protocol
+//! model `design-critic` (`proto/README.md`).
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context;
+use clap::Args;
+use coadapt_design_optimizer::objective::QMode;
+use coadapt_design_optimizer::role::QModeConfig;
+use coadapt_design_service::{DesignModel, HistoryRow, ServeConfig, StaticSource};
+use coadapt_learner::fear::{ActingPolicy, FearLearner};
+use coadapt_learner::{coadapt, networks, run_dir, snapshot};
+
+/// Serve a run's design critic: DesignService (Info, Score, History) and the Open Inference
+/// Protocol model `design-critic` (input `design` FP32 [N, D], output `value` FP32 [N, 1]).
+///
+/// The values are the thesis's Eq. 5.6 with the population networks of the run's newest
+/// snapshot, averaged over a batch of `schedule.start-state-batch` start states drawn from the
+/// run's start-state buffer (the same draw every time the run is served), with the run's
+/// `optimizer.q` (Q1, min of twin, or pessimistic). Serves until Ctrl-C or SIGTERM; the address
+/// is printed on stdout as `grpc://ADDR`.
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// The run directory (of `coadapt run` or `coadapt learner`).
+    pub run_dir: PathBuf,
+    /// Address to listen on (port 0 picks a free port).
+    #[arg(long, default_value = "127.0.0.1:50061")]
+    pub listen: String,
+    /// Serve plaintext on an address other than loopback. TLS is not built in yet, so without
+    /// this flag only loopback addresses are served: anyone who reaches the port reads the
+    /// run's designs and critic.
+    #[arg(long)]
+    pub insecure: bool,
+    /// Most designs one Score or ModelInfer call may carry.
+    #[arg(long, default_value_t = 10_000)]
+    pub max_score_batch: usize,
+}
+
+/// The model and history of the run in `dir`.
+pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
+    let cfg = crate::resume::stored_config(dir)?;
+    let env = crate::roles::make_env_with(&cfg.env, &cfg.remote)?;
+    let spec = env.spec();
+    let root = crate::resume::snapshot_root(dir);
+    let (from, manifest, mut state, skipped) =
+        snapshot::load_latest(&root).with_context(|| format!("{} has no readable snapshot to serve", dir.display()))?;
+    for why in &skipped {
+        eprintln!("serve: skipped snapshot {why}");
+    }
+    let mut fear = FearLearner::new(spec.obs_dim(), spec.act_dim(), cfg.learner.clone(), cfg.seed)?;
+    fear.load_state(&mut state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
+    let version = coadapt::population_version(&state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
+    let n = cfg.schedule.start_state_batch.max(1);
+    let starts = fear
+        .sample_start_states(n)
+        .ok_or_else(|| anyhow::anyhow!("snapshot {}: no start states yet (no episode finished)", from.display()))?;
+    let hidden = &cfg.learner.sac.hidden;
+    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let pop = fear.agent(ActingPolicy::Population);
+    let (q1, q2) = (pop.critic_params(0).0, pop.critic_params(1).0);
+    let (mode, thetas): (QMode, Vec<&[f32]>) = match cfg.optimizer.q {
+        QModeConfig::Q1 => (QMode::First, vec![q1]),
+        QModeConfig::MinOfTwin => (QMode::MinOfTwin, vec![q1, q2]),
+        QModeConfig::Pessimistic => (QMode::MeanMinusKStd(cfg.optimizer.pessimism), vec![q1, q2]),
+    };
+    let model = DesignModel::new(
+        spec.name.clone(),
+        spec.design_names.clone(),
+        spec.design.clone(),
+        version,
+        manifest.run_id.clone(),
+        (&policy, pop.policy_params(), &critic, &thetas),
+        &starts,
+        spec.state_dim,
+        mode,
+    )?;
+    let path = dir.join("designs.csv");
+    let len = std::fs::metadata(&path).with_context(|| format!("reading {}", path.display()))?.len();
+    let history = run_dir::read_designs(&path, len)?
+        .into_iter()
+        .map(|r| HistoryRow {
+            index: r.index,
+            kind: r.kind,
+            design: r.design,
+            episodes: r.episodes,
+            best_eval_return: r.best_eval_return,
+            last_eval_return: r.last_eval_return,
+            predicted_objective: r.predicted_objective,
+            design_rollouts: r.design_rollouts,
+            method: r.method,
+            prototype: r.prototype,
+        })
+        .collect();
+    eprintln!(
+        "serve: {} from {} ({}), population weights version {version}, {n} start states",
+        dir.display(),
+        from.display(),
+        manifest.label
+    );
+    Ok(StaticSource { model: Arc::new(model), history })
+}
+
+/// Serves until Ctrl-C or SIGTERM.
+pub fn run(args: ServeArgs) -> anyhow::Result<()> {
+    let addr: SocketAddr =
+        args.listen.parse().with_context(|| format!("--listen: {:?} is not an address like 127.0.0.1:50061", args.listen))?;
+    if !addr.ip().is_loopback() && !args.insecure {
+        anyhow::bail!(
+            "--listen {addr}: not a loopback address, and coadapt serve has no TLS yet: anyone who reaches the port would read the \
+             run's designs and critic. Listen on 127.0.0.1 (and tunnel), or pass --insecure on a network you trust"
+        );
+    }
+    if args.max_score_batch == 0 {
+        anyhow::bail!("--max-score-batch: 0 would refuse every request; at least 1");
+    }
+    let source = load(&args.run_dir)?;
+    let cfg = ServeConfig { max_score_batch: args.max_score_batch, ..ServeConfig::default() };
+    let server = coadapt_design_service::serve(addr, cfg, Arc::new(source)).with_context(|| format!("listening on {addr}"))?;
+    let at = server.local_addr();
+    eprintln!("serve: coadapt.v1.DesignService and design-critic (Open Inference Protocol) on {at} (Ctrl-C stops)");
+    crate::progress::print_stdout_line(&format!("grpc://{at}"));
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
+    rt.block_on(crate::env_serve::wait_for_signal());
+    eprintln!("serve: stopping");
+    drop(server);
+    Ok(())
+}

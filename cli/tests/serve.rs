@@ -1,0 +1,99 @@
+//! `coadapt serve RUN_DIR` through the binary, queried by the Python client example
+//! (clients/python/example.py: stubs generated from proto/ by grpcio-tools, and Triton's
+//! Open Inference Protocol client from PyPI) in a virtualenv that clients/python/setup_venv.sh
+//! creates once under the target directory.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::OnceLock;
+
+fn workspace_file(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+fn venv() -> &'static Path {
+    static V: OnceLock<PathBuf> = OnceLock::new();
+    V.get_or_init(|| {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("py-client-venv");
+        let status = Command::new("bash").arg(workspace_file("clients/python/setup_venv.sh")).arg(&dir).status().unwrap();
+        assert!(status.success(), "clients/python/setup_venv.sh failed");
+        dir
+    })
+}
+
+fn coadapt() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_coadapt"))
+}
+
+/// A finished tiny run.
+fn finished_run(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let o = coadapt()
+        .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap(), "--transport", "in-process"])
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    dir
+}
+
+#[test]
+fn python_clients_query_a_finished_run_through_both_protocols() {
+    let run = finished_run("python");
+    let mut server = coadapt().arg("serve").arg(&run).args(["--listen", "127.0.0.1:0"]).stdout(Stdio::piped()).spawn().unwrap();
+    let mut line = String::new();
+    BufReader::new(server.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let addr = line.trim().strip_prefix("grpc://").unwrap_or_else(|| panic!("no address line: {line:?}")).to_string();
+    let o = Command::new(venv().join("bin/python"))
+        .arg(workspace_file("clients/python/example.py"))
+        .args(["--server", &addr, "--design", "1,1,1,1,1,1", "--design", "2,0.8,1.5,1.2,2,0.9"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "example.py: {}", String::from_utf8_lossy(&o.stderr));
+    let got: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(got["robot"], "half-cheetah");
+    assert_eq!(got["dimensions"].as_array().unwrap().len(), 6);
+    assert_eq!(got["start_states"], 8, "the tiny config's start-state batch");
+    assert!(got["weights_version"].as_u64().unwrap() >= 1);
+    // The DesignService and the Open Inference Protocol give the same numbers.
+    let objective: Vec<f64> = serde_json::from_value(got["objective"].clone()).unwrap();
+    assert_eq!(objective.len(), 2);
+    assert!(objective.iter().all(|v| v.is_finite()) && objective[0] != objective[1], "{objective:?}");
+    assert_eq!(got["oip_value"], got["objective"]);
+    assert_eq!(got["oip_shape"], serde_json::json!([2, 1]));
+    assert_eq!(got["oip_model_versions"], serde_json::json!([got["weights_version"].to_string()]));
+    // The history, paged two rows at a time, is designs.csv.
+    let csv = std::fs::read_to_string(run.join("designs.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    let history = got["history"].as_array().unwrap();
+    assert_eq!(history.len(), rows.len());
+    for (h, r) in history.iter().zip(&rows) {
+        let f: Vec<&str> = r.split(',').collect();
+        assert_eq!(h["index"].to_string(), f[0]);
+        assert_eq!(h["kind"], f[1]);
+        assert_eq!(h["method"], f[8]);
+    }
+    assert!(Command::new("kill").args(["-TERM", &server.id().to_string()]).status().unwrap().success());
+    assert!(server.wait().unwrap().success(), "coadapt serve did not stop cleanly on SIGTERM");
+}
+
+#[test]
+fn serve_refuses_what_it_cannot_serve_safely() {
+    let run = finished_run("refusals");
+    let o = coadapt().arg("serve").arg(&run).args(["--listen", "0.0.0.0:0"]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("not a loopback address") && e.contains("--insecure"), "{e}");
+    let o = coadapt().arg("serve").arg(&run).args(["--listen", "somewhere"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--listen: \"somewhere\" is not an address"));
+    std::fs::remove_dir_all(run.join("snapshots")).unwrap();
+    let o = coadapt().arg("serve").arg(&run).args(["--listen", "127.0.0.1:0"]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("has no readable snapshot"), "{e}");
+    let o = coadapt().arg("serve").arg(run.join("nothing-here")).args(["--listen", "127.0.0.1:0"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&o.stderr).contains("a run directory?"), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -1,0 +1,92 @@
+"""Asks a coadapt design service (`coadapt serve RUN_DIR`, or a learner serving it) what its
+critic thinks of designs, from Python: the DesignService through stubs generated from
+coadapt's proto/ files, and the same critic through Triton's Open Inference Protocol client.
+
+    python clients/python/example.py --server 127.0.0.1:50061 [--design 1,1,1,1,1,1 ...]
+
+Prints one JSON object on stdout: the service's info, the scores of the designs (the
+DesignService's and the Open Inference Protocol's), and the run's design history.
+"""
+
+import argparse
+import json
+import pathlib
+import sys
+import tempfile
+
+import grpc
+import numpy as np
+import tritonclient.grpc as triton
+from grpc_tools import protoc
+
+PROTO = pathlib.Path(__file__).resolve().parents[2] / "proto"
+
+
+def stubs():
+    """Generates the Python modules of proto/coadapt/v1/design.proto and imports them."""
+    out = tempfile.mkdtemp(prefix="coadapt-stubs-")
+    include = pathlib.Path(protoc.__file__).parent / "_proto"
+    code = protoc.main(["protoc", f"-I{PROTO}", f"-I{include}", f"--python_out={out}", f"--grpc_python_out={out}",
+                        str(PROTO / "coadapt/v1/design.proto")])
+    if code != 0:
+        sys.exit(f"protoc failed on design.proto ({code})")
+    sys.path.insert(0, out)
+    from coadapt.v1 import design_pb2, design_pb2_grpc  # noqa: E402 (generated just now)
+    return design_pb2, design_pb2_grpc
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--server", required=True, help="host:port of the design service")
+    ap.add_argument("--design", action="append", default=[], help="a design, comma-separated values (repeatable); "
+                    "default: the middle of the design box and its two corners")
+    ap.add_argument("--timeout", type=float, default=10.0, help="deadline of every call, seconds")
+    a = ap.parse_args()
+    pb, rpc = stubs()
+    channel = grpc.insecure_channel(a.server)
+    svc = rpc.DesignServiceStub(channel)
+    info = svc.Info(pb.InfoRequest(), timeout=a.timeout)
+    low = np.array([d.low for d in info.dimensions], dtype=np.float32)
+    high = np.array([d.high for d in info.dimensions], dtype=np.float32)
+    designs = [np.array([float(v) for v in d.split(",")], dtype=np.float32) for d in a.design]
+    if not designs:
+        designs = [(low + high) / 2, low, high]
+    batch = np.stack(designs)
+    scores = svc.Score(pb.ScoreRequest(designs=[pb.Design(values=d.tolist()) for d in batch]), timeout=a.timeout)
+
+    # The same numbers through Triton's client: model design-critic, input design [N, D].
+    client = triton.InferenceServerClient(url=a.server)
+    assert client.is_server_live() and client.is_model_ready("design-critic")
+    meta = client.get_model_metadata("design-critic")
+    inp = triton.InferInput("design", list(batch.shape), "FP32")
+    inp.set_data_from_numpy(batch)
+    result = client.infer("design-critic", [inp], outputs=[triton.InferRequestedOutput("value")], client_timeout=a.timeout)
+    values = result.as_numpy("value")
+
+    history, start = [], 0
+    while True:
+        page = svc.History(pb.HistoryRequest(from_index=start, max_rows=2), timeout=a.timeout)
+        history += [{"index": r.index, "kind": r.kind, "design": list(r.design.values), "episodes": r.episodes,
+                     "method": r.method, "prototype": r.prototype,
+                     "best_eval_return": r.best_eval_return if r.HasField("best_eval_return") else None}
+                    for r in page.designs]
+        if not page.more:
+            break
+        start = page.next_index
+    print(json.dumps({
+        "robot": info.robot,
+        "dimensions": [{"name": d.name, "low": d.low, "high": d.high} for d in info.dimensions],
+        "weights_version": info.weights_version,
+        "start_states": info.start_states,
+        "designs": batch.tolist(),
+        "objective": [s.objective for s in scores.scores],
+        "spread": [s.spread for s in scores.scores],
+        "oip_value": values.reshape(-1).tolist(),
+        "oip_shape": list(values.shape),
+        "oip_model_versions": list(meta.versions),
+        "history": history,
+    }))
+
+
+if __name__ == "__main__":
+    main()
