@@ -17,7 +17,8 @@
 //!   environments over dm_env_rpc).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
-//! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol).
+//! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
+//!   [`design_client`]: `coadapt score` and `coadapt history`, its command-line clients.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
@@ -25,6 +26,7 @@ pub mod bench_env;
 pub mod bench_snapshot;
 pub mod bench_transport;
 pub mod confirm;
+pub mod design_client;
 pub mod env_serve;
 pub mod fleet;
 pub mod health;
@@ -62,6 +64,8 @@ pub enum Command {
     Render(render::RenderArgs),
     EnvServe(env_serve::EnvServeArgs),
     Serve(serve::ServeArgs),
+    Score(design_client::ScoreArgs),
+    History(design_client::HistoryArgs),
     /// Run benchmarks; each prints one JSON line per figure.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -80,6 +84,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => render::run(args),
         Command::EnvServe(args) => env_serve::run(args),
         Command::Serve(args) => serve::run(args),
+        Command::Score(args) => design_client::score(args),
+        Command::History(args) => design_client::history(args),
         Command::Bench(cmd) => bench::run(cmd),
     }
 }

@@ -28,6 +28,17 @@ fn coadapt() -> Command {
     Command::new(env!("CARGO_BIN_EXE_coadapt"))
 }
 
+/// A server killed when the test ends, passed or failed (a server left running would hold the
+/// test's output open and hang the harness).
+struct Server(std::process::Child);
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// A finished tiny run.
 fn finished_run(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-{name}", std::process::id()));
@@ -45,9 +56,9 @@ fn finished_run(name: &str) -> PathBuf {
 #[test]
 fn python_clients_query_a_finished_run_through_both_protocols() {
     let run = finished_run("python");
-    let mut server = coadapt().arg("serve").arg(&run).args(["--listen", "127.0.0.1:0"]).stdout(Stdio::piped()).spawn().unwrap();
+    let mut server = Server(coadapt().arg("serve").arg(&run).args(["--listen", "127.0.0.1:0"]).stdout(Stdio::piped()).spawn().unwrap());
     let mut line = String::new();
-    BufReader::new(server.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    BufReader::new(server.0.stdout.take().unwrap()).read_line(&mut line).unwrap();
     let addr = line.trim().strip_prefix("grpc://").unwrap_or_else(|| panic!("no address line: {line:?}")).to_string();
     let o = Command::new(venv().join("bin/python"))
         .arg(workspace_file("clients/python/example.py"))
@@ -78,8 +89,21 @@ fn python_clients_query_a_finished_run_through_both_protocols() {
         assert_eq!(h["kind"], f[1]);
         assert_eq!(h["method"], f[8]);
     }
-    assert!(Command::new("kill").args(["-TERM", &server.id().to_string()]).status().unwrap().success());
-    assert!(server.wait().unwrap().success(), "coadapt serve did not stop cleanly on SIGTERM");
+    // The command-line clients: the same scores, and designs.csv byte for byte.
+    let o = coadapt().args(["score", "--server", &addr, "--design", "1,1,1,1,1,1", "--design", "2,0.8,1.5,1.2,2,0.9"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    // Both print the f32 values, in their own shortest forms.
+    let scored: Vec<f32> = out.lines().skip(1).map(|l| l.split(',').nth(1).unwrap().parse().unwrap()).collect();
+    assert_eq!(scored, objective.iter().map(|&v| v as f32).collect::<Vec<_>>(), "{out}");
+    let o = coadapt().args(["history", "--server", &format!("http://{addr}")]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(String::from_utf8_lossy(&o.stdout), csv);
+    let o = coadapt().args(["score", "--server", &addr, "--design", "1,1,1"]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("InvalidArgument") && e.contains("designs[0].values: 3 values"), "{e}");
+    assert!(Command::new("kill").args(["-TERM", &server.0.id().to_string()]).status().unwrap().success());
+    assert!(server.0.wait().unwrap().success(), "coadapt serve did not stop cleanly on SIGTERM");
 }
 
 #[test]
