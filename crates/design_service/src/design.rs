@@ -64,6 +64,7 @@ impl DesignService for Design {
             weights_version: m.weights_version,
             start_states: u32::try_from(m.start_states()).unwrap_or(u32::MAX),
             max_score_batch: u32::try_from(self.shared.cfg.max_score_batch).unwrap_or(u32::MAX),
+            max_optimize_evaluations: self.shared.cfg.max_optimize_evaluations,
             run_id: m.run_id.clone(),
         }))
     }
@@ -77,6 +78,14 @@ impl DesignService for Design {
             weights_version: m.weights_version,
             start_states: u32::try_from(m.start_states()).unwrap_or(u32::MAX),
         }))
+    }
+
+    type OptimizeStream = tokio_stream::wrappers::ReceiverStream<Result<pb::OptimizeProgress, Status>>;
+
+    async fn optimize(&self, req: Request<pb::OptimizeRequest>) -> Result<Response<Self::OptimizeStream>, Status> {
+        let m = self.shared.model()?;
+        let search = crate::optimize::Search::of(req.get_ref(), &m, self.shared.cfg.max_optimize_evaluations)?;
+        Ok(Response::new(crate::optimize::start(&self.shared, m, search).await?))
     }
 
     async fn history(&self, req: Request<pb::HistoryRequest>) -> Result<Response<pb::HistoryReply>, Status> {

@@ -8,7 +8,8 @@
 //!   start-state batch (the optimiser's [`DesignObjective`](coadapt_design_optimizer::objective::DesignObjective)),
 //!   with its spread over the start states; [`ModelSource`], where a server gets the current
 //!   model and the run's history (a finished run's files, or a running learner).
-//! - `design`: the DesignService handlers; `inference`: the Open Inference Protocol handlers.
+//! - `design`: the DesignService handlers (`optimize`: the streamed search); `inference`: the
+//!   Open Inference Protocol handlers.
 //!   Both validate every request before use and answer a malformed one with
 //!   `INVALID_ARGUMENT` naming the field.
 //! - `server`: [`serve`], one tonic server for both, with health per service and reflection
@@ -19,6 +20,7 @@
 mod design;
 mod inference;
 mod model;
+mod optimize;
 mod server;
 
 pub use model::{DesignModel, HistoryPage, HistoryRow, ModelSource, StaticSource};

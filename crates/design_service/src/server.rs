@@ -20,6 +20,9 @@ use crate::model::{DesignModel, ModelSource};
 pub struct ServeConfig {
     /// Most designs one Score or ModelInfer call may carry.
     pub max_score_batch: usize,
+    /// Most designs one Optimize call may score (particles x iterations): the reference's PSO
+    /// is 700 x 250.
+    pub max_optimize_evaluations: u64,
     /// Most rows one History call returns.
     pub history_page: usize,
     /// Scoring calls computed at once (each on one blocking thread); more wait their turn, so
@@ -39,6 +42,7 @@ impl Default for ServeConfig {
     fn default() -> Self {
         Self {
             max_score_batch: 10_000,
+            max_optimize_evaluations: 700 * 250,
             history_page: 1000,
             max_concurrent: 1,
             rpc_timeout: Duration::from_secs(30),
@@ -54,7 +58,7 @@ impl Default for ServeConfig {
 pub(crate) struct Shared {
     pub(crate) source: Arc<dyn ModelSource>,
     pub(crate) cfg: ServeConfig,
-    permits: Semaphore,
+    pub(crate) permits: Arc<Semaphore>,
 }
 
 impl Shared {
@@ -63,9 +67,14 @@ impl Shared {
         self.source.model().ok_or_else(|| Status::unavailable("no population networks yet: the run has not trained them"))
     }
 
+    /// A place in the bounded pool of computations.
+    pub(crate) async fn permit(&self) -> Result<tokio::sync::OwnedSemaphorePermit, Status> {
+        self.permits.clone().acquire_owned().await.map_err(|_| Status::unavailable("the server is stopping"))
+    }
+
     /// Eq. 5.6 and its spread for `designs` (checked), on the bounded pool.
     pub(crate) async fn score(&self, m: Arc<DesignModel>, designs: Vec<f32>) -> Result<(Vec<f32>, Vec<f32>), Status> {
-        let _permit = self.permits.acquire().await.map_err(|_| Status::unavailable("the server is stopping"))?;
+        let _permit = self.permit().await?;
         tokio::task::spawn_blocking(move || {
             let n = designs.len() / m.design_dim().max(1);
             let (mut mean, mut spread) = (vec![0.0; n], vec![0.0; n]);
@@ -138,7 +147,7 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
     };
     let limits = PeerLimits::new(cfg.max_connections_per_peer, cfg.max_connections);
     let incoming = LimitedIncoming::new(listener, limits, "coadapt design service");
-    let shared = Arc::new(Shared { source, permits: Semaphore::new(cfg.max_concurrent.max(1)), cfg: cfg.clone() });
+    let shared = Arc::new(Shared { source, permits: Arc::new(Semaphore::new(cfg.max_concurrent.max(1))), cfg: cfg.clone() });
     let max = cfg.max_message_bytes;
     let design = DesignServiceServer::new(Design { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max);
     let inference =
