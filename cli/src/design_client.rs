@@ -30,6 +30,83 @@ pub struct ScoreArgs {
     pub design: Vec<String>,
 }
 
+/// Search a run's critic for the best design (PSO or CMA-ES over Eq. 5.6) on the server,
+/// printing the best design so far after every iteration (stderr) and the answer (stdout).
+#[derive(Debug, Args)]
+pub struct OptimizeArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// pso or cmaes.
+    #[arg(long, default_value = "pso")]
+    pub method: String,
+    /// PSO particles, or CMA-ES candidates per generation (0: the method's default).
+    #[arg(long, default_value_t = 0)]
+    pub particles: u32,
+    /// PSO iterations, or CMA-ES generations at most (0: 250).
+    #[arg(long, default_value_t = 0)]
+    pub iterations: u32,
+    /// Narrower lower bounds, comma-separated, one per dimension.
+    #[arg(long)]
+    pub low: Option<String>,
+    /// Narrower upper bounds, comma-separated, one per dimension.
+    #[arg(long)]
+    pub high: Option<String>,
+    /// A coordinate held fixed, DIMENSION=VALUE (0-based, repeatable), e.g. --fix 3=1.2.
+    #[arg(long)]
+    pub fix: Vec<String>,
+    /// The search's seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+fn floats(flag: &str, text: &str) -> anyhow::Result<Vec<f32>> {
+    text.split(',').map(|v| v.trim().parse::<f32>().with_context(|| format!("{flag}: {v:?} is not a number"))).collect()
+}
+
+pub fn optimize(a: OptimizeArgs) -> anyhow::Result<()> {
+    let fixed = a
+        .fix
+        .iter()
+        .map(|f| {
+            let (d, v) = f.split_once('=').ok_or_else(|| anyhow::anyhow!("--fix {f:?}: expected DIMENSION=VALUE"))?;
+            Ok(pb::FixedCoordinate {
+                dimension: d.trim().parse().with_context(|| format!("--fix {f:?}: {d:?} is not a dimension index"))?,
+                value: v.trim().parse().with_context(|| format!("--fix {f:?}: {v:?} is not a number"))?,
+            })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let req = pb::OptimizeRequest {
+        method: a.method.clone(),
+        particles: a.particles,
+        iterations: a.iterations,
+        low: a.low.as_deref().map(|t| floats("--low", t)).transpose()?.unwrap_or_default(),
+        high: a.high.as_deref().map(|t| floats("--high", t)).transpose()?.unwrap_or_default(),
+        fixed,
+        seed: a.seed,
+    };
+    // A search may take longer than one call's deadline: the stream gets 100 of them.
+    let (rt, mut c, _) = client(&ServerArgs { server: a.server.server.clone(), timeout_secs: a.server.timeout_secs * 100.0 })?;
+    rt.block_on(async move {
+        let mut s = c.optimize(req).await.map_err(status)?.into_inner();
+        while let Some(m) = s.message().await.map_err(status)? {
+            let d: Vec<String> = m.best.as_ref().map(|d| d.values.iter().map(|v| v.to_string()).collect()).unwrap_or_default();
+            if m.done {
+                println!("design,objective,spread,evaluations,weights_version");
+                println!("{},{},{},{},{}", d.join(";"), m.best_objective, m.best_spread, m.evaluations, m.weights_version);
+                return Ok(());
+            }
+            eprintln!(
+                "optimize: iteration {} ({} designs scored): best {} at {}",
+                m.iteration + 1,
+                m.evaluations,
+                m.best_objective,
+                d.join(";")
+            );
+        }
+        anyhow::bail!("the design service ended the search without an answer")
+    })
+}
+
 /// Print a run's designs as CSV (designs.csv's columns), paged from the server.
 #[derive(Debug, Args)]
 pub struct HistoryArgs {

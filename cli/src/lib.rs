@@ -18,7 +18,8 @@
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
 //! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
-//!   [`design_client`]: `coadapt score` and `coadapt history`, its command-line clients.
+//!   [`design_client`]: `coadapt score`, `coadapt optimize` and `coadapt history`, its
+//!   command-line clients.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
@@ -65,6 +66,7 @@ pub enum Command {
     EnvServe(env_serve::EnvServeArgs),
     Serve(serve::ServeArgs),
     Score(design_client::ScoreArgs),
+    Optimize(design_client::OptimizeArgs),
     History(design_client::HistoryArgs),
     /// Run benchmarks; each prints one JSON line per figure.
     #[command(subcommand)]
@@ -85,6 +87,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::EnvServe(args) => env_serve::run(args),
         Command::Serve(args) => serve::run(args),
         Command::Score(args) => design_client::score(args),
+        Command::Optimize(args) => design_client::optimize(args),
         Command::History(args) => design_client::history(args),
         Command::Bench(cmd) => bench::run(cmd),
     }

@@ -78,6 +78,26 @@ fn python_clients_query_a_finished_run_through_both_protocols() {
     assert_eq!(got["oip_value"], got["objective"]);
     assert_eq!(got["oip_shape"], serde_json::json!([2, 1]));
     assert_eq!(got["oip_model_versions"], serde_json::json!([got["weights_version"].to_string()]));
+    // Optimize to the end: an answer inside the box whose objective Score confirms below; and
+    // a search cancelled after three iterations.
+    let answer = &got["optimize_answer"];
+    assert_eq!(answer["evaluations"], 300, "{answer}");
+    assert_eq!(got["optimize_first_before_cancel"].as_array().unwrap().len(), 3);
+    assert_eq!(got["optimize_cancelled"], true);
+    let best: Vec<f32> = serde_json::from_value(answer["design"].clone()).unwrap();
+    let o = coadapt()
+        .args(["score", "--server", &addr, "--design", &best.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",")])
+        .output()
+        .unwrap();
+    let line = String::from_utf8_lossy(&o.stdout).lines().nth(1).unwrap_or_default().to_string();
+    assert_eq!(line.split(',').nth(1).and_then(|v| v.parse::<f32>().ok()), Some(answer["objective"].as_f64().unwrap() as f32), "{line}");
+    // The same search from the command line gives the same answer.
+    let o = coadapt().args(["optimize", "--server", &addr, "--particles", "30", "--iterations", "10", "--seed", "1"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    let design: Vec<f32> = out.lines().nth(1).unwrap().split(',').next().unwrap().split(';').map(|v| v.parse().unwrap()).collect();
+    assert_eq!(design, best, "{out}");
+    assert_eq!(String::from_utf8_lossy(&o.stderr).matches("optimize: iteration").count(), 10);
     // The history, paged two rows at a time, is designs.csv.
     let csv = std::fs::read_to_string(run.join("designs.csv")).unwrap();
     let rows: Vec<&str> = csv.lines().skip(1).collect();

@@ -63,6 +63,24 @@ def main():
     result = client.infer("design-critic", [inp], outputs=[triton.InferRequestedOutput("value")], client_timeout=a.timeout)
     values = result.as_numpy("value")
 
+    # Optimize, streamed: a small PSO to the end (the last message is the answer), then a large
+    # one cancelled after its first three iterations.
+    answer = None
+    for m in svc.Optimize(pb.OptimizeRequest(method="pso", particles=30, iterations=10, seed=1), timeout=a.timeout):
+        if m.done:
+            answer = {"design": list(m.best.values), "objective": m.best_objective, "spread": m.best_spread,
+                      "evaluations": m.evaluations}
+    big = svc.Optimize(pb.OptimizeRequest(method="pso", particles=700, iterations=250, seed=2), timeout=a.timeout * 10)
+    first = []
+    cancelled = False
+    try:
+        for m in big:
+            first.append(m.best_objective)
+            if len(first) == 3:
+                big.cancel()
+    except grpc.RpcError as e:
+        cancelled = e.code() == grpc.StatusCode.CANCELLED
+
     history, start = [], 0
     while True:
         page = svc.History(pb.HistoryRequest(from_index=start, max_rows=2), timeout=a.timeout)
@@ -84,6 +102,9 @@ def main():
         "oip_value": values.reshape(-1).tolist(),
         "oip_shape": list(values.shape),
         "oip_model_versions": list(meta.versions),
+        "optimize_answer": answer,
+        "optimize_first_before_cancel": first,
+        "optimize_cancelled": cancelled,
         "history": history,
     }))
 
