@@ -160,29 +160,31 @@ pub fn score(a: ScoreArgs) -> anyhow::Result<()> {
 }
 
 pub fn history(a: HistoryArgs) -> anyhow::Result<()> {
+    use coadapt_learner::run_dir::{DESIGNS_HEADER, DesignRow, design_lines};
+    use std::io::Write;
     let (rt, mut c, _) = client(&a.server)?;
-    let opt = |v: Option<f32>| v.map(|v| v.to_string()).unwrap_or_default();
-    println!("{}", coadapt_learner::run_dir::DESIGNS_HEADER);
+    println!("{DESIGNS_HEADER}");
     let mut from = a.from;
     loop {
         let p = rt.block_on(c.history(pb::HistoryRequest { from_index: from, max_rows: 0 })).map_err(status)?.into_inner();
-        let mut w = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(std::io::stdout());
-        for r in &p.designs {
-            let d: Vec<String> = r.design.as_ref().map(|d| d.values.iter().map(|v| v.to_string()).collect()).unwrap_or_default();
-            w.write_record([
-                r.index.to_string(),
-                r.kind.clone(),
-                d.join(";"),
-                r.episodes.to_string(),
-                opt(r.best_eval_return),
-                opt(r.last_eval_return),
-                opt(r.predicted_objective),
-                r.design_rollouts.to_string(),
-                r.method.clone(),
-                r.prototype.clone(),
-            ])?;
-        }
-        w.flush()?;
+        // The rows as the run wrote them, by the same writer.
+        let rows: Vec<DesignRow> = p
+            .designs
+            .iter()
+            .map(|r| DesignRow {
+                index: r.index as usize,
+                kind: r.kind.clone(),
+                design: r.design.as_ref().map(|d| d.values.clone()).unwrap_or_default(),
+                episodes: r.episodes as usize,
+                best_eval_return: r.best_eval_return,
+                last_eval_return: r.last_eval_return,
+                predicted_objective: r.predicted_objective,
+                design_rollouts: r.design_rollouts,
+                method: r.method.clone(),
+                prototype: r.prototype.clone(),
+            })
+            .collect();
+        std::io::stdout().write_all(&design_lines(&rows)?)?;
         if !p.more || p.next_index <= from {
             return Ok(());
         }

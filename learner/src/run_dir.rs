@@ -129,7 +129,7 @@ pub fn write_atomically(path: &Path, text: &str) -> io::Result<()> {
 
 /// `rows` as lines of `designs.csv`. A real CSV writer: a text field with a comma, a quote or a
 /// newline is quoted, so no value can forge a row (plain fields are written as they are).
-fn design_lines(rows: &[DesignRow]) -> io::Result<Vec<u8>> {
+pub fn design_lines(rows: &[DesignRow]) -> io::Result<Vec<u8>> {
     let mut w = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(Vec::new());
     for r in rows {
         w.write_record([
