@@ -31,6 +31,7 @@ use coadapt_core::BoxSpace;
 use faer::{Mat, Side};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
 
 use crate::swarm::{Progress, SearchError, SearchResult, SwarmObjective, check_bounds, key};
 
@@ -315,10 +316,11 @@ pub fn maximise(
     config: &CmaesConfig,
     seed: u64,
 ) -> Result<SearchResult, SearchError> {
-    maximise_with(objective, bounds, config, seed, |_| {})
+    maximise_with(objective, bounds, config, seed, |_| ControlFlow::Continue(()))
 }
 
-/// [`maximise`], calling `progress` after every generation.
+/// [`maximise`], calling `progress` after every generation; `ControlFlow::Break` ends the search
+/// there with the best design so far.
 ///
 /// It runs [`Cmaes`] for up to `config.generations` generations, stopping early once
 /// [`Cmaes::spread`] falls below `config.tol_x` (or is not finite) or the covariance cannot be
@@ -328,7 +330,7 @@ pub fn maximise_with(
     bounds: &BoxSpace,
     config: &CmaesConfig,
     seed: u64,
-    mut progress: impl FnMut(&Progress<'_>),
+    mut progress: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
 ) -> Result<SearchResult, SearchError> {
     let tol_ok = config.tol_x >= 0.0; // false for NaN
     if config.generations == 0 || !tol_ok {
@@ -356,9 +358,9 @@ pub fn maximise_with(
             best.copy_from_slice(&es.designs[top * n..(top + 1) * n]);
         }
         history.push(best_score);
-        progress(&Progress { iteration: g, evaluations, best_score, best: &best });
+        let go_on = progress(&Progress { iteration: g, evaluations, best_score, best: &best });
         let spread = es.spread();
-        if !es.is_healthy() || !spread.is_finite() || spread < config.tol_x {
+        if go_on.is_break() || !es.is_healthy() || !spread.is_finite() || spread < config.tol_x {
             break;
         }
     }

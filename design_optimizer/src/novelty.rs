@@ -89,7 +89,7 @@ impl SwarmObjective for Novelty {
 /// The most novel design in `bounds` with respect to `chosen` (`k x dim`, row-major), found by
 /// PSO; `score` is its novelty (in normalised units when `config.normalise`).
 pub fn most_novel(chosen: &[f32], bounds: &BoxSpace, config: &NoveltyConfig, seed: u64) -> Result<SearchResult, SearchError> {
-    most_novel_with(chosen, bounds, config, seed, |_| {})
+    most_novel_with(chosen, bounds, config, seed, |_| std::ops::ControlFlow::Continue(()))
 }
 
 /// [`most_novel`], calling `progress` after every PSO iteration.
@@ -98,7 +98,7 @@ pub fn most_novel_with(
     bounds: &BoxSpace,
     config: &NoveltyConfig,
     seed: u64,
-    progress: impl FnMut(&Progress<'_>),
+    progress: impl FnMut(&Progress<'_>) -> std::ops::ControlFlow<()>,
 ) -> Result<SearchResult, SearchError> {
     let mut novelty = Novelty::new(chosen, bounds, config.neighbours, config.normalise)?;
     pso::maximise_with(&mut novelty, bounds, &config.pso, seed, progress)

@@ -20,6 +20,7 @@
 use coadapt_core::BoxSpace;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+use std::ops::ControlFlow;
 
 use crate::swarm::{Progress, SearchError, SearchResult, SwarmObjective, check_bounds, key};
 
@@ -123,16 +124,17 @@ pub fn maximise(
     config: &PsoConfig,
     seed: u64,
 ) -> Result<SearchResult, SearchError> {
-    maximise_with(objective, bounds, config, seed, |_| {})
+    maximise_with(objective, bounds, config, seed, |_| ControlFlow::Continue(()))
 }
 
-/// [`maximise`], calling `progress` after every iteration.
+/// [`maximise`], calling `progress` after every iteration; `ControlFlow::Break` ends the search
+/// there with the best design so far (a client that cancelled).
 pub fn maximise_with(
     objective: &mut (impl SwarmObjective + ?Sized),
     bounds: &BoxSpace,
     config: &PsoConfig,
     seed: u64,
-    mut progress: impl FnMut(&Progress<'_>),
+    mut progress: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
 ) -> Result<SearchResult, SearchError> {
     check_bounds(bounds)?;
     config.check()?;
@@ -175,8 +177,8 @@ pub fn maximise_with(
             gbest.copy_from_slice(&pbest[i * dim..(i + 1) * dim]);
         }
         history.push(gbest_score);
-        progress(&Progress { iteration: it, evaluations: (it + 1) * n, best_score: gbest_score, best: &gbest });
-        if it + 1 == config.iterations {
+        let go_on = progress(&Progress { iteration: it, evaluations: (it + 1) * n, best_score: gbest_score, best: &gbest });
+        if it + 1 == config.iterations || go_on.is_break() {
             break;
         }
 

@@ -103,6 +103,7 @@ fn pso_with_the_full_reference_settings_finds_the_optimum_inside_the_design_box(
     let r = pso::maximise_with(&mut quadratic(&INSIDE, &WEIGHTS, &b), &b, &clamped(), 0, |p| {
         assert_eq!((p.iteration, p.evaluations), (iterations, 700 * (iterations + 1)));
         iterations += 1;
+        std::ops::ControlFlow::Continue(())
     })
     .unwrap();
     assert_eq!((iterations, r.history.len(), r.evaluations), (250, 250, 175_000));

@@ -1,7 +1,7 @@
 //! `Optimize`: PSO or CMA-ES over Eq. 5.6, streamed.
 
+use std::ops::ControlFlow;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use coadapt_core::BoxSpace;
 use coadapt_design_optimizer::objective::ObjectiveWorkspace;
@@ -102,17 +102,12 @@ impl Search {
     }
 
     /// Runs the search on this thread, sending progress to `tx`; a closed `tx` (the client
-    /// cancelled) stops the scoring, so the search ends at once.
+    /// cancelled) ends the search after the iteration under way.
     pub(crate) fn run(&self, m: &DesignModel, tx: &mpsc::Sender<Result<pb::OptimizeProgress, Status>>) {
-        let cancelled = AtomicBool::new(false);
+        let mut cancelled = false;
         let mut ws = ObjectiveWorkspace::default();
         let (mut full, mut spread, mut one) = (Vec::new(), Vec::new(), Vec::new());
         let mut objective = |xs: &[f32], scores: &mut [f32]| {
-            if cancelled.load(Ordering::Relaxed) || tx.is_closed() {
-                cancelled.store(true, Ordering::Relaxed);
-                scores.fill(0.0);
-                return;
-            }
             full.clear();
             for x in xs.chunks_exact(self.free.dim()) {
                 self.expand(x, &mut one);
@@ -123,9 +118,6 @@ impl Search {
         };
         let mut best = Vec::new();
         let progress = |p: &coadapt_design_optimizer::swarm::Progress<'_>| {
-            if cancelled.load(Ordering::Relaxed) {
-                return;
-            }
             self.expand(p.best, &mut best);
             let msg = pb::OptimizeProgress {
                 iteration: p.iteration as u32,
@@ -137,8 +129,10 @@ impl Search {
                 weights_version: m.weights_version,
             };
             if tx.blocking_send(Ok(msg)).is_err() {
-                cancelled.store(true, Ordering::Relaxed);
+                cancelled = true;
+                return ControlFlow::Break(());
             }
+            ControlFlow::Continue(())
         };
         let result = if self.cmaes {
             let cfg = CmaesConfig { population: Some(self.particles), generations: self.iterations, ..CmaesConfig::default() };
@@ -147,7 +141,7 @@ impl Search {
             let cfg = PsoConfig { particles: self.particles, iterations: self.iterations, ..PsoConfig::default() };
             pso::maximise_with(&mut objective, &self.free, &cfg, self.seed, progress)
         };
-        if cancelled.load(Ordering::Relaxed) {
+        if cancelled {
             return;
         }
         let last = match result {
