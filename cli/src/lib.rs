@@ -28,6 +28,7 @@ pub mod bench_snapshot;
 pub mod bench_transport;
 pub mod confirm;
 pub mod design_client;
+pub mod design_live;
 pub mod env_serve;
 pub mod fleet;
 pub mod health;
@@ -40,6 +41,7 @@ pub mod resume;
 pub mod role_cmd;
 pub mod roles;
 pub mod run;
+pub mod security;
 pub mod serve;
 pub mod train;
 

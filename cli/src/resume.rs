@@ -21,6 +21,8 @@ const MAY_CHANGE: &[&str] = &[
     "remote",
     "sim-threads",
     "metrics",
+    "design-service",
+    "security",
 ];
 
 fn may_change(path: &str) -> bool {

@@ -45,6 +45,8 @@ impl RoleArgs {
             actors: None,
             flow: None,
             resume: None,
+            serve: None,
+            insecure: false,
         };
         let (mut cfg, name) = resolve(&run)?;
         if let Some(f) = &self.fleet {

@@ -276,6 +276,8 @@ pub fn learner(
         RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
     };
     std::fs::write(dir.join("config.toml"), toml::to_string(cfg)?).context("writing config.toml")?;
+    // Dropped when the run returns: Watch streams end, the server stops.
+    let design_service = crate::design_live::start(cfg, spec, &run_id, links, &mut writer)?;
     // The operator may answer from another directory: name the run directory in full.
     let mut print = progress_printer(cfg, &std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()));
     let stats = std::sync::Arc::new(std::sync::Mutex::new(coadapt::Stats::default()));
@@ -285,6 +287,9 @@ pub fn learner(
     }
     let mut on_event = |e: &RunEvent<'_>| {
         crate::health::observe(e);
+        if let (Some(live), RunEvent::DesignStart { row, .. }) = (&design_service, e) {
+            live.design_started(row);
+        }
         match e {
             RunEvent::Stats(s) => *stats.lock().unwrap_or_else(|e| e.into_inner()) = **s,
             e => print(e),

@@ -60,6 +60,12 @@ pub struct RunConfig {
     /// Prometheus `/metrics` of the learner and the optimiser (`learner-listen`,
     /// `optimizer-listen`; empty: off).
     pub metrics: crate::metrics::MetricsConfig,
+    /// The learner's DesignService and `design-critic` model during the run (`listen`; empty:
+    /// off) and their bounds.
+    pub design_service: crate::design_live::DesignServiceConfig,
+    /// TLS and tokens of every gRPC endpoint (`tls-cert`, `tls-key`, `tls-ca`, `tokens-file`,
+    /// `token-file`, `insecure`, ...).
+    pub security: crate::security::SecurityConfig,
 }
 
 impl Default for RunConfig {
@@ -80,6 +86,8 @@ impl Default for RunConfig {
             remote: crate::roles::RemoteEnvConfig::default(),
             snapshot: coadapt_learner::snapshot::SnapshotConfig::default(),
             metrics: crate::metrics::MetricsConfig::default(),
+            design_service: crate::design_live::DesignServiceConfig::default(),
+            security: crate::security::SecurityConfig::default(),
         }
     }
 }
@@ -141,6 +149,16 @@ pub struct RunArgs {
     /// the snapshot; the same seed gives the same rows as a run never stopped.
     #[arg(long, value_name = "RUN_DIR", conflicts_with = "out")]
     pub resume: Option<PathBuf>,
+    /// Serve design queries during the run on ADDR (sets design-service.listen): the
+    /// learner answers DesignService (Info, Score, Optimize, Landscape, History, Watch) and the
+    /// Open Inference Protocol model `design-critic` with the networks of its latest design
+    /// request. Loopback only unless [security] configures TLS or --insecure is given.
+    #[arg(long, value_name = "ADDR")]
+    pub serve: Option<String>,
+    /// Allow plaintext (no TLS) on addresses other than loopback (sets security.insecure):
+    /// only on a network you trust.
+    #[arg(long)]
+    pub insecure: bool,
 }
 
 fn parse_enum<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> anyhow::Result<T> {
@@ -181,6 +199,12 @@ pub fn resolve(args: &RunArgs) -> anyhow::Result<(RunConfig, String)> {
     }
     if let Some(f) = &args.flow {
         cfg.flow.mode = parse_enum::<FlowMode>("flow", f)?;
+    }
+    if let Some(a) = &args.serve {
+        cfg.design_service.listen = a.clone();
+    }
+    if args.insecure {
+        cfg.security.insecure = true;
     }
     Ok((cfg, name))
 }

@@ -39,6 +39,53 @@ pub struct ServeArgs {
     pub max_score_batch: usize,
 }
 
+/// Eq. 5.6 of `cfg`'s run with population networks `(policy, q1, q2)` of `version` over
+/// `start_states`, with the run's `optimizer.q`: what the optimiser maximises.
+pub fn design_model(
+    cfg: &crate::run::RunConfig,
+    spec: &coadapt_core::EnvSpec,
+    version: u64,
+    run_id: String,
+    (phi, q1, q2): (&[f32], &[f32], &[f32]),
+    start_states: &[f32],
+) -> anyhow::Result<DesignModel> {
+    let hidden = &cfg.learner.sac.hidden;
+    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let (mode, thetas): (QMode, Vec<&[f32]>) = match cfg.optimizer.q {
+        QModeConfig::Q1 => (QMode::First, vec![q1]),
+        QModeConfig::MinOfTwin => (QMode::MinOfTwin, vec![q1, q2]),
+        QModeConfig::Pessimistic => (QMode::MeanMinusKStd(cfg.optimizer.pessimism), vec![q1, q2]),
+    };
+    Ok(DesignModel::new(
+        spec.name.clone(),
+        spec.design_names.clone(),
+        spec.design.clone(),
+        version,
+        run_id,
+        (&policy, phi, &critic, &thetas),
+        start_states,
+        spec.state_dim,
+        mode,
+    )?)
+}
+
+/// A designs.csv row as the service's history row.
+pub fn history_row(r: run_dir::DesignRow) -> HistoryRow {
+    HistoryRow {
+        index: r.index,
+        kind: r.kind,
+        design: r.design,
+        episodes: r.episodes,
+        best_eval_return: r.best_eval_return,
+        last_eval_return: r.last_eval_return,
+        predicted_objective: r.predicted_objective,
+        design_rollouts: r.design_rollouts,
+        method: r.method,
+        prototype: r.prototype,
+    }
+}
+
 /// The model and history of the run in `dir`.
 pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
     let cfg = crate::resume::stored_config(dir)?;
@@ -57,44 +104,18 @@ pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
     let starts = fear
         .sample_start_states(n)
         .ok_or_else(|| anyhow::anyhow!("snapshot {}: no start states yet (no episode finished)", from.display()))?;
-    let hidden = &cfg.learner.sac.hidden;
-    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
-    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
     let pop = fear.agent(ActingPolicy::Population);
-    let (q1, q2) = (pop.critic_params(0).0, pop.critic_params(1).0);
-    let (mode, thetas): (QMode, Vec<&[f32]>) = match cfg.optimizer.q {
-        QModeConfig::Q1 => (QMode::First, vec![q1]),
-        QModeConfig::MinOfTwin => (QMode::MinOfTwin, vec![q1, q2]),
-        QModeConfig::Pessimistic => (QMode::MeanMinusKStd(cfg.optimizer.pessimism), vec![q1, q2]),
-    };
-    let model = DesignModel::new(
-        spec.name.clone(),
-        spec.design_names.clone(),
-        spec.design.clone(),
+    let model = design_model(
+        &cfg,
+        spec,
         version,
         manifest.run_id.clone(),
-        (&policy, pop.policy_params(), &critic, &thetas),
+        (pop.policy_params(), pop.critic_params(0).0, pop.critic_params(1).0),
         &starts,
-        spec.state_dim,
-        mode,
     )?;
     let path = dir.join("designs.csv");
     let len = std::fs::metadata(&path).with_context(|| format!("reading {}", path.display()))?.len();
-    let history = run_dir::read_designs(&path, len)?
-        .into_iter()
-        .map(|r| HistoryRow {
-            index: r.index,
-            kind: r.kind,
-            design: r.design,
-            episodes: r.episodes,
-            best_eval_return: r.best_eval_return,
-            last_eval_return: r.last_eval_return,
-            predicted_objective: r.predicted_objective,
-            design_rollouts: r.design_rollouts,
-            method: r.method,
-            prototype: r.prototype,
-        })
-        .collect();
+    let history = run_dir::read_designs(&path, len)?.into_iter().map(history_row).collect();
     eprintln!(
         "serve: {} from {} ({}), population weights version {version}, {n} start states",
         dir.display(),

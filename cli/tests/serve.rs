@@ -109,6 +109,20 @@ fn python_clients_query_a_finished_run_through_both_protocols() {
         assert_eq!(h["kind"], f[1]);
         assert_eq!(h["method"], f[8]);
     }
+    // The landscape: a 5 x 5 grid of finite values over the plane of every design tried.
+    let land = &got["landscape"];
+    assert_eq!(land["pc1"].as_array().unwrap().len(), 5);
+    assert_eq!(land["pc2"].as_array().unwrap().len(), 5);
+    let values: Vec<f64> = serde_json::from_value(land["objective"].clone()).unwrap();
+    assert!(values.len() == 25 && values.iter().all(|v| v.is_finite()), "{values:?}");
+    assert_eq!(land["designs"].as_array().unwrap().len(), rows.len());
+    assert_eq!(land["weights_version"], got["weights_version"]);
+    // Watch on a finished run: every row, then the stream ends.
+    let watched = got["watched"].as_array().unwrap();
+    assert_eq!(watched.len(), rows.len(), "{watched:?}");
+    for (w, r) in watched.iter().zip(&rows) {
+        assert_eq!(w["index"].to_string(), r.split(',').next().unwrap());
+    }
     // The command-line clients: the same scores, and designs.csv byte for byte.
     let o = coadapt().args(["score", "--server", &addr, "--design", "1,1,1,1,1,1", "--design", "2,0.8,1.5,1.2,2,0.9"]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -140,4 +154,76 @@ fn serve_refuses_what_it_cannot_serve_safely() {
     assert!(!o.status.success() && e.contains("has no readable snapshot"), "{e}");
     let o = coadapt().arg("serve").arg(run.join("nothing-here")).args(["--listen", "127.0.0.1:0"]).output().unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("a run directory?"), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// A fleet killed when the test ends.
+struct Fleet(std::process::Child);
+
+impl Drop for Fleet {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn python_clients_query_a_running_fleet_and_watch_its_designs() {
+    let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-live", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut fleet = Fleet(
+        coadapt()
+            .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap(), "--transport", "grpc"])
+            .args(["--designs", "60", "--serve", "127.0.0.1:0", "--out"])
+            .arg(&dir)
+            .stderr(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    // The learner names the service's address on stderr; the rest of the log is kept.
+    let (tx, rx) = std::sync::mpsc::channel();
+    let log = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+    let keep = log.clone();
+    let stderr = fleet.0.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if let Some(at) = line.split("design service").nth(1).and_then(|r| r.split("grpc://").nth(1)) {
+                let _ = tx.send(at.split_whitespace().next().unwrap_or_default().to_string());
+            }
+            keep.lock().unwrap().push_str(&(line + "\n"));
+        }
+    });
+    let addr = rx
+        .recv_timeout(std::time::Duration::from_secs(60))
+        .unwrap_or_else(|_| panic!("no design service address: {}", log.lock().unwrap()));
+    let o = Command::new(venv().join("bin/python"))
+        .arg(workspace_file("clients/python/example.py"))
+        .args(["--server", &addr, "--watch-rows", "12"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "example.py: {}\nfleet: {}", String::from_utf8_lossy(&o.stderr), log.lock().unwrap());
+    let got: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(got["robot"], "half-cheetah");
+    assert!(got["weights_version"].as_u64().unwrap() >= 1, "served from the first design request on");
+    // The learner's critic through both protocols: the same numbers (same version).
+    assert_eq!(got["oip_value"], got["objective"]);
+    assert_eq!(got["oip_shape"], serde_json::json!([3, 1]));
+    assert_eq!(got["optimize_answer"]["evaluations"], 300);
+    assert_eq!(got["optimize_cancelled"], true);
+    assert!(!got["history"].as_array().unwrap().is_empty());
+    assert_eq!(got["landscape"]["objective"].as_array().unwrap().len(), 25);
+    // Watch went past the history into changes made while it watched: a design sent when
+    // chosen (no episodes yet) and again when its episodes were done.
+    let watched = got["watched"].as_array().unwrap();
+    assert_eq!(watched.len(), 12, "{watched:?}");
+    let again = watched
+        .iter()
+        .enumerate()
+        .any(|(i, w)| w["episodes"] == 0 && watched[i + 1..].iter().any(|l| l["index"] == w["index"] && l["episodes"].as_u64() > Some(0)));
+    assert!(again, "no design seen chosen and then done: {watched:?}");
+    // The run is still going: the service did not stop it. Ctrl-C ends it cleanly.
+    assert!(fleet.0.try_wait().unwrap().is_none(), "the fleet ended early: {}", log.lock().unwrap());
+    assert!(Command::new("kill").args(["-INT", &fleet.0.id().to_string()]).status().unwrap().success());
+    let status = fleet.0.wait().unwrap();
+    assert!(status.success(), "{}", log.lock().unwrap());
 }

@@ -5,7 +5,8 @@ coadapt's proto/ files, and the same critic through Triton's Open Inference Prot
     python clients/python/example.py --server 127.0.0.1:50061 [--design 1,1,1,1,1,1 ...]
 
 Prints one JSON object on stdout: the service's info, the scores of the designs (the
-DesignService's and the Open Inference Protocol's), and the run's design history.
+DesignService's and the Open Inference Protocol's), an optimised design, the design landscape,
+the run's design history, and what Watch streamed (to the run's end, or --watch-rows rows).
 """
 
 import argparse
@@ -13,6 +14,7 @@ import json
 import pathlib
 import sys
 import tempfile
+import time
 
 import grpc
 import numpy as np
@@ -41,27 +43,42 @@ def main():
     ap.add_argument("--design", action="append", default=[], help="a design, comma-separated values (repeatable); "
                     "default: the middle of the design box and its two corners")
     ap.add_argument("--timeout", type=float, default=10.0, help="deadline of every call, seconds")
+    ap.add_argument("--watch-rows", type=int, default=0, help="stop watching after this many rows (0: when the run ends)")
     a = ap.parse_args()
     pb, rpc = stubs()
     channel = grpc.insecure_channel(a.server)
     svc = rpc.DesignServiceStub(channel)
-    info = svc.Info(pb.InfoRequest(), timeout=a.timeout)
+    # A learner serves from its first design request on: until then, UNAVAILABLE.
+    deadline = time.monotonic() + 6 * a.timeout
+    while True:
+        try:
+            info = svc.Info(pb.InfoRequest(), timeout=a.timeout)
+            break
+        except grpc.RpcError as e:
+            if e.code() != grpc.StatusCode.UNAVAILABLE or time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
     low = np.array([d.low for d in info.dimensions], dtype=np.float32)
     high = np.array([d.high for d in info.dimensions], dtype=np.float32)
     designs = [np.array([float(v) for v in d.split(",")], dtype=np.float32) for d in a.design]
     if not designs:
         designs = [(low + high) / 2, low, high]
     batch = np.stack(designs)
-    scores = svc.Score(pb.ScoreRequest(designs=[pb.Design(values=d.tolist()) for d in batch]), timeout=a.timeout)
 
-    # The same numbers through Triton's client: model design-critic, input design [N, D].
+    # The same numbers through Triton's client: model design-critic, input design [N, D]. A
+    # running learner changes its networks at each design request: both calls are made again
+    # until they saw the same version.
     client = triton.InferenceServerClient(url=a.server)
     assert client.is_server_live() and client.is_model_ready("design-critic")
-    meta = client.get_model_metadata("design-critic")
-    inp = triton.InferInput("design", list(batch.shape), "FP32")
-    inp.set_data_from_numpy(batch)
-    result = client.infer("design-critic", [inp], outputs=[triton.InferRequestedOutput("value")], client_timeout=a.timeout)
-    values = result.as_numpy("value")
+    for _ in range(10):
+        scores = svc.Score(pb.ScoreRequest(designs=[pb.Design(values=d.tolist()) for d in batch]), timeout=a.timeout)
+        meta = client.get_model_metadata("design-critic")
+        inp = triton.InferInput("design", list(batch.shape), "FP32")
+        inp.set_data_from_numpy(batch)
+        result = client.infer("design-critic", [inp], outputs=[triton.InferRequestedOutput("value")], client_timeout=a.timeout)
+        values = result.as_numpy("value")
+        if result.get_response().model_version == str(scores.weights_version):
+            break
 
     # Optimize, streamed: a small PSO to the end (the last message is the answer), then a large
     # one cancelled after its first three iterations.
@@ -91,6 +108,21 @@ def main():
         if not page.more:
             break
         start = page.next_index
+    land = svc.Landscape(pb.LandscapeRequest(grid=5), timeout=a.timeout)
+
+    # Watch: the history, then every change, until the run ends (the stream ends) or enough rows.
+    watched = []
+    stream = svc.Watch(pb.WatchDesignsRequest(from_index=0), timeout=30 * a.timeout)
+    try:
+        for ev in stream:
+            r = ev.design
+            watched.append({"index": r.index, "kind": r.kind, "episodes": r.episodes, "prototype": r.prototype})
+            if a.watch_rows and len(watched) >= a.watch_rows:
+                stream.cancel()
+    except grpc.RpcError as e:
+        if e.code() != grpc.StatusCode.CANCELLED:
+            raise
+
     print(json.dumps({
         "robot": info.robot,
         "dimensions": [{"name": d.name, "low": d.low, "high": d.high} for d in info.dimensions],
@@ -106,6 +138,11 @@ def main():
         "optimize_first_before_cancel": first,
         "optimize_cancelled": cancelled,
         "history": history,
+        "landscape": {"pc1": list(land.pc1), "pc2": list(land.pc2), "objective": list(land.objective),
+                      "explained": [land.explained1, land.explained2],
+                      "designs": [{"index": d.index, "kind": d.kind, "pc1": d.pc1, "pc2": d.pc2} for d in land.designs],
+                      "weights_version": land.weights_version},
+        "watched": watched,
     }))
 
 

@@ -101,6 +101,17 @@ pub struct RunWriter {
     episodes: BufWriter<File>,
     /// Bytes of `episodes.csv` written so far (a snapshot records it; a resume cuts back to it).
     episodes_bytes: u64,
+    /// Told each design row written (a running learner's design service).
+    on_designs: Option<DesignsObserver>,
+}
+
+/// A callback given each row written to `designs.csv` (after it is written).
+pub struct DesignsObserver(pub Box<dyn Fn(&DesignRow) + Send>);
+
+impl std::fmt::Debug for DesignsObserver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("DesignsObserver")
+    }
 }
 
 /// Where the run directory's files stood at a snapshot.
@@ -227,6 +238,7 @@ impl RunWriter {
             designs_open: Vec::new(),
             episodes,
             episodes_bytes: header.len() as u64,
+            on_designs: None,
         })
     }
 
@@ -245,9 +257,15 @@ impl RunWriter {
             designs_open: at.designs_open,
             episodes,
             episodes_bytes: at.episodes_bytes,
+            on_designs: None,
         };
         w.write_open_designs()?;
         Ok(w)
+    }
+
+    /// Calls `f` with every row [`RunWriter::design`] writes from now on.
+    pub fn observe_designs(&mut self, f: DesignsObserver) {
+        self.on_designs = Some(f);
     }
 
     /// Where the files stand (for a snapshot; call [`RunWriter::sync`] first).
@@ -328,7 +346,11 @@ impl RunWriter {
             Some(i) => self.designs_open[i] = r.clone(),
             None => self.designs_open.push(r.clone()),
         }
-        self.write_open_designs()
+        self.write_open_designs()?;
+        if let Some(on) = &self.on_designs {
+            (on.0)(r);
+        }
+        Ok(())
     }
 
     /// Cuts `designs.csv` back to its closed rows and writes the open ones after them, fsynced.

@@ -1,4 +1,5 @@
-//! `coadapt.v1.DesignService`: Info, Score, History.
+//! `coadapt.v1.DesignService`: Info, Score, History (Optimize, Landscape and Watch have their
+//! own modules).
 
 use std::sync::Arc;
 
@@ -33,7 +34,7 @@ fn designs_of(req: &pb::ScoreRequest, model: &crate::DesignModel, max: usize) ->
     Ok(flat)
 }
 
-fn record(r: HistoryRow) -> pb::DesignRecord {
+pub(crate) fn record(r: HistoryRow) -> pb::DesignRecord {
     pb::DesignRecord {
         index: u32::try_from(r.index).unwrap_or(u32::MAX),
         kind: r.kind,
@@ -100,5 +101,16 @@ impl DesignService for Design {
             next_index: u32::try_from(next).unwrap_or(u32::MAX),
             more: p.more,
         }))
+    }
+
+    async fn landscape(&self, req: Request<pb::LandscapeRequest>) -> Result<Response<pb::LandscapeReply>, Status> {
+        let m = self.shared.model()?;
+        Ok(Response::new(crate::landscape::landscape(&self.shared, m, req.get_ref()).await?))
+    }
+
+    type WatchStream = tokio_stream::wrappers::ReceiverStream<Result<pb::DesignEvent, Status>>;
+
+    async fn watch(&self, req: Request<pb::WatchDesignsRequest>) -> Result<Response<Self::WatchStream>, Status> {
+        Ok(Response::new(crate::watch::start(self.shared.clone(), req.get_ref().from_index as usize)))
     }
 }

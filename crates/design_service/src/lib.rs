@@ -7,9 +7,10 @@
 //! - `model`: [`DesignModel`], the thesis's Eq. 5.6 over fixed population networks and a fixed
 //!   start-state batch (the optimiser's [`DesignObjective`](coadapt_design_optimizer::objective::DesignObjective)),
 //!   with its spread over the start states; [`ModelSource`], where a server gets the current
-//!   model and the run's history (a finished run's files, or a running learner).
-//! - `design`: the DesignService handlers (`optimize`: the streamed search); `inference`: the
-//!   Open Inference Protocol handlers.
+//!   model and the run's history: [`StaticSource`] (a finished run's files) or, in `live`,
+//!   [`LiveSource`] (fed by a running learner at each design request and design row).
+//! - `design`: the DesignService handlers (`optimize`: the streamed search; `landscape`: Fig.
+//!   5.9's grid; `watch`: the design stream); `inference`: the Open Inference Protocol handlers.
 //!   Both validate every request before use and answer a malformed one with
 //!   `INVALID_ARGUMENT` naming the field.
 //! - `server`: [`serve`], one tonic server for both, with health per service and reflection
@@ -19,11 +20,15 @@
 
 mod design;
 mod inference;
+mod landscape;
+mod live;
 mod model;
 mod optimize;
 mod server;
+mod watch;
 
-pub use model::{DesignModel, HistoryPage, HistoryRow, ModelSource, StaticSource};
+pub use live::LiveSource;
+pub use model::{DesignEvent, DesignModel, HistoryPage, HistoryRow, ModelSource, StaticSource};
 pub use server::{DesignServer, ServeConfig, serve};
 
 /// The model name of the design critic in the Open Inference Protocol.

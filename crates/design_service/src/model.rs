@@ -86,6 +86,15 @@ pub struct HistoryPage {
     pub more: bool,
 }
 
+/// A change to the run's designs.
+#[derive(Clone, Debug, PartialEq)]
+pub enum DesignEvent {
+    /// A row, new or in a newer state.
+    Row(HistoryRow),
+    /// The run has ended: nothing more will change.
+    Ended,
+}
+
 /// Where a server finds the current model and the run's designs.
 pub trait ModelSource: Send + Sync + std::fmt::Debug {
     /// The current model (`None`: not ready, no networks yet).
@@ -93,6 +102,21 @@ pub trait ModelSource: Send + Sync + std::fmt::Debug {
     /// The rows of the design history from index `from` on: at most `max` (at least one),
     /// and more only to end on a whole design (every row of its index).
     fn history(&self, from: usize, max: usize) -> Result<HistoryPage, String>;
+    /// The changes from now on; `None` once the run has ended (a finished run's files).
+    fn subscribe(&self) -> Option<tokio::sync::broadcast::Receiver<DesignEvent>>;
+}
+
+/// The rows of `rows` (ordered by index) from index `from` on, at most `max` (at least one)
+/// and more only to end on a whole design.
+pub(crate) fn page(rows: &[HistoryRow], from: usize, max: usize) -> HistoryPage {
+    let start = rows.partition_point(|r| r.index < from);
+    let mut end = (start + max.max(1)).min(rows.len());
+    // A page ends after a whole design: its rejected proposals and its final row share one
+    // index, and the next page starts at the next index.
+    while end < rows.len() && rows[end].index == rows[end - 1].index {
+        end += 1;
+    }
+    HistoryPage { rows: rows[start..end].to_vec(), more: end < rows.len() }
 }
 
 /// A model and history that do not change: a finished run.
@@ -108,13 +132,10 @@ impl ModelSource for StaticSource {
     }
 
     fn history(&self, from: usize, max: usize) -> Result<HistoryPage, String> {
-        let start = self.history.partition_point(|r| r.index < from);
-        let mut end = (start + max.max(1)).min(self.history.len());
-        // A page ends after a whole design: its rejected proposals and its final row share one
-        // index, and the next page starts at the next index.
-        while end < self.history.len() && self.history[end].index == self.history[end - 1].index {
-            end += 1;
-        }
-        Ok(HistoryPage { rows: self.history[start..end].to_vec(), more: end < self.history.len() })
+        Ok(page(&self.history, from, max))
+    }
+
+    fn subscribe(&self) -> Option<tokio::sync::broadcast::Receiver<DesignEvent>> {
+        None
     }
 }

@@ -59,12 +59,22 @@ pub(crate) struct Shared {
     pub(crate) source: Arc<dyn ModelSource>,
     pub(crate) cfg: ServeConfig,
     pub(crate) permits: Arc<Semaphore>,
+    /// Set when the server stops: open streams end.
+    pub(crate) stop: watch::Receiver<bool>,
 }
 
 impl Shared {
     /// The current model, or UNAVAILABLE.
     pub(crate) fn model(&self) -> Result<Arc<DesignModel>, Status> {
         self.source.model().ok_or_else(|| Status::unavailable("no population networks yet: the run has not trained them"))
+    }
+
+    /// Resolves when the server stops.
+    pub(crate) fn stopping(&self) -> impl std::future::Future<Output = ()> + Send + 'static {
+        let mut stop = self.stop.clone();
+        async move {
+            let _ = stop.wait_for(|s| *s).await;
+        }
     }
 
     /// A place in the bounded pool of computations.
@@ -147,7 +157,9 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
     };
     let limits = PeerLimits::new(cfg.max_connections_per_peer, cfg.max_connections);
     let incoming = LimitedIncoming::new(listener, limits, "coadapt design service");
-    let shared = Arc::new(Shared { source, permits: Arc::new(Semaphore::new(cfg.max_concurrent.max(1))), cfg: cfg.clone() });
+    let (shutdown, mut stop) = watch::channel(false);
+    let shared =
+        Arc::new(Shared { source, permits: Arc::new(Semaphore::new(cfg.max_concurrent.max(1))), cfg: cfg.clone(), stop: stop.clone() });
     let max = cfg.max_message_bytes;
     let design = DesignServiceServer::new(Design { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max);
     let inference =
@@ -161,13 +173,31 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
     let (v1, v1alpha) =
         (reflection().build_v1().map_err(std::io::Error::other)?, reflection().build_v1alpha().map_err(std::io::Error::other)?);
     let (reporter, health) = tonic_health::server::health_reporter();
-    let ready = shared.source.model().is_some();
-    rt.block_on(async {
+    let set_health = |reporter: tonic_health::server::HealthReporter, ready: bool| async move {
         for name in ["", "coadapt.v1.DesignService", "inference.GRPCInferenceService"] {
             let status = if ready { tonic_health::ServingStatus::Serving } else { tonic_health::ServingStatus::NotServing };
             reporter.set_service_status(name, status).await;
         }
-    });
+    };
+    let ready = shared.source.model().is_some();
+    rt.block_on(set_health(reporter.clone(), ready));
+    if !ready {
+        // A running learner has no networks until its first design request: serving from then.
+        let (source, reporter, mut stop) = (shared.source.clone(), reporter.clone(), stop.clone());
+        rt.spawn(async move {
+            let mut tick = tokio::time::interval(Duration::from_millis(200));
+            loop {
+                tokio::select! {
+                    _ = tick.tick() => {}
+                    _ = stop.wait_for(|s| *s) => return,
+                }
+                if source.model().is_some() {
+                    set_health(reporter, true).await;
+                    return;
+                }
+            }
+        });
+    }
     let router = tonic::transport::Server::builder()
         .timeout(cfg.rpc_timeout)
         .max_concurrent_streams(64)
@@ -177,7 +207,6 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
         .add_service(health)
         .add_service(v1)
         .add_service(v1alpha);
-    let (shutdown, mut stop) = watch::channel(false);
     let thread = std::thread::Builder::new().name("coadapt-design-service".into()).spawn(move || {
         let _reporter = reporter;
         rt.block_on(async move {

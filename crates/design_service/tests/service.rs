@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use coadapt_core::BoxSpace;
 use coadapt_design_optimizer::objective::QMode;
-use coadapt_design_service::{DesignModel, HistoryRow, ServeConfig, StaticSource, serve};
+use coadapt_design_service::{DesignModel, HistoryRow, LiveSource, ServeConfig, StaticSource, serve};
 use coadapt_nn::Mlp;
 use coadapt_wire::inference as oip;
 use coadapt_wire::inference::grpc_inference_service_client::GrpcInferenceServiceClient;
@@ -81,9 +81,8 @@ fn row(index: usize, prototype: &str) -> HistoryRow {
     }
 }
 
-fn server(cfg: ServeConfig) -> (coadapt_design_service::DesignServer, Nets) {
-    let n = nets();
-    let model = DesignModel::new(
+fn model(n: &Nets) -> DesignModel {
+    DesignModel::new(
         "toy".into(),
         vec!["thigh".into(), "shin".into(), "foot".into()],
         BoxSpace::new(vec![0.5; DIM], vec![2.0; DIM]).unwrap(),
@@ -94,7 +93,12 @@ fn server(cfg: ServeConfig) -> (coadapt_design_service::DesignServer, Nets) {
         STATE,
         QMode::First,
     )
-    .unwrap();
+    .unwrap()
+}
+
+fn server(cfg: ServeConfig) -> (coadapt_design_service::DesignServer, Nets) {
+    let n = nets();
+    let model = model(&n);
     let history = vec![row(0, ""), row(1, "rejected"), row(1, "confirmed"), row(2, "")];
     let s = serve("127.0.0.1:0".parse().unwrap(), cfg, Arc::new(StaticSource { model: Arc::new(model), history })).unwrap();
     (s, n)
@@ -376,5 +380,88 @@ fn optimize_refuses_what_does_not_fit_and_stops_when_cancelled() {
         let sc = tokio::time::timeout(std::time::Duration::from_secs(10), d.score(designs(&[[1.0; DIM]]))).await;
         assert!(sc.is_ok_and(|r| r.is_ok()), "Score waited behind a cancelled search");
         assert!(t.elapsed() < std::time::Duration::from_secs(5), "the cancelled search held the pool for {:?}", t.elapsed());
+    });
+}
+
+#[test]
+fn landscape_lays_the_grid_over_the_designs_tried_and_refuses_a_grid_too_large() {
+    let (s, n) = server(ServeConfig { max_score_batch: 100, ..ServeConfig::default() });
+    rt().block_on(async {
+        let mut d = DesignServiceClient::new(channel(&s).await);
+        let l = d.landscape(pb::LandscapeRequest { grid: 4 }).await.unwrap().into_inner();
+        assert_eq!((l.pc1.len(), l.pc2.len(), l.objective.len()), (4, 4, 16));
+        // The rejected proposal is not a design tried.
+        assert_eq!(l.designs.iter().map(|p| p.index).collect::<Vec<_>>(), vec![0, 1, 2]);
+        // Each grid value is Eq. 5.6 at mean + pc1 axis1 + pc2 axis2, clipped to the box.
+        let (mean, a1, a2) = (l.mean.unwrap().values, l.axis1.unwrap().values, l.axis2.unwrap().values);
+        for (j, &p2) in l.pc2.iter().enumerate() {
+            for (i, &p1) in l.pc1.iter().enumerate() {
+                let x: Vec<f32> = (0..DIM).map(|k| (mean[k] + p1 * a1[k] + p2 * a2[k]).clamp(0.5, 2.0)).collect();
+                let (want, _) = reference(&n, &x);
+                let got = l.objective[j * 4 + i];
+                assert!((got - want).abs() <= 1e-4 * want.abs().max(1.0), "({i}, {j}): {got} vs {want}");
+            }
+        }
+        // The designs differ only in the second coordinate: all the variance on one axis.
+        assert!((l.explained1 - 1.0).abs() < 1e-5, "{}", l.explained1);
+        invalid(d.landscape(pb::LandscapeRequest { grid: 11 }).await, "grid: 11 x 11 points");
+    });
+}
+
+async fn next(w: &mut tonic::Streaming<pb::DesignEvent>) -> Option<pb::DesignEvent> {
+    tokio::time::timeout(std::time::Duration::from_secs(5), w.message()).await.expect("no event in 5 s").unwrap()
+}
+
+#[test]
+fn watch_streams_the_history_then_each_change_until_the_run_ends() {
+    let n = nets();
+    // A resumed run's rows: design 1 is the open one.
+    let live = Arc::new(LiveSource::new(vec![row(0, ""), row(1, "rejected")]));
+    // Streams outlive the server's deadline for a call.
+    let cfg = ServeConfig { rpc_timeout: std::time::Duration::from_millis(300), ..ServeConfig::default() };
+    let s = serve("127.0.0.1:0".parse().unwrap(), cfg, live.clone()).unwrap();
+    rt().block_on(async {
+        let mut d = DesignServiceClient::new(channel(&s).await);
+        // No networks yet: UNAVAILABLE, but the history is there.
+        assert_eq!(d.info(pb::InfoRequest {}).await.unwrap_err().code(), Code::Unavailable);
+        let h = d.history(pb::HistoryRequest { from_index: 0, max_rows: 0 }).await.unwrap().into_inner();
+        assert_eq!(h.designs.len(), 2);
+        let mut w = d.watch(pb::WatchDesignsRequest { from_index: 1 }).await.unwrap().into_inner();
+        let first = next(&mut w).await.unwrap().design.unwrap();
+        assert_eq!((first.index, first.prototype.as_str()), (1, "rejected"));
+        tokio::time::sleep(std::time::Duration::from_millis(600)).await;
+        // Design 1 chosen again and confirmed, then trained; design 2 chosen.
+        let mut chosen = row(1, "confirmed");
+        chosen.episodes = 0;
+        live.upsert(chosen);
+        live.upsert(row(1, "confirmed"));
+        live.set_model(model(&n));
+        live.upsert(row(2, ""));
+        let got: Vec<(u32, u32, String)> = {
+            let mut v = Vec::new();
+            for _ in 0..3 {
+                let r = next(&mut w).await.unwrap().design.unwrap();
+                v.push((r.index, r.episodes, r.prototype));
+            }
+            v
+        };
+        assert_eq!(got, vec![(1, 0, "confirmed".into()), (1, 3, "confirmed".into()), (2, 3, String::new())]);
+        // The history keeps the rejected proposal and the confirmed row, and the new design.
+        let h = d.history(pb::HistoryRequest { from_index: 1, max_rows: 1 }).await.unwrap().into_inner();
+        assert_eq!(
+            h.designs.iter().map(|r| (r.index, r.prototype.clone())).collect::<Vec<_>>(),
+            vec![(1, "rejected".to_string()), (1, "confirmed".to_string())]
+        );
+        assert!(h.more);
+        assert_eq!(d.info(pb::InfoRequest {}).await.unwrap().into_inner().weights_version, 42);
+        live.end();
+        assert!(next(&mut w).await.is_none(), "the stream ends with the run");
+        // A Watch after the end: the rows, then the end.
+        let mut w = d.watch(pb::WatchDesignsRequest { from_index: 0 }).await.unwrap().into_inner();
+        let mut rows = 0;
+        while next(&mut w).await.is_some() {
+            rows += 1;
+        }
+        assert_eq!(rows, 4);
     });
 }
