@@ -52,6 +52,31 @@ pub struct TransportArgs {
     pub connect: String,
     #[arg(long, hide = true, default_value_t = 0)]
     pub id: u64,
+    /// Time gRPC over TLS with the certificates in DIR (`coadapt tls new --out DIR`: ca.pem,
+    /// server.pem, server-key.pem); the figures' configs end in `-tls`.
+    #[arg(long, value_name = "DIR")]
+    pub tls: Option<std::path::PathBuf>,
+}
+
+/// `--tls`: the same for the learner and its peer processes.
+static TLS_DIR: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+
+/// The benchmark's TLS settings (none without `--tls`).
+fn security() -> crate::security::SecurityConfig {
+    let Some(dir) = TLS_DIR.get() else { return crate::security::SecurityConfig::default() };
+    let f = |n: &str| dir.join(n).display().to_string();
+    crate::security::SecurityConfig {
+        tls_cert: f("server.pem"),
+        tls_key: f("server-key.pem"),
+        tls_ca: f("ca.pem"),
+        tls_server_name: "localhost".into(),
+        ..Default::default()
+    }
+}
+
+/// `-tls` when timing over TLS.
+fn tls_suffix() -> &'static str {
+    if TLS_DIR.get().is_some() { "-tls" } else { "" }
 }
 
 const OBS: usize = 23;
@@ -90,6 +115,9 @@ fn fleet_config(kind: TransportKind, fleet: &str, connect: &str) -> FleetConfig 
 }
 
 pub fn run(a: &TransportArgs) -> anyhow::Result<()> {
+    if let Some(dir) = &a.tls {
+        let _ = TLS_DIR.set(dir.clone());
+    }
     if let Some(peer) = a.peer {
         let kind = *a.transport.first().context("--peer needs --transport")?;
         return run_peer(peer, &fleet_config(kind, &a.fleet, &a.connect), a);
@@ -119,7 +147,7 @@ struct Learner {
 fn learner(kind: TransportKind, tag: &str) -> anyhow::Result<Learner> {
     let fleet = format!("coadapt-bench-{}-{tag}", std::process::id());
     let cfg = fleet_config(kind, &fleet, "");
-    let (links, guard) = cfg.learner_links(None, None)?;
+    let (links, guard) = cfg.learner_links(None, None, &security())?;
     let connect = match &guard {
         crate::fleet::LearnerGuard::Grpc(s) => format!("http://{}", s.local_addr()),
         crate::fleet::LearnerGuard::None => String::new(),
@@ -134,6 +162,7 @@ fn spawn_peers(kind: TransportKind, l: &Learner, peer: &str, n: usize, seconds: 
             Command::new(&exe)
                 .args(["bench", "transport", "--peer", peer, "--transport", kind.name(), "--fleet", &l.fleet, "--connect", &l.connect])
                 .args(["--id", &i.to_string(), "--seconds", &seconds.to_string()])
+                .args(TLS_DIR.get().map(|d| vec!["--tls".to_string(), d.display().to_string()]).unwrap_or_default())
                 .stdin(Stdio::null())
                 .stdout(Stdio::null())
                 .spawn()
@@ -200,7 +229,7 @@ fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> 
     drop(l);
     reap(peers);
     times.sort_by(f64::total_cmp);
-    let config = format!("{}-{n}actors-{}KB", kind.name(), len * 4 / 1000);
+    let config = format!("{}-{n}actors-{}KB{}", kind.name(), len * 4 / 1000, tls_suffix());
     emit("weights_broadcast_median", &config, times[times.len() / 2], "ms");
     emit("weights_broadcast_p99", &config, times[(times.len() * 99 / 100).min(times.len() - 1)], "ms");
     // Weights delivered per second of median round trip, all actors together.
@@ -239,14 +268,14 @@ fn experience(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()>
     reap(peers);
     let Some(first) = first else { bail!("no experience arrived from {n} peer processes") };
     let secs = last.duration_since(first).as_secs_f64().max(1e-9);
-    let config = format!("{}-{n}senders-{ROWS}rows", kind.name());
+    let config = format!("{}-{n}senders-{ROWS}rows{}", kind.name(), tls_suffix());
     emit("experience", &config, rows as f64 / secs, "transitions/s");
     emit("experience", &config, (rows * bytes_per_row) as f64 / secs / 1e6, "MB/s");
     Ok(())
 }
 
 fn run_peer(peer: Peer, cfg: &FleetConfig, a: &TransportArgs) -> anyhow::Result<()> {
-    let mut links = cfg.actor_links(a.id)?;
+    let mut links = cfg.actor_links(a.id, &security())?;
     match peer {
         Peer::Echo => {
             let mut seen = 0;

@@ -16,6 +16,10 @@ pub struct ServerArgs {
     /// Deadline of each call, seconds.
     #[arg(long, default_value_t = 10.0)]
     pub timeout_secs: f64,
+    /// TLS (--tls-ca, --tls-server-name, --client-cert/--client-key) and the token
+    /// (--token-file, or COADAPT_TOKEN in the environment).
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
 }
 
 /// Score designs with a run's critic (Eq. 5.6: the mean over the run's start states of the
@@ -85,7 +89,11 @@ pub fn optimize(a: OptimizeArgs) -> anyhow::Result<()> {
         seed: a.seed,
     };
     // A search may take longer than one call's deadline: the stream gets 100 of them.
-    let (rt, mut c, _) = client(&ServerArgs { server: a.server.server.clone(), timeout_secs: a.server.timeout_secs * 100.0 })?;
+    let (rt, mut c, _) = client(&ServerArgs {
+        server: a.server.server.clone(),
+        timeout_secs: a.server.timeout_secs * 100.0,
+        security: a.server.security.clone(),
+    })?;
     rt.block_on(async move {
         let mut s = c.optimize(req).await.map_err(status)?.into_inner();
         while let Some(m) = s.message().await.map_err(status)? {
@@ -117,19 +125,20 @@ pub struct HistoryArgs {
     pub from: u32,
 }
 
-fn client(a: &ServerArgs) -> anyhow::Result<(tokio::runtime::Runtime, DesignServiceClient<tonic::transport::Channel>, Duration)> {
+type Client = DesignServiceClient<coadapt_auth::AuthChannel>;
+
+fn client(a: &ServerArgs) -> anyhow::Result<(tokio::runtime::Runtime, Client, Duration)> {
     let t = Duration::try_from_secs_f64(a.timeout_secs)
         .ok()
         .filter(|d| !d.is_zero())
         .ok_or_else(|| anyhow::anyhow!("--timeout-secs: {} is not a positive number of seconds", a.timeout_secs))?;
-    let url = if a.server.contains("://") { a.server.clone() } else { format!("http://{}", a.server) };
-    let endpoint = tonic::transport::Endpoint::from_shared(url.clone())
-        .with_context(|| format!("--server: {:?} is not an address", a.server))?
-        .connect_timeout(t)
-        .timeout(t);
+    let auth = crate::security::from_args(&a.security).client_auth()?;
+    let endpoint =
+        auth.endpoint(&a.server).with_context(|| format!("--server: {:?} is not an address", a.server))?.connect_timeout(t).timeout(t);
+    let url = endpoint.uri().to_string();
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
     let channel = rt.block_on(endpoint.connect()).with_context(|| format!("connecting to the design service at {url}"))?;
-    Ok((rt, DesignServiceClient::new(channel), t))
+    Ok((rt, DesignServiceClient::with_interceptor(channel, auth.bearer()), t))
 }
 
 fn status(e: tonic::Status) -> anyhow::Error {

@@ -15,8 +15,12 @@ pub struct EnvServeArgs {
     #[arg(long)]
     pub env: String,
     /// Address to listen on (port 0 picks a free port; the address is printed on stdout).
+    /// Loopback only unless TLS is configured (--tls-cert, --tls-key) or --insecure is given.
     #[arg(long, default_value = "127.0.0.1:0")]
     pub listen: String,
+    /// TLS and tokens (actors and operators may step the robot).
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
 }
 
 /// Serves until Ctrl-C or SIGTERM.
@@ -24,17 +28,25 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
     let name = args.env.clone();
     // Fail now, not at the first CreateWorld, on an unknown robot.
     coadapt_robots::make(&name)?;
+    let security = crate::security::from_args(&args.security);
+    let auth = security.server_auth()?;
     let factory: coadapt_env_rpc::EnvFactory = std::sync::Arc::new(move || coadapt_robots::make(&name).map_err(|e| e.to_string()));
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the runtime")?;
     rt.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(&args.listen).await.with_context(|| format!("listening on {}", args.listen))?;
+        let want: std::net::SocketAddr =
+            args.listen.parse().with_context(|| format!("--listen: {:?} is not an address like 127.0.0.1:50051", args.listen))?;
+        crate::security::check_plaintext_listen("--listen", want, &security)?;
+        let listener = tokio::net::TcpListener::bind(want).await.with_context(|| format!("listening on {}", args.listen))?;
         let addr = listener.local_addr()?;
         eprintln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);
         crate::progress::print_stdout_line(&format!("dm-env-rpc://{addr}"));
         let (stopped_tx, stopped_rx) = tokio::sync::oneshot::channel::<()>();
-        let server = tokio::spawn(coadapt_env_rpc::server::serve(listener, factory, async {
-            let _ = stopped_rx.await;
-        }));
+        let server = tokio::spawn(async move {
+            coadapt_env_rpc::server::serve(listener, factory, &auth, async {
+                let _ = stopped_rx.await;
+            })
+            .await
+        });
         wait_for_signal().await;
         eprintln!("env-serve: stopping (open streams get {GRACE:?} to finish)");
         let _ = stopped_tx.send(());

@@ -110,7 +110,7 @@ impl FleetConfig {
         Ok(coadapt_shm::ShmConfig { fleet: self.name.clone(), max_actors: self.max_actors, ..coadapt_shm::ShmConfig::default() })
     }
 
-    fn grpc(&self) -> anyhow::Result<coadapt_grpc::GrpcConfig> {
+    fn grpc(&self, security: &crate::security::SecurityConfig) -> anyhow::Result<coadapt_grpc::GrpcConfig> {
         let t = self.rpc_timeout_secs;
         let rpc_timeout = Duration::try_from_secs_f64(t)
             .ok()
@@ -131,6 +131,8 @@ impl FleetConfig {
         if !self.name.is_empty() {
             cfg.fleet = self.name.clone();
         }
+        cfg.server_auth = security.server_auth()?;
+        cfg.client_auth = security.client_auth()?;
         Ok(cfg)
     }
 
@@ -138,7 +140,12 @@ impl FleetConfig {
     /// other widths than `dims` at the edge.
     /// `max_episode_steps`: the robot's episode length, the most steps an episode's end may
     /// claim over gRPC (it bounds what the server holds per episode).
-    pub fn learner_links(&self, dims: Option<Dims>, max_episode_steps: Option<usize>) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
+    pub fn learner_links(
+        &self,
+        dims: Option<Dims>,
+        max_episode_steps: Option<usize>,
+        security: &crate::security::SecurityConfig,
+    ) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
@@ -149,7 +156,8 @@ impl FleetConfig {
             TransportKind::Grpc => {
                 let addr: SocketAddr =
                     self.listen.parse().with_context(|| format!("fleet.listen: {:?} is not an address like 0.0.0.0:50051", self.listen))?;
-                let mut grpc = self.grpc()?;
+                crate::security::check_plaintext_listen("fleet.listen", addr, security)?;
+                let mut grpc = self.grpc(security)?;
                 // The id the learner's snapshots carry too; a client that sees it change drops
                 // what it holds from the older start.
                 grpc.run_id = Some(crate::resume::run_id());
@@ -167,30 +175,28 @@ impl FleetConfig {
         }
     }
 
-    pub fn actor_links(&self, id: u64) -> anyhow::Result<ActorLinks> {
+    pub fn actor_links(&self, id: u64, security: &crate::security::SecurityConfig) -> anyhow::Result<ActorLinks> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
                 clean_stale();
                 coadapt_shm::actor_links(&cfg, id).with_context(|| format!("joining shared-memory fleet {}", cfg.fleet))
             }
-            TransportKind::Grpc => {
-                coadapt_grpc::actor_links(&self.connect, id, &self.grpc()?).with_context(|| format!("connecting to {}", self.connect))
-            }
+            TransportKind::Grpc => coadapt_grpc::actor_links(&self.connect, id, &self.grpc(security)?)
+                .with_context(|| format!("connecting to {}", self.connect)),
             TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
         }
     }
 
-    pub fn optimizer_links(&self) -> anyhow::Result<OptimizerLinks> {
+    pub fn optimizer_links(&self, security: &crate::security::SecurityConfig) -> anyhow::Result<OptimizerLinks> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
                 clean_stale();
                 coadapt_shm::optimizer_links(&cfg).with_context(|| format!("joining shared-memory fleet {}", cfg.fleet))
             }
-            TransportKind::Grpc => {
-                coadapt_grpc::optimizer_links(&self.connect, &self.grpc()?).with_context(|| format!("connecting to {}", self.connect))
-            }
+            TransportKind::Grpc => coadapt_grpc::optimizer_links(&self.connect, &self.grpc(security)?)
+                .with_context(|| format!("connecting to {}", self.connect)),
             TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
         }
     }

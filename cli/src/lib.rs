@@ -27,6 +27,7 @@ pub mod bench_env;
 pub mod bench_snapshot;
 pub mod bench_transport;
 pub mod confirm;
+pub mod credentials;
 pub mod design_client;
 pub mod design_live;
 pub mod env_serve;
@@ -68,6 +69,12 @@ pub enum Command {
     EnvServe(env_serve::EnvServeArgs),
     Serve(serve::ServeArgs),
     Score(design_client::ScoreArgs),
+    /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
+    #[command(subcommand)]
+    Token(credentials::TokenCommand),
+    /// TLS certificates for the fleet's endpoints (`coadapt tls new --out DIR`).
+    #[command(subcommand)]
+    Tls(credentials::TlsCommand),
     Optimize(design_client::OptimizeArgs),
     History(design_client::HistoryArgs),
     /// Run benchmarks; each prints one JSON line per figure.
@@ -89,6 +96,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::EnvServe(args) => env_serve::run(args),
         Command::Serve(args) => serve::run(args),
         Command::Score(args) => design_client::score(args),
+        Command::Token(cmd) => credentials::token(cmd),
+        Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),
         Command::History(args) => design_client::history(args),
         Command::Bench(cmd) => bench::run(cmd),

@@ -129,7 +129,7 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     let spec = make_env(&cfg.env)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
-    let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps))?;
+    let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
     eprintln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
     let stop_health = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let health = match &guard {
@@ -174,7 +174,7 @@ pub fn actor(args: ActorArgs) -> anyhow::Result<()> {
     let id = args.id.unwrap_or_else(default_id);
     let spec = make_env(&cfg.env)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
-    let mut links = cfg.fleet.actor_links(id)?;
+    let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
     eprintln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
     roles::actor(&cfg, &spec, id, &mut links, &shutdown)
 }
@@ -190,7 +190,7 @@ pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
     }
     let spec = make_env(&cfg.env)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
-    let mut links = cfg.fleet.optimizer_links()?;
+    let mut links = cfg.fleet.optimizer_links(&cfg.security)?;
     eprintln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());
     roles::optimizer(&cfg, &spec, &mut links, &shutdown, args.state_dir.as_deref())
 }

@@ -55,8 +55,9 @@ impl Default for RemoteEnvConfig {
 }
 
 impl RemoteEnvConfig {
-    /// The client's options, refusing durations that are not positive numbers of seconds.
-    pub fn options(&self) -> anyhow::Result<RemoteOptions> {
+    /// The client's options (with `security`'s TLS and token), refusing durations that are
+    /// not positive numbers of seconds.
+    pub fn options(&self, security: &crate::security::SecurityConfig) -> anyhow::Result<RemoteOptions> {
         let secs = |field: &str, v: f64| {
             if v.is_finite() && v > 0.0 && v < 1e9 {
                 Ok(Duration::from_secs_f64(v))
@@ -69,22 +70,23 @@ impl RemoteEnvConfig {
             request_timeout: secs("request-timeout-secs", self.request_timeout_secs)?,
             reconnect_for: secs("reconnect-secs", self.reconnect_secs)?,
             max_backoff: secs("max-backoff-secs", self.max_backoff_secs)?,
+            auth: security.client_auth()?,
             ..RemoteOptions::default()
         })
     }
 }
 
 /// The environment `name`: a built-in robot, or `dm-env-rpc://HOST:PORT` for a remote one.
-pub fn make_env_with(name: &str, remote: &RemoteEnvConfig) -> anyhow::Result<Box<dyn Env>> {
+pub fn make_env_with(name: &str, remote: &RemoteEnvConfig, security: &crate::security::SecurityConfig) -> anyhow::Result<Box<dyn Env>> {
     if coadapt_env_rpc::is_remote(name) {
-        return Ok(Box::new(RemoteEnv::connect(name, remote.options()?)?));
+        return Ok(Box::new(RemoteEnv::connect(name, remote.options(security)?)?));
     }
     coadapt_robots::make(name).map_err(|e| anyhow::anyhow!("{e}; or dm-env-rpc://HOST:PORT for a remote environment"))
 }
 
 /// [`make_env_with`] with the default remote settings.
 pub fn make_env(name: &str) -> anyhow::Result<Box<dyn Env>> {
-    make_env_with(name, &RemoteEnvConfig::default())
+    make_env_with(name, &RemoteEnvConfig::default(), &crate::security::SecurityConfig::default())
 }
 
 /// Simulation rollouts for the baselines: one deterministic episode of the population policy
@@ -317,7 +319,8 @@ pub fn learner(
 /// One actor: runs the episodes it is handed until the learner is done.
 pub fn actor(cfg: &RunConfig, spec: &EnvSpec, id: u64, links: &mut ActorLinks, shutdown: &AtomicBool) -> anyhow::Result<()> {
     let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), &cfg.learner.sac.hidden)?;
-    let mut actor = Actor::new(make_env_with(&cfg.env, &cfg.remote)?, policy, PolicyKind::SquashedGaussian, cfg.seed.wrapping_add(id))?;
+    let mut actor =
+        Actor::new(make_env_with(&cfg.env, &cfg.remote, &cfg.security)?, policy, PolicyKind::SquashedGaussian, cfg.seed.wrapping_add(id))?;
     let s = coadapt_actors::role::run(&mut actor, id, links, cfg.chunk_len, cfg.remote.env_retries, shutdown)
         .with_context(|| format!("actor {id}"))?;
     eprintln!(
@@ -351,7 +354,7 @@ pub fn optimizer(
         let actors = (0..cfg.sim_threads.max(1))
             .map(|i| {
                 Ok(Actor::new(
-                    make_env_with(&cfg.env, &cfg.remote)?,
+                    make_env_with(&cfg.env, &cfg.remote, &cfg.security)?,
                     policy.clone(),
                     PolicyKind::SquashedGaussian,
                     cfg.seed ^ (0x5349_4d00 + i as u64),

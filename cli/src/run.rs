@@ -241,7 +241,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
     }
     cfg.flow.lease().map_err(anyhow::Error::msg)?;
     cfg.schedule.poll_interval().map_err(anyhow::Error::msg)?;
-    cfg.remote.options()?;
+    cfg.remote.options(&cfg.security)?;
     if cfg.fleet.transport == TransportKind::Shm && cfg.actors > cfg.fleet.max_actors {
         bail!("actors: {} is more than fleet.max-actors ({}); raise fleet.max-actors", cfg.actors, cfg.fleet.max_actors);
     }

@@ -1,7 +1,11 @@
 //! `[security]`: TLS and role tokens for every gRPC endpoint a process serves or calls.
 
 use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
 
+use anyhow::Context;
+use coadapt_auth::{ClientAuth, ClientTls, ServerAuth, ServerTls, Token, TokenTable};
 use serde::{Deserialize, Serialize};
 
 /// `[security]`: who may talk to the fleet's endpoints. Paths only: keys and tokens are read
@@ -47,4 +51,153 @@ pub fn check_plaintext_listen(key: &str, addr: SocketAddr, cfg: &SecurityConfig)
          reaches the port could read and write the run. Configure TLS, listen on 127.0.0.1, or set security.insecure \
          (--insecure) on a network you trust"
     )
+}
+
+fn path(p: &str) -> Option<&std::path::Path> {
+    let p = p.trim();
+    (!p.is_empty()).then(|| std::path::Path::new(p))
+}
+
+/// Warns when a file holding a secret can be read by others than its owner.
+fn warn_if_shared(key: &str, p: &std::path::Path) {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        if let Ok(m) = std::fs::metadata(p)
+            && m.permissions().mode() & 0o077 != 0
+        {
+            eprintln!("warning: {key} = {}: readable by others than its owner (chmod 600 it)", p.display());
+        }
+    }
+}
+
+impl SecurityConfig {
+    /// What a server applies: TLS when `tls-cert` is set (with `client-auth`, client
+    /// certificates signed by `tls-ca` are required), tokens when `tokens-file` is set.
+    pub fn server_auth(&self) -> anyhow::Result<ServerAuth> {
+        let tls = match (path(&self.tls_cert), path(&self.tls_key)) {
+            (None, None) => None,
+            (Some(_), None) => anyhow::bail!("security.tls-key: missing; security.tls-cert needs its private key"),
+            (None, Some(_)) => anyhow::bail!("security.tls-cert: missing; security.tls-key is set without its certificate"),
+            (Some(c), Some(k)) => {
+                warn_if_shared("security.tls-key", k);
+                let ca = if self.client_auth {
+                    Some(path(&self.tls_ca).context("security.tls-ca: client-auth needs the CA that signs the clients' certificates")?)
+                } else {
+                    None
+                };
+                Some(ServerTls::load(c, k, ca, ("security.tls-cert", "security.tls-key", "security.tls-ca"))?)
+            }
+        };
+        let tokens = match path(&self.tokens_file) {
+            None => None,
+            Some(p) => {
+                let t = TokenTable::load(p).map_err(|e| anyhow::anyhow!("security.tokens-file: {e}"))?;
+                if t.is_empty() {
+                    anyhow::bail!(
+                        "security.tokens-file = {}: no tokens: every call would be refused (coadapt token new adds one)",
+                        p.display()
+                    );
+                }
+                Some(Arc::new(t))
+            }
+        };
+        Ok(ServerAuth { tls, tokens })
+    }
+
+    /// What a client presents: TLS when `tls-ca` is set (its own certificate with
+    /// `client-cert`), the token of `COADAPT_TOKEN` or `token-file`.
+    pub fn client_auth(&self) -> anyhow::Result<ClientAuth> {
+        let identity = match (path(&self.client_cert), path(&self.client_key)) {
+            (None, None) => None,
+            (Some(c), Some(k)) => {
+                warn_if_shared("security.client-key", k);
+                Some((c, k))
+            }
+            _ => anyhow::bail!("security.client-cert and security.client-key: set both or neither"),
+        };
+        let tls = match path(&self.tls_ca) {
+            None if identity.is_some() => anyhow::bail!("security.tls-ca: a client certificate is of no use without TLS (set tls-ca)"),
+            None => None,
+            Some(ca) => Some(ClientTls::load(
+                ca,
+                &self.tls_server_name,
+                identity,
+                ("security.tls-ca", "security.client-cert", "security.client-key"),
+            )?),
+        };
+        let token = match (std::env::var("COADAPT_TOKEN").ok().filter(|t| !t.trim().is_empty()), path(&self.token_file)) {
+            (Some(t), _) => Some(Token::new(&t).map_err(|e| anyhow::anyhow!("COADAPT_TOKEN: {e}"))?),
+            (None, Some(p)) => {
+                warn_if_shared("security.token-file", p);
+                let text = std::fs::read_to_string(p).with_context(|| format!("security.token-file = {}", p.display()))?;
+                Some(Token::new(&text).map_err(|e| anyhow::anyhow!("security.token-file = {}: {e}", p.display()))?)
+            }
+            (None, None) => None,
+        };
+        Ok(ClientAuth { tls, token })
+    }
+
+    /// `args`' flags over these settings.
+    pub fn with_args(mut self, a: &SecurityArgs) -> Self {
+        let set = |field: &mut String, v: &Option<PathBuf>| {
+            if let Some(v) = v {
+                *field = v.display().to_string();
+            }
+        };
+        set(&mut self.tls_cert, &a.tls_cert);
+        set(&mut self.tls_key, &a.tls_key);
+        set(&mut self.tls_ca, &a.tls_ca);
+        set(&mut self.client_cert, &a.client_cert);
+        set(&mut self.client_key, &a.client_key);
+        set(&mut self.tokens_file, &a.tokens_file);
+        set(&mut self.token_file, &a.token_file);
+        if let Some(n) = &a.tls_server_name {
+            self.tls_server_name = n.clone();
+        }
+        self.client_auth |= a.client_auth;
+        self.insecure |= a.insecure;
+        self
+    }
+}
+
+/// TLS and token flags of the commands that serve or call without a run config (`serve`,
+/// `env-serve`, `score`, `optimize`, `history`). Paths only: secrets stay in files.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct SecurityArgs {
+    /// Serve TLS with this PEM certificate (with --tls-key).
+    #[arg(long, value_name = "PEM")]
+    pub tls_cert: Option<PathBuf>,
+    /// The PEM private key of --tls-cert.
+    #[arg(long, value_name = "PEM")]
+    pub tls_key: Option<PathBuf>,
+    /// The CA certificate that signed the server (a client checks the server with it; a server
+    /// with --client-auth checks clients' certificates with it).
+    #[arg(long, value_name = "PEM")]
+    pub tls_ca: Option<PathBuf>,
+    /// The name the server's certificate is issued for (default: the host called).
+    #[arg(long, value_name = "NAME")]
+    pub tls_server_name: Option<String>,
+    /// Mutual TLS: require clients' certificates signed by --tls-ca.
+    #[arg(long)]
+    pub client_auth: bool,
+    /// A client certificate for mutual TLS (PEM, with --client-key).
+    #[arg(long, value_name = "PEM")]
+    pub client_cert: Option<PathBuf>,
+    #[arg(long, value_name = "PEM")]
+    pub client_key: Option<PathBuf>,
+    /// Serve: accept only the tokens in this file (`ROLE SHA256` lines; `coadapt token new`).
+    #[arg(long, value_name = "FILE")]
+    pub tokens_file: Option<PathBuf>,
+    /// Call with the token in this file (`COADAPT_TOKEN` in the environment wins).
+    #[arg(long, value_name = "FILE")]
+    pub token_file: Option<PathBuf>,
+    /// Serve plaintext (no TLS) on an address other than loopback: a network you trust only.
+    #[arg(long)]
+    pub insecure: bool,
+}
+
+/// The settings of `args` alone.
+pub fn from_args(args: &SecurityArgs) -> SecurityConfig {
+    SecurityConfig::default().with_args(args)
 }

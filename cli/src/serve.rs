@@ -29,11 +29,12 @@ pub struct ServeArgs {
     /// Address to listen on (port 0 picks a free port).
     #[arg(long, default_value = "127.0.0.1:50061")]
     pub listen: String,
-    /// Serve plaintext on an address other than loopback. TLS is not built in yet, so without
-    /// this flag only loopback addresses are served: anyone who reaches the port reads the
+    /// TLS (--tls-cert, --tls-key; --client-auth with --tls-ca for mutual TLS) and tokens
+    /// (--tokens-file: clients, optimisers and operators may query). Without TLS only loopback
+    /// addresses are served unless --insecure: anyone who reaches the port would read the
     /// run's designs and critic.
-    #[arg(long)]
-    pub insecure: bool,
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
     /// Most designs one Score or ModelInfer call may carry.
     #[arg(long, default_value_t = 10_000)]
     pub max_score_batch: usize,
@@ -89,7 +90,7 @@ pub fn history_row(r: run_dir::DesignRow) -> HistoryRow {
 /// The model and history of the run in `dir`.
 pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
     let cfg = crate::resume::stored_config(dir)?;
-    let env = crate::roles::make_env_with(&cfg.env, &cfg.remote)?;
+    let env = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?;
     let spec = env.spec();
     let root = crate::resume::snapshot_root(dir);
     let (from, manifest, mut state, skipped) =
@@ -129,17 +130,14 @@ pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     let addr: SocketAddr =
         args.listen.parse().with_context(|| format!("--listen: {:?} is not an address like 127.0.0.1:50061", args.listen))?;
-    if !addr.ip().is_loopback() && !args.insecure {
-        anyhow::bail!(
-            "--listen {addr}: not a loopback address, and coadapt serve has no TLS yet: anyone who reaches the port would read the \
-             run's designs and critic. Listen on 127.0.0.1 (and tunnel), or pass --insecure on a network you trust"
-        );
-    }
+    let security = crate::security::from_args(&args.security);
+    crate::security::check_plaintext_listen("--listen", addr, &security)?;
+    let auth = security.server_auth()?;
     if args.max_score_batch == 0 {
         anyhow::bail!("--max-score-batch: 0 would refuse every request; at least 1");
     }
     let source = load(&args.run_dir)?;
-    let cfg = ServeConfig { max_score_batch: args.max_score_batch, ..ServeConfig::default() };
+    let cfg = ServeConfig { max_score_batch: args.max_score_batch, auth, ..ServeConfig::default() };
     let server = coadapt_design_service::serve(addr, cfg, Arc::new(source)).with_context(|| format!("listening on {addr}"))?;
     let at = server.local_addr();
     eprintln!("serve: coadapt.v1.DesignService and design-critic (Open Inference Protocol) on {at} (Ctrl-C stops)");

@@ -36,6 +36,8 @@ pub struct ServeConfig {
     pub max_connections_per_peer: usize,
     /// TCP connections open in all.
     pub max_connections: usize,
+    /// TLS and accepted tokens (clients, optimisers and operators may query).
+    pub auth: coadapt_auth::ServerAuth,
 }
 
 impl Default for ServeConfig {
@@ -49,6 +51,7 @@ impl Default for ServeConfig {
             max_message_bytes: 16 << 20,
             max_connections_per_peer: 64,
             max_connections: 256,
+            auth: coadapt_auth::ServerAuth::default(),
         }
     }
 }
@@ -161,17 +164,28 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
     let shared =
         Arc::new(Shared { source, permits: Arc::new(Semaphore::new(cfg.max_concurrent.max(1))), cfg: cfg.clone(), stop: stop.clone() });
     let max = cfg.max_message_bytes;
-    let design = DesignServiceServer::new(Design { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max);
-    let inference =
-        GrpcInferenceServiceServer::new(Inference { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max);
+    use coadapt_auth::Role;
+    use tonic::service::interceptor::InterceptedService;
+    let queries = cfg.auth.gate(&[Role::Client, Role::Optimizer]);
+    let any = cfg.auth.gate(&Role::ALL).counting(queries.counts().clone());
+    let design = InterceptedService::new(
+        DesignServiceServer::new(Design { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max),
+        queries.clone(),
+    );
+    let inference = InterceptedService::new(
+        GrpcInferenceServiceServer::new(Inference { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max),
+        queries,
+    );
     let reflection = || {
         tonic_reflection::server::Builder::configure()
             .register_encoded_file_descriptor_set(coadapt_wire::FILE_DESCRIPTOR_SET)
             .register_encoded_file_descriptor_set(coadapt_wire::INFERENCE_DESCRIPTOR_SET)
             .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
     };
-    let (v1, v1alpha) =
-        (reflection().build_v1().map_err(std::io::Error::other)?, reflection().build_v1alpha().map_err(std::io::Error::other)?);
+    let (v1, v1alpha) = (
+        InterceptedService::new(reflection().build_v1().map_err(std::io::Error::other)?, any.clone()),
+        InterceptedService::new(reflection().build_v1alpha().map_err(std::io::Error::other)?, any),
+    );
     let (reporter, health) = tonic_health::server::health_reporter();
     let set_health = |reporter: tonic_health::server::HealthReporter, ready: bool| async move {
         for name in ["", "coadapt.v1.DesignService", "inference.GRPCInferenceService"] {
@@ -198,7 +212,11 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
             }
         });
     }
-    let router = tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder();
+    if let Some(tls) = &cfg.auth.tls {
+        builder = builder.tls_config(tls.config()).map_err(std::io::Error::other)?;
+    }
+    let router = builder
         .timeout(cfg.rpc_timeout)
         .max_concurrent_streams(64)
         .http2_max_pending_accept_reset_streams(Some(32))

@@ -19,7 +19,6 @@ use coadapt_wire::dm_env_rpc::v1::{self as pb, EnvironmentRequest, EnvironmentSt
 use coadapt_wire::tensor::{self, Accept};
 use tokio::sync::mpsc;
 use tonic::Streaming;
-use tonic::transport::Endpoint;
 
 use crate::profile::{self, Profile, ProfileError, Uids};
 use crate::{RemoteOptions, block};
@@ -105,7 +104,9 @@ async fn receive(conn: &mut Conn, url: &str, request: &'static str, timeout: Dur
 /// Connects, creates a world (no settings), joins it, and reads the default design.
 async fn open(url: String, endpoint: String, opts: RemoteOptions) -> Result<(Conn, Profile, Uids, Vec<f32>), RemoteError> {
     let connect_err = |what: String| RemoteError::Connect { url: url.clone(), what };
-    let channel = Endpoint::from_shared(endpoint.clone())
+    let channel = opts
+        .auth
+        .endpoint(&endpoint)
         .map_err(|e| connect_err(format!("bad address {endpoint}: {e}")))?
         .connect_timeout(opts.connect_timeout)
         .tcp_nodelay(true)
@@ -116,7 +117,7 @@ async fn open(url: String, endpoint: String, opts: RemoteOptions) -> Result<(Con
         .await
         .map_err(|_| connect_err(format!("no connection within {:?}", opts.connect_timeout)))?
         .map_err(|e| connect_err(format!("cannot connect: {e}")))?;
-    let mut client = EnvironmentClient::new(channel);
+    let mut client = EnvironmentClient::with_interceptor(channel, opts.auth.bearer());
     let (tx, requests) = mpsc::channel(4);
     // The first request goes in before the call: some servers (grpcio's) send their response
     // headers only with their first message, so waiting for the call to open first would wait
@@ -179,8 +180,8 @@ impl RemoteEnv {
     /// Connects to `url` (`dm-env-rpc://HOST:PORT`) and reads the environment's specs.
     pub fn connect(url: &str, opts: RemoteOptions) -> Result<Self, RemoteError> {
         let endpoint = crate::endpoint(url).map_err(|what| RemoteError::Connect { url: url.to_string(), what })?;
-        let (conn, profile, uids, default_design) =
-            block(open(url.to_string(), endpoint.clone(), opts)).map_err(|what| RemoteError::Connect { url: url.to_string(), what })??;
+        let (conn, profile, uids, default_design) = block(open(url.to_string(), endpoint.clone(), opts.clone()))
+            .map_err(|what| RemoteError::Connect { url: url.to_string(), what })??;
         let spec = EnvSpec {
             name: url.to_string(),
             state_dim: profile.state_dim,
@@ -242,7 +243,7 @@ impl RemoteEnv {
         let start = Instant::now();
         let mut wait = Duration::from_millis(100);
         loop {
-            let attempt = block(open(self.url.clone(), self.endpoint.clone(), self.opts))
+            let attempt = block(open(self.url.clone(), self.endpoint.clone(), self.opts.clone()))
                 .map_err(|what| RemoteError::Connect { url: self.url.clone(), what })
                 .and_then(|r| r);
             match attempt {

@@ -43,7 +43,7 @@ pub fn endpoint(url: &str) -> Result<String, String> {
 }
 
 /// Deadlines and reconnection of a [`RemoteEnv`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct RemoteOptions {
     /// Connecting and opening the stream.
     pub connect_timeout: Duration,
@@ -56,6 +56,8 @@ pub struct RemoteOptions {
     pub reconnect_for: Duration,
     /// The longest wait between reconnection attempts (waits double from 100 ms).
     pub max_backoff: Duration,
+    /// TLS (the CA that signed the server; a certificate for mutual TLS) and the actor's token.
+    pub auth: coadapt_auth::ClientAuth,
 }
 
 impl Default for RemoteOptions {
@@ -66,6 +68,7 @@ impl Default for RemoteOptions {
             keep_alive: Duration::from_secs(10),
             reconnect_for: Duration::from_secs(60),
             max_backoff: Duration::from_secs(5),
+            auth: coadapt_auth::ClientAuth::default(),
         }
     }
 }

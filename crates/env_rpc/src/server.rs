@@ -334,25 +334,33 @@ impl Environment for EnvService {
     }
 }
 
-/// Serves `factory` over dm_env_rpc on `listener` until `shutdown` resolves.
+/// Serves `factory` over dm_env_rpc on `listener` until `shutdown` resolves, with `auth`'s
+/// TLS and tokens (actors and operators may step environments).
 pub async fn serve(
     listener: tokio::net::TcpListener,
     factory: EnvFactory,
+    auth: &coadapt_auth::ServerAuth,
     shutdown: impl std::future::Future<Output = ()> + Send,
 ) -> Result<(), tonic::transport::Error> {
-    serve_service(listener, EnvService::new(factory), shutdown).await
+    serve_service(listener, EnvService::new(factory), auth, shutdown).await
 }
 
 async fn serve_service(
     listener: tokio::net::TcpListener,
     service: EnvService,
+    auth: &coadapt_auth::ServerAuth,
     shutdown: impl std::future::Future<Output = ()> + Send,
 ) -> Result<(), tonic::transport::Error> {
-    tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder();
+    if let Some(tls) = &auth.tls {
+        builder = builder.tls_config(tls.config())?;
+    }
+    let gate = auth.gate(&[coadapt_auth::Role::Actor]);
+    builder
         .http2_keepalive_interval(Some(Duration::from_secs(10)))
         .http2_keepalive_timeout(Some(Duration::from_secs(20)))
         .tcp_nodelay(true)
-        .add_service(EnvironmentServer::new(service))
+        .add_service(tonic::service::interceptor::InterceptedService::new(EnvironmentServer::new(service), gate))
         .serve_with_incoming_shutdown(tokio_stream::wrappers::TcpListenerStream::new(listener), shutdown)
         .await
 }
@@ -375,7 +383,7 @@ impl BackgroundServer {
         let service = EnvService::new(factory);
         let s = service.clone();
         rt.spawn(async move {
-            if let Err(e) = serve_service(listener, s, std::future::pending()).await {
+            if let Err(e) = serve_service(listener, s, &coadapt_auth::ServerAuth::default(), std::future::pending()).await {
                 eprintln!("env-serve: {e}");
             }
         });

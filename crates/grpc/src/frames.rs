@@ -10,7 +10,6 @@ use coadapt_wire::Wire;
 use coadapt_wire::pb;
 use coadapt_wire::pb::fleet_client::FleetClient;
 use tokio_stream::wrappers::ReceiverStream;
-use tonic::transport::Channel;
 
 pub(crate) type AckStream = tonic::Streaming<pb::Ack>;
 type Opening = Pin<Box<dyn Future<Output = Result<tonic::Response<AckStream>, tonic::Status>> + Send>>;
@@ -29,7 +28,7 @@ pub(crate) trait Frame: prost::Message + Default + Clone + Send + Sync + 'static
     fn set_seq(&mut self, seq: u64);
     /// Opens the bidirectional stream that carries these frames.
     #[doc(hidden)]
-    fn open(client: FleetClient<Channel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening;
+    fn open(client: FleetClient<coadapt_auth::AuthChannel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening;
 }
 
 impl Frame for pb::ExperienceFrame {
@@ -52,7 +51,7 @@ impl Frame for pb::ExperienceFrame {
         self.seq = seq;
     }
 
-    fn open(mut client: FleetClient<Channel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening {
+    fn open(mut client: FleetClient<coadapt_auth::AuthChannel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening {
         Box::pin(async move { client.push_experience(frames).await })
     }
 }
@@ -77,7 +76,7 @@ impl Frame for pb::DesignReplyFrame {
         self.seq = seq;
     }
 
-    fn open(mut client: FleetClient<Channel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening {
+    fn open(mut client: FleetClient<coadapt_auth::AuthChannel>, frames: tonic::Request<ReceiverStream<Self>>) -> Opening {
         Box::pin(async move { client.push_design_replies(frames).await })
     }
 }

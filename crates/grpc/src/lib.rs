@@ -119,6 +119,11 @@ pub struct GrpcConfig {
     /// and needs a new one). `None` (or 0): [`serve_learner`] draws a random one, see
     /// [`LearnerServer::run_id`]. Clients ignore it; they learn the run id when they register.
     pub run_id: Option<u64>,
+    /// The learner's: TLS and the accepted role tokens (actors and optimisers only; the
+    /// population weights to optimisers and operators only).
+    pub server_auth: coadapt_auth::ServerAuth,
+    /// A client's: TLS (the CA, its own certificate for mutual TLS) and its token.
+    pub client_auth: coadapt_auth::ClientAuth,
 }
 
 impl Default for GrpcConfig {
@@ -142,6 +147,8 @@ impl Default for GrpcConfig {
             max_header_list_bytes: 16 << 10,
             max_pending_reset_streams: 32,
             run_id: None,
+            server_auth: coadapt_auth::ServerAuth::default(),
+            client_auth: coadapt_auth::ClientAuth::default(),
         }
     }
 }

@@ -15,7 +15,6 @@ use coadapt_transport::{ActorLinks, OptimizerLinks, TransportError};
 use coadapt_wire::pb;
 use coadapt_wire::pb::fleet_client::FleetClient;
 use tokio::runtime::Runtime;
-use tonic::transport::{Channel, Endpoint};
 
 use crate::{Backoff, CONNECTION_WINDOW, GrpcConfig, PROTOCOL, STREAM_WINDOW, is_permanent, is_unregistered, random_u64, status_error};
 
@@ -50,7 +49,7 @@ where
 /// One client's connection and identity, shared by its channel ends.
 #[derive(Debug)]
 pub(crate) struct Conn {
-    pub(crate) client: FleetClient<Channel>,
+    pub(crate) client: FleetClient<coadapt_auth::AuthChannel>,
     pub(crate) cfg: GrpcConfig,
     pub(crate) session: u64,
     role: pb::Role,
@@ -171,7 +170,9 @@ impl Drop for Session {
 
 fn connect(endpoint: &str, cfg: &GrpcConfig, role: pb::Role, actor_id: u64) -> Result<Arc<Session>, TransportError> {
     let rt = runtime()?;
-    let ep = Endpoint::from_shared(endpoint.to_string())
+    let ep = cfg
+        .client_auth
+        .endpoint(endpoint)
         .map_err(|e| TransportError::Invalid(format!("endpoint {endpoint:?}: {e}")))?
         .connect_timeout(cfg.connect_timeout)
         .tcp_nodelay(true)
@@ -184,8 +185,9 @@ fn connect(endpoint: &str, cfg: &GrpcConfig, role: pb::Role, actor_id: u64) -> R
         let _in_rt = rt.enter();
         ep.connect_lazy()
     };
-    let client =
-        FleetClient::new(channel).max_decoding_message_size(cfg.max_message_bytes).max_encoding_message_size(cfg.max_message_bytes);
+    let client = FleetClient::with_interceptor(channel, cfg.client_auth.bearer())
+        .max_decoding_message_size(cfg.max_message_bytes)
+        .max_encoding_message_size(cfg.max_message_bytes);
     let conn = Arc::new(Conn {
         client,
         cfg: cfg.clone(),

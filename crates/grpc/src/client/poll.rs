@@ -14,7 +14,6 @@ use coadapt_transport::{Assignment, DesignRequest, Receiver, TransportError};
 use coadapt_wire::Wire;
 use coadapt_wire::pb;
 use coadapt_wire::pb::fleet_client::FleetClient;
-use tonic::transport::Channel;
 
 use super::{Session, block};
 use crate::{Backoff, is_permanent, is_unregistered, run_of, status_error};
@@ -25,11 +24,11 @@ type Call<P> = Pin<Box<dyn Future<Output = Result<Delivery<P>, tonic::Status>> +
 
 /// A message handed out by long poll.
 pub(crate) trait Polled: Wire<Pb: Send> + Send + 'static {
-    fn call(client: FleetClient<Channel>, poll: tonic::Request<pb::Poll>) -> Call<Self::Pb>;
+    fn call(client: FleetClient<coadapt_auth::AuthChannel>, poll: tonic::Request<pb::Poll>) -> Call<Self::Pb>;
 }
 
 impl Polled for Assignment {
-    fn call(mut client: FleetClient<Channel>, poll: tonic::Request<pb::Poll>) -> Call<pb::Assignment> {
+    fn call(mut client: FleetClient<coadapt_auth::AuthChannel>, poll: tonic::Request<pb::Poll>) -> Call<pb::Assignment> {
         Box::pin(async move {
             let d = client.next_assignment(poll).await?;
             let run = run_of(d.metadata());
@@ -40,7 +39,7 @@ impl Polled for Assignment {
 }
 
 impl Polled for DesignRequest {
-    fn call(mut client: FleetClient<Channel>, poll: tonic::Request<pb::Poll>) -> Call<pb::DesignRequest> {
+    fn call(mut client: FleetClient<coadapt_auth::AuthChannel>, poll: tonic::Request<pb::Poll>) -> Call<pb::DesignRequest> {
         Box::pin(async move {
             let d = client.next_design_request(poll).await?;
             let run = run_of(d.metadata());

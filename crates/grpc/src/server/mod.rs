@@ -77,6 +77,11 @@ pub struct Refusals {
     pub connections_per_peer: u64,
     /// Connections closed as they were accepted: `GrpcConfig::max_connections` were open.
     pub connections_total: u64,
+    /// Calls without a token, or with one the learner does not accept (UNAUTHENTICATED).
+    pub unauthenticated: u64,
+    /// Calls whose token's role may not make them (PERMISSION_DENIED): a client's token on the
+    /// fleet, an actor's on the population weights, a token of one role registering as another.
+    pub permission_denied: u64,
 }
 
 /// What the learner knows of one client, from its registration, heartbeats and polls.
@@ -118,6 +123,8 @@ pub(crate) struct Hub {
     pub(crate) dims: Mutex<Option<Dims>>,
     pub(crate) shutdown: watch::Receiver<bool>,
     pub(crate) refusals: Mutex<Refusals>,
+    /// Calls the token gates refused.
+    pub(crate) gate_counts: Arc<coadapt_auth::GateCounts>,
 }
 
 impl Hub {
@@ -135,6 +142,7 @@ impl Hub {
             Reason::EmptyDropped => &mut r.empty_dropped,
             Reason::Purged => &mut r.purged,
             Reason::OtherRun => &mut r.other_run,
+            Reason::PermissionDenied => &mut r.permission_denied,
         };
         *field = field.saturating_add(n);
     }
@@ -234,6 +242,7 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
         dims: Mutex::new(None),
         shutdown: shutdown_rx.clone(),
         refusals: Mutex::new(Refusals::default()),
+        gate_counts: Arc::default(),
     });
     let links = LearnerLinks {
         experience: Box::new(InboxReceiver(hub.experience.clone())),
@@ -350,6 +359,8 @@ impl LearnerServer {
         let mut r = self.hub.refusals.lock().map(|r| *r).unwrap_or_default();
         r.connections_per_peer = self.peers.refused_per_peer.load(Relaxed);
         r.connections_total = self.peers.refused_total.load(Relaxed);
+        r.unauthenticated = self.hub.gate_counts.unauthenticated.load(Relaxed);
+        r.permission_denied += self.hub.gate_counts.permission_denied.load(Relaxed);
         r
     }
 

@@ -27,6 +27,7 @@ pub(crate) enum Reason {
     EmptyDropped,
     Purged,
     OtherRun,
+    PermissionDenied,
 }
 
 /// A frame refused: the stream ends with this status.

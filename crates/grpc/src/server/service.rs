@@ -4,6 +4,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use coadapt_auth::Role;
 use coadapt_transport::Validate;
 use coadapt_wire::Wire;
 use coadapt_wire::pb;
@@ -11,6 +12,7 @@ use coadapt_wire::pb::fleet_server::{Fleet, FleetServer};
 use prost::Message;
 use tokio::sync::{mpsc, watch};
 use tokio_stream::wrappers::ReceiverStream;
+use tonic::service::interceptor::InterceptedService;
 use tonic::{Request, Response, Status, Streaming};
 
 use super::queues::{Gate, Inbox, Incoming, Offer, Outbox, Reason, Take};
@@ -26,11 +28,15 @@ type Acks = ReceiverStream<Result<pb::Ack, Status>>;
 pub(super) fn router(
     hub: Arc<Hub>,
     rt: &tokio::runtime::Runtime,
-) -> Result<(tonic::transport::server::Router, tonic_health::server::HealthReporter), tonic_reflection::server::Error> {
+) -> Result<(tonic::transport::server::Router, tonic_health::server::HealthReporter), String> {
     let cfg = hub.cfg.clone();
-    let fleet = FleetServer::new(FleetService { hub })
+    let gate = |roles| cfg.server_auth.gate(roles).counting(hub.gate_counts.clone());
+    let fleet = FleetServer::new(FleetService { hub: hub.clone() })
         .max_decoding_message_size(cfg.max_message_bytes)
         .max_encoding_message_size(cfg.max_message_bytes);
+    // Actors and optimisers (each call then checked against the caller's role); health
+    // answers anyone (probes), reflection any known token.
+    let fleet = InterceptedService::new(fleet, gate(&[Role::Actor, Role::Optimizer]));
     let (health_reporter, health) = tonic_health::server::health_reporter();
     let reporter = health_reporter.clone();
     // Serving before the first client can ask.
@@ -45,7 +51,14 @@ pub(super) fn router(
             .register_encoded_file_descriptor_set(coadapt_wire::FILE_DESCRIPTOR_SET)
             .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
     };
-    let router = tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder();
+    if let Some(tls) = &cfg.server_auth.tls {
+        builder = builder.tls_config(tls.config()).map_err(|e| format!("TLS: {e}"))?;
+    }
+    let any = gate(&Role::ALL);
+    let v1 = InterceptedService::new(reflection().build_v1().map_err(|e| e.to_string())?, any.clone());
+    let v1alpha = InterceptedService::new(reflection().build_v1alpha().map_err(|e| e.to_string())?, any);
+    let router = builder
         .initial_stream_window_size(STREAM_WINDOW)
         .initial_connection_window_size(CONNECTION_WINDOW)
         .http2_keepalive_interval(Some(cfg.heartbeat))
@@ -57,8 +70,8 @@ pub(super) fn router(
         .tcp_nodelay(true)
         .add_service(fleet)
         .add_service(health)
-        .add_service(reflection().build_v1()?)
-        .add_service(reflection().build_v1alpha()?);
+        .add_service(v1)
+        .add_service(v1alpha);
     Ok((router, reporter))
 }
 
@@ -306,11 +319,25 @@ fn check<F: Frame>(hub: &Hub, pb: <F::Item as Wire>::Pb) -> Result<F::Item, Stri
     Ok(x)
 }
 
+impl FleetService {
+    /// PERMISSION_DENIED (counted) unless the caller's token is of `role` (or an operator's).
+    fn token_allows<T>(&self, req: &Request<T>, role: ClientRole, what: &str) -> Result<(), Status> {
+        let need = match role {
+            ClientRole::Actor => Role::Actor,
+            ClientRole::Optimizer => Role::Optimizer,
+        };
+        coadapt_auth::require(req, &[need], &format!("{what} {}", need.name())).map(|_| ()).inspect_err(|_| {
+            self.hub.count(Reason::PermissionDenied, 1);
+        })
+    }
+}
+
 #[tonic::async_trait]
 impl Fleet for FleetService {
     async fn register(&self, req: Request<pb::Hello>) -> Result<Response<pb::Welcome>, Status> {
+        let role = role_of(req.get_ref().role)?;
+        self.token_allows(&req, role, "register as")?;
         let h = req.into_inner();
-        let role = role_of(h.role)?;
         if h.fleet != self.hub.cfg.fleet {
             return Err(Status::failed_precondition(format!("this learner serves fleet {:?}, not {:?}", self.hub.cfg.fleet, h.fleet)));
         }
@@ -365,8 +392,9 @@ impl Fleet for FleetService {
     }
 
     async fn heartbeat(&self, req: Request<pb::Beat>) -> Result<Response<pb::BeatReply>, Status> {
+        let role = role_of(req.get_ref().role)?;
+        self.token_allows(&req, role, "beat as")?;
         let b = req.into_inner();
-        let role = role_of(b.role)?;
         self.caller(b.session, role)?;
         same_run(&self.hub, b.run_id)?;
         if let Ok(mut clients) = self.hub.clients.lock()
@@ -390,6 +418,7 @@ impl Fleet for FleetService {
     type PushExperienceStream = Acks;
 
     async fn push_experience(&self, req: Request<Streaming<pb::ExperienceFrame>>) -> Result<Response<Acks>, Status> {
+        self.token_allows(&req, ClientRole::Actor, "push experience as")?;
         let session = stream_session(&req)?;
         self.caller(session, ClientRole::Actor)?;
         same_run(&self.hub, stream_run(&req)?)?;
@@ -399,6 +428,7 @@ impl Fleet for FleetService {
     type PushDesignRepliesStream = Acks;
 
     async fn push_design_replies(&self, req: Request<Streaming<pb::DesignReplyFrame>>) -> Result<Response<Acks>, Status> {
+        self.token_allows(&req, ClientRole::Optimizer, "push design replies as")?;
         let session = stream_session(&req)?;
         self.caller(session, ClientRole::Optimizer)?;
         same_run(&self.hub, stream_run(&req)?)?;
@@ -408,12 +438,19 @@ impl Fleet for FleetService {
     type WatchWeightsStream = ReceiverStream<Result<pb::WeightsUpdate, Status>>;
 
     async fn watch_weights(&self, req: Request<pb::WatchRequest>) -> Result<Response<Self::WatchWeightsStream>, Status> {
-        let w = req.into_inner();
-        let topic = match pb::WeightsTopic::try_from(w.topic) {
-            Ok(pb::WeightsTopic::Acting) => self.hub.acting.clone(),
-            Ok(pb::WeightsTopic::Population) => self.hub.population.clone(),
-            _ => return Err(Status::invalid_argument(format!("topic: {} is not acting (1) or population (2)", w.topic))),
+        let topic = match pb::WeightsTopic::try_from(req.get_ref().topic) {
+            Ok(pb::WeightsTopic::Acting) => {
+                self.token_allows(&req, ClientRole::Actor, "watch the acting weights as")?;
+                self.hub.acting.clone()
+            }
+            // The population networks are the run's critic: optimisers and operators only.
+            Ok(pb::WeightsTopic::Population) => {
+                self.token_allows(&req, ClientRole::Optimizer, "watch the population weights as")?;
+                self.hub.population.clone()
+            }
+            _ => return Err(Status::invalid_argument(format!("topic: {} is not acting (1) or population (2)", req.get_ref().topic))),
         };
+        let w = req.into_inner();
         // Versions of another start are no measure of ours: send our newest, whatever its number.
         let min_version = if w.run_id == 0 || w.run_id == self.hub.run_id { w.min_version } else { 0 };
         let (tx, rx) = mpsc::channel(1);
@@ -422,6 +459,7 @@ impl Fleet for FleetService {
     }
 
     async fn next_assignment(&self, req: Request<pb::Poll>) -> Result<Response<pb::AssignmentDelivery>, Status> {
+        self.token_allows(&req, ClientRole::Actor, "take assignments as")?;
         let p = req.into_inner();
         let (assignment, seq, finished) = self.poll(&self.hub.assignments, ClientRole::Actor, &p).await?;
         if let Some(a) = &assignment {
@@ -432,6 +470,7 @@ impl Fleet for FleetService {
     }
 
     async fn next_design_request(&self, req: Request<pb::Poll>) -> Result<Response<pb::DesignRequestDelivery>, Status> {
+        self.token_allows(&req, ClientRole::Optimizer, "take design requests as")?;
         let (request, seq, finished) = self.poll(&self.hub.requests, ClientRole::Optimizer, &req.into_inner()).await?;
         Ok(stamped(&self.hub, pb::DesignRequestDelivery { request, seq, finished }))
     }
