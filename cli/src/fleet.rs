@@ -165,7 +165,13 @@ impl FleetConfig {
                     grpc.max_episode_steps = n as u64;
                 }
                 let (links, server) = coadapt_grpc::serve_learner(addr, &grpc).with_context(|| format!("serving gRPC on {addr}"))?;
-                eprintln!("learner: gRPC on {}", server.local_addr());
+                let tls = match &grpc.server_auth.tls {
+                    Some(t) if t.mutual() => "TLS, client certificates required",
+                    Some(_) => "TLS",
+                    None => "plaintext",
+                };
+                let tokens = grpc.server_auth.tokens.as_ref().map_or("no tokens".to_string(), |t| format!("{} accepted token(s)", t.len()));
+                eprintln!("learner: gRPC on {} ({tls}, {tokens})", server.local_addr());
                 if let Some(d) = dims {
                     server.expect_dims(d);
                 }

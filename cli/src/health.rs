@@ -34,6 +34,15 @@ pub fn observe(e: &RunEvent<'_>) {
     }
 }
 
+/// The stall limit [`watch`] applies, in ms (0: not watched), for `/healthz`.
+static WATCHED_STALL_MS: AtomicU64 = AtomicU64::new(0);
+
+/// What `/healthz` answers: `Some(true)` serving, `Some(false)` stalled, `None` not watched.
+pub fn watched_health() -> Option<bool> {
+    let ms = WATCHED_STALL_MS.load(Relaxed);
+    (ms > 0).then(|| healthy(Duration::from_millis(ms)))
+}
+
 /// Whether the learner is healthy: progress within `stall`, or waiting for an operator.
 pub fn healthy(stall: Duration) -> bool {
     WAITING.load(Relaxed) || now_ms().saturating_sub(LAST_PROGRESS_MS.load(Relaxed)) <= stall.as_millis() as u64
@@ -47,6 +56,7 @@ pub fn watch(
     stop: std::sync::Arc<AtomicBool>,
 ) -> std::io::Result<std::thread::JoinHandle<()>> {
     progress();
+    WATCHED_STALL_MS.store((stall.as_millis() as u64).max(1), Relaxed);
     std::thread::Builder::new().name("health".into()).spawn(move || {
         let mut serving = true;
         while !stop.load(Relaxed) {

@@ -71,10 +71,18 @@ fn answer(mut s: TcpStream, source: &Source) -> std::io::Result<()> {
     }
     let head = String::from_utf8_lossy(&buf[..got]);
     let line = head.lines().next().unwrap_or_default();
-    let (status, body, kind) = if line.starts_with("GET /metrics ") || line == "GET /metrics" {
+    let is = |path: &str| line.starts_with(&format!("GET {path} ")) || line == format!("GET {path}");
+    let (status, body, kind) = if is("/metrics") {
         ("200 OK", render(source), "text/plain; version=0.0.4; charset=utf-8")
+    } else if is("/healthz") {
+        // The learner's health as its gRPC health service says it, for probes that cannot
+        // speak TLS (Kubernetes' gRPC probes): 503 once it has stalled.
+        match crate::health::watched_health() {
+            Some(false) => ("503 Service Unavailable", "NOT_SERVING\n".to_string(), "text/plain; charset=utf-8"),
+            _ => ("200 OK", "SERVING\n".to_string(), "text/plain; charset=utf-8"),
+        }
     } else {
-        ("404 Not Found", "only GET /metrics here\n".to_string(), "text/plain; charset=utf-8")
+        ("404 Not Found", "only GET /metrics and GET /healthz here\n".to_string(), "text/plain; charset=utf-8")
     };
     write!(s, "HTTP/1.1 {status}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}", body.len())?;
     s.flush()

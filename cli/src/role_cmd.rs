@@ -30,6 +30,11 @@ pub struct RoleArgs {
     /// Override the seed.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Override [security]: TLS files, the learner's --tokens-file, this process's
+    /// --token-file (one config for the whole fleet, a token per role; `COADAPT_TOKEN` in the
+    /// environment wins), --insecure.
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
 }
 
 impl RoleArgs {
@@ -52,6 +57,7 @@ impl RoleArgs {
         if let Some(f) = &self.fleet {
             cfg.fleet.name = f.clone();
         }
+        cfg.security = cfg.security.clone().with_args(&self.security);
         let spec = make_env(&cfg.env)?.spec().clone();
         resolve_initial_designs(&mut cfg, &spec);
         check(&cfg, &spec)?;
@@ -74,6 +80,10 @@ pub struct LearnerArgs {
     /// metrics.learner-listen).
     #[arg(long)]
     pub metrics: Option<String>,
+    /// Override design-service.listen: serve DesignService and the Open Inference Protocol's
+    /// `design-critic` during the run on ADDR (with the same TLS and tokens as the fleet).
+    #[arg(long, value_name = "ADDR")]
+    pub serve: Option<String>,
     /// Continue the run in --out from its newest sound snapshot (a damaged one is skipped,
     /// naming what is wrong); an --out without a run starts one. For restarts by systemd or
     /// Kubernetes: the same command line starts and resumes.
@@ -120,6 +130,9 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     }
     if let Some(m) = args.metrics {
         cfg.metrics.learner_listen = m;
+    }
+    if let Some(a) = args.serve {
+        cfg.design_service.listen = a;
     }
     let dir = match args.out {
         Some(d) => d,

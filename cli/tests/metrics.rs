@@ -61,6 +61,8 @@ fn learner_and_optimizer_metrics_are_scraped_during_a_run() {
     };
     let optimizer = get(op, "/metrics").expect("optimizer metrics");
     let missing = get(lp, "/nothing").unwrap();
+    let health = get(lp, "/healthz").unwrap();
+    assert!(health.starts_with("HTTP/1.1 200 OK") && health.ends_with("SERVING\n"), "{health}");
     let o = child.wait_with_output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(learner.starts_with("HTTP/1.1 200 OK") && learner.contains("text/plain; version=0.0.4"), "{learner}");

@@ -227,3 +227,103 @@ fn python_clients_query_a_running_fleet_and_watch_its_designs() {
     let status = fleet.0.wait().unwrap();
     assert!(status.success(), "{}", log.lock().unwrap());
 }
+
+fn read_addr(server: &mut Server) -> String {
+    let mut line = String::new();
+    BufReader::new(server.0.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    line.trim().strip_prefix("grpc://").unwrap_or_else(|| panic!("no address line: {line:?}")).to_string()
+}
+
+#[test]
+fn a_secured_server_answers_only_tls_and_known_tokens_of_its_roles() {
+    let run = finished_run("secured");
+    let sec = run.join("sec");
+    let ok = |o: std::process::Output| {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        o
+    };
+    ok(coadapt().args(["tls", "new", "--out"]).arg(sec.join("tls")).output().unwrap());
+    for role in ["client", "actor"] {
+        ok(coadapt()
+            .args(["token", "new", "--role", role, "--out"])
+            .arg(sec.join(format!("{role}.token")))
+            .arg("--tokens-file")
+            .arg(sec.join("tokens"))
+            .output()
+            .unwrap());
+    }
+    let p = |n: &str| sec.join(n).display().to_string();
+    // With TLS configured, a non-loopback address needs no --insecure.
+    let mut server = Server(
+        coadapt()
+            .arg("serve")
+            .arg(&run)
+            .args(["--listen", "0.0.0.0:0", "--tls-cert", &p("tls/server.pem"), "--tls-key", &p("tls/server-key.pem")])
+            .args(["--tokens-file", &p("tokens")])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let port = read_addr(&mut server).rsplit(':').next().unwrap().to_string();
+    let addr = format!("127.0.0.1:{port}");
+    let score = |extra: &[&str]| {
+        coadapt().args(["score", "--server", &addr, "--design", "1,1,1,1,1,1", "--timeout-secs", "5"]).args(extra).output().unwrap()
+    };
+    let err = |o: std::process::Output| {
+        assert!(!o.status.success(), "accepted: {}", String::from_utf8_lossy(&o.stdout));
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    // Plaintext to a TLS port: refused.
+    err(score(&[]));
+    let e = err(score(&["--tls-ca", &p("tls/ca.pem")]));
+    assert!(e.contains("Unauthenticated") && e.contains("authorization: missing"), "{e}");
+    let e = err(score(&["--tls-ca", &p("tls/ca.pem"), "--token-file", &p("actor.token")]));
+    assert!(e.contains("PermissionDenied") && e.contains("role actor"), "{e}");
+    let o = ok(score(&["--tls-ca", &p("tls/ca.pem"), "--token-file", &p("client.token")]));
+    let scored: f32 = String::from_utf8_lossy(&o.stdout).lines().nth(1).unwrap().split(',').nth(1).unwrap().parse().unwrap();
+    // The Python client over TLS with the client token: the DesignService and Triton's client.
+    let o = Command::new(venv().join("bin/python"))
+        .arg(workspace_file("clients/python/example.py"))
+        .args(["--server", &addr, "--design", "1,1,1,1,1,1", "--tls-ca", &p("tls/ca.pem"), "--token-file", &p("client.token")])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "example.py over TLS: {}", String::from_utf8_lossy(&o.stderr));
+    let got: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(got["objective"][0].as_f64().map(|v| v as f32), Some(scored));
+    assert_eq!(got["oip_value"], got["objective"]);
+    // Without the token the Python client is refused too.
+    let o = Command::new(venv().join("bin/python"))
+        .arg(workspace_file("clients/python/example.py"))
+        .args(["--server", &addr, "--tls-ca", &p("tls/ca.pem"), "--timeout", "3"])
+        .output()
+        .unwrap();
+    assert!(
+        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("UNAUTHENTICATED"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // No secret in the server's log.
+    assert!(Command::new("kill").args(["-TERM", &server.0.id().to_string()]).status().unwrap().success());
+    let out = server.0.wait_with_output_ref();
+    for role in ["client", "actor"] {
+        let token = std::fs::read_to_string(sec.join(format!("{role}.token"))).unwrap();
+        assert!(!out.contains(token.trim()), "the {role} token is in the server's log");
+    }
+}
+
+trait WaitLog {
+    fn wait_with_output_ref(&mut self) -> String;
+}
+
+impl WaitLog for std::process::Child {
+    /// Waits for the child and returns its stderr.
+    fn wait_with_output_ref(&mut self) -> String {
+        let mut s = String::new();
+        if let Some(mut e) = self.stderr.take() {
+            let _ = std::io::Read::read_to_string(&mut e, &mut s);
+        }
+        let _ = self.wait();
+        s
+    }
+}

@@ -11,6 +11,7 @@ the run's design history, and what Watch streamed (to the run's end, or --watch-
 
 import argparse
 import json
+import os
 import pathlib
 import sys
 import tempfile
@@ -44,10 +45,22 @@ def main():
                     "default: the middle of the design box and its two corners")
     ap.add_argument("--timeout", type=float, default=10.0, help="deadline of every call, seconds")
     ap.add_argument("--watch-rows", type=int, default=0, help="stop watching after this many rows (0: when the run ends)")
+    ap.add_argument("--tls-ca", help="PEM of the CA that signed the server's certificate: speak TLS (else plaintext)")
+    ap.add_argument("--token-file", help="a file holding a client token (COADAPT_TOKEN in the environment wins)")
     a = ap.parse_args()
     pb, rpc = stubs()
-    channel = grpc.insecure_channel(a.server)
+    token = os.environ.get("COADAPT_TOKEN") or (pathlib.Path(a.token_file).read_text().strip() if a.token_file else None)
+    root = pathlib.Path(a.tls_ca).read_bytes() if a.tls_ca else None
+    if root is not None:
+        creds = grpc.ssl_channel_credentials(root_certificates=root)
+        if token:
+            # Sent as `authorization: Bearer <token>`, only ever over TLS.
+            creds = grpc.composite_channel_credentials(creds, grpc.access_token_call_credentials(token))
+        channel = grpc.secure_channel(a.server, creds)
+    else:
+        channel = grpc.insecure_channel(a.server)
     svc = rpc.DesignServiceStub(channel)
+    headers = {"authorization": f"Bearer {token}"} if token else None
     # A learner serves from its first design request on: until then, UNAVAILABLE.
     deadline = time.monotonic() + 6 * a.timeout
     while True:
@@ -68,14 +81,15 @@ def main():
     # The same numbers through Triton's client: model design-critic, input design [N, D]. A
     # running learner changes its networks at each design request: both calls are made again
     # until they saw the same version.
-    client = triton.InferenceServerClient(url=a.server)
-    assert client.is_server_live() and client.is_model_ready("design-critic")
+    client = triton.InferenceServerClient(url=a.server, ssl=root is not None, root_certificates=a.tls_ca)
+    assert client.is_server_live(headers=headers) and client.is_model_ready("design-critic", headers=headers)
     for _ in range(10):
         scores = svc.Score(pb.ScoreRequest(designs=[pb.Design(values=d.tolist()) for d in batch]), timeout=a.timeout)
-        meta = client.get_model_metadata("design-critic")
+        meta = client.get_model_metadata("design-critic", headers=headers)
         inp = triton.InferInput("design", list(batch.shape), "FP32")
         inp.set_data_from_numpy(batch)
-        result = client.infer("design-critic", [inp], outputs=[triton.InferRequestedOutput("value")], client_timeout=a.timeout)
+        result = client.infer("design-critic", [inp], outputs=[triton.InferRequestedOutput("value")], client_timeout=a.timeout,
+                              headers=headers)
         values = result.as_numpy("value")
         if result.get_response().model_version == str(scores.weights_version):
             break

@@ -38,6 +38,15 @@ Options:
   --grace SECS        seconds to wait for a clean exit before SIGTERM (default 30)
   --ready-timeout S   gRPC: seconds to wait for the learner's port before starting the others
                       (default 60)
+  --tls-dir DIR       gRPC over TLS with `coadapt tls new --out DIR`'s files: the learner serves
+                      DIR/server.pem (key DIR/server-key.pem), the others check it with
+                      DIR/ca.pem; env COADAPT_TLS_DIR
+  --tokens-file FILE  the learner accepts only these tokens (`coadapt token new --tokens-file`);
+                      env COADAPT_TOKENS_FILE
+  --actor-token FILE  the actors' token file; env COADAPT_ACTOR_TOKEN_FILE
+  --optimizer-token FILE  the optimiser's token file; env COADAPT_OPTIMIZER_TOKEN_FILE
+  --insecure          let the learner listen in plaintext on a non-loopback address (a network
+                      you trust; without TLS it is refused)
   -h, --help          this help
 
 Exit status: the learner's (without a learner: 0 if every actor and optimiser exited 0, else 1);
@@ -46,6 +55,9 @@ Exit status: the learner's (without a learner: 0 if every actor and optimiser ex
 Examples:
   deploy/local/fleet.sh --config configs/half-cheetah-tiny.toml --actors 4
   deploy/local/fleet.sh --config configs/half-cheetah-tiny.toml --transport grpc --listen 127.0.0.1:50051
+  deploy/local/fleet.sh --config configs/half-cheetah-tiny.toml --transport grpc --tls-dir tls \
+    --tokens-file tokens --actor-token actor.token --optimizer-token optimizer.token
+Tokens are read from files by coadapt itself: never on a command line, never in a log.
 EOF
 }
 
@@ -69,6 +81,11 @@ roles="learner,optimizer,actors"
 bin=${COADAPT_BIN:-}
 grace=30
 ready_timeout=60
+tls_dir=${COADAPT_TLS_DIR:-}
+tokens_file=${COADAPT_TOKENS_FILE:-}
+actor_token=${COADAPT_ACTOR_TOKEN_FILE:-}
+optimizer_token=${COADAPT_OPTIMIZER_TOKEN_FILE:-}
+insecure=0
 
 need_arg() { [[ $# -ge 2 && -n $2 ]] || die "$1 needs a value (see --help)"; }
 while [[ $# -gt 0 ]]; do
@@ -88,6 +105,11 @@ while [[ $# -gt 0 ]]; do
     --bin) need_arg "$@"; bin=$2; shift 2 ;;
     --grace) need_arg "$@"; grace=$2; shift 2 ;;
     --ready-timeout) need_arg "$@"; ready_timeout=$2; shift 2 ;;
+    --tls-dir) need_arg "$@"; tls_dir=$2; shift 2 ;;
+    --tokens-file) need_arg "$@"; tokens_file=$2; shift 2 ;;
+    --actor-token) need_arg "$@"; actor_token=$2; shift 2 ;;
+    --optimizer-token) need_arg "$@"; optimizer_token=$2; shift 2 ;;
+    --insecure) insecure=1; shift ;;
     *) die "unknown argument '$1' (see --help)" ;;
   esac
 done
@@ -101,6 +123,14 @@ is_uint "$first_id" || die "--first-id must be a whole number, got '$first_id'"
 is_uint "$grace" || die "--grace must be whole seconds, got '$grace'"
 is_uint "$ready_timeout" || die "--ready-timeout must be whole seconds, got '$ready_timeout'"
 [[ -z $seed ]] || is_uint "$seed" || die "--seed must be a whole number, got '$seed'"
+for f in "$tls_dir" "$tokens_file" "$actor_token" "$optimizer_token"; do
+  [[ -z $f || -r $f ]] || die "'$f' is not readable"
+done
+if [[ -n $tls_dir ]]; then
+  for f in ca.pem server.pem server-key.pem; do
+    [[ -r $tls_dir/$f ]] || die "--tls-dir: no readable $tls_dir/$f (coadapt tls new --out $tls_dir makes them)"
+  done
+fi
 case $transport in
   shm | grpc) ;;
   *) die "--transport must be shm or grpc, got '$transport' (in-process is 'coadapt run --transport in-process')" ;;
@@ -263,9 +293,15 @@ trap kill_leftovers EXIT
 common=(--config "$config" --transport "$transport" --fleet "$fleet")
 log "fleet '$fleet': transport $transport, config $config, roles $roles, logs in $log_dir"
 
+# TLS and tokens: paths only (coadapt reads the files).
+client_tls=()
+[[ -n $tls_dir ]] && client_tls=(--tls-ca "$tls_dir/ca.pem")
 if ((want_learner)); then
   largs=(learner "${common[@]}" --out "$out")
   [[ $transport == grpc ]] && largs+=(--listen "$listen")
+  [[ -n $tls_dir ]] && largs+=(--tls-cert "$tls_dir/server.pem" --tls-key "$tls_dir/server-key.pem")
+  [[ -n $tokens_file ]] && largs+=(--tokens-file "$tokens_file")
+  ((insecure)) && largs+=(--insecure)
   [[ -n $seed ]] && largs+=(--seed "$seed")
   start learner-0 "${largs[@]}"
   learner_pid=$REPLY
@@ -290,11 +326,15 @@ client=()
 [[ $transport == grpc ]] && client=(--connect "$connect")
 
 if ((want_optimizer && !stopping)); then
-  start optimizer-0 optimizer "${common[@]}" "${client[@]}"
+  oargs=(optimizer "${common[@]}" "${client[@]}" "${client_tls[@]}")
+  [[ -n $optimizer_token ]] && oargs+=(--token-file "$optimizer_token")
+  start optimizer-0 "${oargs[@]}"
 fi
 if ((want_actors)); then
   for ((i = first_id; i < first_id + actors && !stopping; i++)); do
-    start "actor-$i" actor "${common[@]}" "${client[@]}" --id "$i"
+    aargs=(actor "${common[@]}" "${client[@]}" "${client_tls[@]}" --id "$i")
+    [[ -n $actor_token ]] && aargs+=(--token-file "$actor_token")
+    start "actor-$i" "${aargs[@]}"
   done
 fi
 

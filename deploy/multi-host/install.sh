@@ -70,6 +70,8 @@ fi
 units_dir=$root/etc/systemd/system
 install -d -m 0755 "$root/usr/local/bin" "$root/usr/local/lib/coadapt" "$units_dir" \
   "$root/etc/coadapt" "$root/usr/local/share/doc/coadapt"
+# Where the TLS files and role tokens go (copied in by the operator: see deploy/README.md).
+install -d -m 0750 "$root/etc/coadapt/tls" "$root/etc/coadapt/tokens.d"
 install -m 0755 "$bin" "$root/usr/local/bin/coadapt"
 install -m 0755 "$SCRIPT_DIR/systemd/coadapt-role.sh" "$root/usr/local/lib/coadapt/coadapt-role"
 for u in coadapt-learner.service coadapt-optimizer.service coadapt-actor@.service; do
@@ -107,6 +109,8 @@ if ! id -u coadapt >/dev/null 2>&1; then
     --shell /usr/sbin/nologin --comment "coadapt fleet" coadapt
   say "created system user coadapt"
 fi
+# The units run as coadapt: it reads the TLS files and tokens, nobody else does.
+chgrp coadapt /etc/coadapt/tls /etc/coadapt/tokens.d
 command -v systemctl >/dev/null 2>&1 || die "systemctl not found: is this a systemd host?"
 systemctl daemon-reload
 if ((start)); then

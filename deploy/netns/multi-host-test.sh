@@ -206,8 +206,17 @@ fi
 run_dir=$work/run
 fleet=coadapt-netns-$$
 say "coadapt: $bin; config: $config; run directory: $run_dir"
+# Across hosts the learner serves TLS and accepts only the actors' and the optimiser's tokens:
+# certificates for its address and one token per role, made by coadapt itself.
+sec=$work/sec
+"$bin" tls new --out "$sec/tls" --host "$learner_ip" 2>>"$work/credentials.log" || fail "coadapt tls new failed"
+for role in actor optimizer; do
+  "$bin" token new --role "$role" --out "$sec/$role.token" --tokens-file "$sec/tokens" 2>>"$work/credentials.log" ||
+    fail "coadapt token new --role $role failed"
+done
 in_host "$ns_l" "$REPO_ROOT/deploy/multi-host/learner-host.sh" --bin "$bin" --config "$config" \
   --listen "$learner_ip:50051" --out "$run_dir" --fleet "$fleet" -- --grace 20 \
+  --tls-dir "$sec/tls" --tokens-file "$sec/tokens" --optimizer-token "$sec/optimizer.token" \
   >"$work/learner-host.out" 2>"$work/learner-host.err" &
 learner_host=$!
 bg_pids+=("$learner_host")
@@ -221,7 +230,8 @@ i=0
 for ns in "$ns_a1" "$ns_a2"; do
   in_host "$ns" "$REPO_ROOT/deploy/multi-host/actor-host.sh" "http://$learner_ip:50051" 1 \
     --first-id $((i * 100)) --bin "$bin" --config "$config" --fleet "$fleet" \
-    --log-dir "$work/$ns-logs" -- --grace 20 >"$work/$ns.out" 2>&1 &
+    --log-dir "$work/$ns-logs" -- --grace 20 --tls-dir "$sec/tls" --actor-token "$sec/actor.token" \
+    >"$work/$ns.out" 2>&1 &
   actor_hosts+=("$!")
   bg_pids+=("$!")
   i=$((i + 1))
@@ -307,5 +317,12 @@ for p in problems:
 print(f"  designs.csv: {len(d)} rows; episodes.csv: {len(e)} rows", file=sys.stderr)
 sys.exit(1 if problems else 0)
 PY
+for role in actor optimizer; do
+  tok=$(<"$sec/$role.token")
+  if grep -rqF -- "$tok" "$run_dir/logs" "$work"/*-logs "$work"/*.out "$work"/*.err 2>/dev/null; then
+    fail "the $role token appears in a log"
+  fi
+done
+say "the fleet spoke TLS with role tokens across hosts; no token in any log"
 passed=1
 say "PASS: learner + optimiser in $ns_l, actors in $ns_a1 and $ns_a2, gRPC across the bridge; run directory checked"

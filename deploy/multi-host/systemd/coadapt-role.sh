@@ -19,6 +19,14 @@ Runs `$COADAPT_BIN <role> ...` with the settings of the environment (the units l
   COADAPT_RUN_DIR    learner: run directory (default /var/lib/coadapt/run)
   COADAPT_SEED       learner: override the config's seed (optional)
   COADAPT_EXTRA_ARGS extra arguments for every role, split on spaces (optional)
+  COADAPT_TLS_DIR    TLS files of `coadapt tls new` (default /etc/coadapt/tls): the learner
+                     serves server.pem/server-key.pem when present, the others check it with
+                     ca.pem when present
+  COADAPT_TOKENS_FILE learner: the accepted tokens (default /etc/coadapt/tokens when present)
+  COADAPT_TOKEN_DIR  optimiser and actors: their token, <dir>/<role>.token (default
+                     /etc/coadapt/tokens.d when present); tokens are read by coadapt from the
+                     file, never passed as arguments
+  COADAPT_INSECURE   learner: 1 to serve plaintext on a non-loopback address (trusted networks)
 ID is the actor id (the unit instance: coadapt-actor@3 runs actor 3).
 EOF_USAGE
 }
@@ -58,6 +66,25 @@ case $role in
     ;;
   *) die "unknown role '$role' (learner, optimizer, actor)" ;;
 esac
+# TLS and tokens: file paths only.
+tls_dir=${COADAPT_TLS_DIR:-/etc/coadapt/tls}
+if [[ $transport == grpc ]]; then
+  case $role in
+    learner)
+      if [[ -f $tls_dir/server.pem ]]; then
+        args+=(--tls-cert "$tls_dir/server.pem" --tls-key "$tls_dir/server-key.pem")
+      fi
+      tokens=${COADAPT_TOKENS_FILE:-/etc/coadapt/tokens}
+      [[ ! -f $tokens ]] || args+=(--tokens-file "$tokens")
+      [[ ${COADAPT_INSECURE:-0} != 1 ]] || args+=(--insecure)
+      ;;
+    *)
+      [[ ! -f $tls_dir/ca.pem ]] || args+=(--tls-ca "$tls_dir/ca.pem")
+      token=${COADAPT_TOKEN_DIR:-/etc/coadapt/tokens.d}/$role.token
+      [[ ! -f $token ]] || args+=(--token-file "$token")
+      ;;
+  esac
+fi
 if [[ -n ${COADAPT_EXTRA_ARGS:-} ]]; then
   read -r -a extra <<<"$COADAPT_EXTRA_ARGS"
   args+=("${extra[@]}")
