@@ -29,6 +29,10 @@ pub enum BenchCommand {
     /// Environments over dm_env_rpc: steps/s and step latency (median, p99) of our robots
     /// served on loopback against the same in process, and of any server given by --url.
     Env(crate::bench_env::EnvArgs),
+    /// Design queries: Score latency and designs/s for batches of 1, 100 and 10,000 over gRPC
+    /// (and TLS) against the same in process; the learner's updates/s with and without a client
+    /// scoring in a loop.
+    Design(crate::bench_design::DesignBenchArgs),
 }
 
 #[derive(Debug, Args)]
@@ -79,6 +83,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Snapshot(a) => crate::bench_snapshot::run(&a),
         BenchCommand::Transport(a) => crate::bench_transport::run(&a),
         BenchCommand::Env(a) => crate::bench_env::run(&a),
+        BenchCommand::Design(a) => crate::bench_design::run(&a),
     }
 }
 
@@ -133,7 +138,7 @@ pub(crate) fn emit(bench: &str, config: &str, value: f64, unit: &str) {
 }
 
 /// Calls `f` repeatedly for about `seconds` after a short warm-up; returns calls per second.
-fn rate(seconds: f64, mut f: impl FnMut()) -> f64 {
+pub(crate) fn rate(seconds: f64, mut f: impl FnMut()) -> f64 {
     for _ in 0..3 {
         f();
     }
@@ -146,7 +151,7 @@ fn rate(seconds: f64, mut f: impl FnMut()) -> f64 {
     n as f64 / start.elapsed().as_secs_f64()
 }
 
-fn random_batch(rows: usize, obs: usize, act: usize, seed: u64) -> Batch {
+pub(crate) fn random_batch(rows: usize, obs: usize, act: usize, seed: u64) -> Batch {
     let mut r = rng(seed, 9);
     let mut b = Batch::new(rows, obs, act);
     for v in b.obs.iter_mut().chain(b.next_obs.iter_mut()).chain(b.rew.iter_mut()) {

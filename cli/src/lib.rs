@@ -23,6 +23,7 @@
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
+pub mod bench_design;
 pub mod bench_env;
 pub mod bench_snapshot;
 pub mod bench_transport;

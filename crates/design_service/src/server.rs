@@ -119,7 +119,11 @@ pub(crate) fn check_design(values: &[f32], m: &DesignModel, field: &str) -> Resu
     Ok(())
 }
 
-/// A running server; dropping it stops it.
+/// How long a stopping server waits for its clients to close their connections.
+const STOP_GRACE: Duration = Duration::from_secs(1);
+
+/// A running server; dropping it stops it (within [`STOP_GRACE`] and a little more, whatever
+/// its clients do).
 #[derive(Debug)]
 pub struct DesignServer {
     local_addr: SocketAddr,
@@ -228,11 +232,23 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
     let thread = std::thread::Builder::new().name("coadapt-design-service".into()).spawn(move || {
         let _reporter = reporter;
         rt.block_on(async move {
+            let mut stop_late = stop.clone();
             let graceful = async move {
                 let _ = stop.wait_for(|s| *s).await;
             };
-            if let Err(e) = router.serve_with_incoming_shutdown(incoming, graceful).await {
-                eprintln!("coadapt design service: stopped: {e}");
+            // A graceful stop waits for every client to close its connection; one that never
+            // does (idle, hostile, or frozen) must not hold the process: cut after a grace.
+            let cut = async move {
+                let _ = stop_late.wait_for(|s| *s).await;
+                tokio::time::sleep(STOP_GRACE).await;
+            };
+            tokio::select! {
+                r = router.serve_with_incoming_shutdown(incoming, graceful) => {
+                    if let Err(e) = r {
+                        eprintln!("coadapt design service: stopped: {e}");
+                    }
+                }
+                () = cut => {}
             }
         });
         rt.shutdown_timeout(Duration::from_millis(200));

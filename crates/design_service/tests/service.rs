@@ -465,3 +465,18 @@ fn watch_streams_the_history_then_each_change_until_the_run_ends() {
         assert_eq!(rows, 4);
     });
 }
+
+#[test]
+fn a_server_stops_within_its_grace_whatever_its_clients_do() {
+    let (s, _) = server(ServeConfig::default());
+    let rt = rt();
+    // A client that made a call and then went quiet without closing its connection (its
+    // runtime is not polled again: as a frozen or hostile peer would).
+    let mut d = rt.block_on(async { DesignServiceClient::new(channel(&s).await) });
+    rt.block_on(d.info(pb::InfoRequest {})).unwrap();
+    let t = std::time::Instant::now();
+    drop(s);
+    let took = t.elapsed();
+    assert!(took < std::time::Duration::from_secs(3), "the server took {took:?} to stop");
+    drop(d);
+}
