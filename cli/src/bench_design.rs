@@ -5,7 +5,8 @@
 //!   Eq. 5.6 computed in process (`inproc`): the difference is the service's own cost.
 //! - The learner's SAC updates/s (3 x 256, obs 23 with the design, batch 256) alone and while a
 //!   client scores batches of 100 designs in a loop against a design server in the same process
-//!   (the server's pool of `max-concurrent` = 1 thread): what serving costs the training.
+//!   (the server's pool of `max-concurrent` = 1 thread), with no busy-share limit and with the
+//!   learner's default share of 0.2 of a core: what serving costs the training.
 //!
 //! Networks are HalfCheetah-sized (state 17, design 6, action 6, 3 x 256), 32 start states (the
 //! reference's start-state batch). Every design is drawn before the timed loops.
@@ -90,7 +91,11 @@ fn time_calls(config: &str, batch: usize, seconds: f64, mut f: impl FnMut()) {
 }
 
 fn serve(m: DesignModel, tls: Option<&std::path::Path>) -> anyhow::Result<coadapt_design_service::DesignServer> {
-    let mut cfg = ServeConfig::default();
+    serve_with(m, tls, 1.0)
+}
+
+fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> anyhow::Result<coadapt_design_service::DesignServer> {
+    let mut cfg = ServeConfig { max_busy_share: share, ..ServeConfig::default() };
     if let Some(dir) = tls {
         let f = |n: &str| dir.join(n).display().to_string();
         cfg.auth = crate::security::SecurityConfig { tls_cert: f("server.pem"), tls_key: f("server-key.pem"), ..Default::default() }
@@ -157,7 +162,22 @@ fn learner_rates(a: &DesignBenchArgs, sac: &Sac) -> anyhow::Result<()> {
         learner.update(&batch);
     });
     emit("learner_updates", "3x256-obs23-alone", alone, "updates/s");
-    let server = serve(model(sac)?, None)?;
+    for share in [1.0, 0.2] {
+        beside_learner(a, sac, &mut learner, &batch, alone, share)?;
+    }
+    Ok(())
+}
+
+/// The learner's rate beside a client scoring in a loop against a server of `share`.
+fn beside_learner(
+    a: &DesignBenchArgs,
+    sac: &Sac,
+    learner: &mut Sac,
+    batch: &coadapt_core::Batch,
+    alone: f64,
+    share: f64,
+) -> anyhow::Result<()> {
+    let server = serve_with(model(sac)?, None, share)?;
     let addr = server.local_addr();
     let stop = Arc::new(AtomicBool::new(false));
     let calls = Arc::new(AtomicU64::new(0));
@@ -176,13 +196,14 @@ fn learner_rates(a: &DesignBenchArgs, sac: &Sac) -> anyhow::Result<()> {
     let t = Instant::now();
     let before = calls.load(Ordering::Relaxed);
     let busy = crate::bench::rate(a.seconds, || {
-        learner.update(&batch);
+        learner.update(batch);
     });
     let scored = (calls.load(Ordering::Relaxed) - before) as f64 * 100.0 / t.elapsed().as_secs_f64();
     stop.store(true, Ordering::Relaxed);
     scorer.join().map_err(|_| anyhow::anyhow!("the scoring client panicked"))??;
-    emit("learner_updates", "3x256-obs23-with-score-client-batch100", busy, "updates/s");
-    emit("learner_updates_kept", "with-score-client-batch100", busy / alone * 100.0, "%");
-    emit("design_score", "grpc-batch100-beside-learner", scored, "designs/s");
+    let tag = format!("score-client-batch100-busy-share{share}");
+    emit("learner_updates", &format!("3x256-obs23-with-{tag}"), busy, "updates/s");
+    emit("learner_updates_kept", &format!("with-{tag}"), busy / alone * 100.0, "%");
+    emit("design_score", &format!("grpc-batch100-beside-learner-busy-share{share}"), scored, "designs/s");
     Ok(())
 }

@@ -40,6 +40,10 @@ pub struct DesignServiceConfig {
     pub history_page: usize,
     /// The server's deadline for a call (an Optimize's or a Watch's stream may run longer).
     pub rpc_timeout_secs: f64,
+    /// The share of one core queries may keep busy, in (0, 1]: after computing for t the
+    /// server rests t (1/share - 1) before the next query, so training keeps its machine
+    /// (BENCHMARKS.md: the learner's updates/s with a client scoring in a loop).
+    pub max_busy_share: f64,
 }
 
 impl Default for DesignServiceConfig {
@@ -52,6 +56,7 @@ impl Default for DesignServiceConfig {
             max_concurrent: d.max_concurrent,
             history_page: d.history_page,
             rpc_timeout_secs: d.rpc_timeout.as_secs_f64(),
+            max_busy_share: 0.2,
         }
     }
 }
@@ -66,6 +71,9 @@ impl DesignServiceConfig {
             .ok()
             .filter(|d| !d.is_zero())
             .with_context(|| format!("design-service.rpc-timeout-secs: {} is not a positive number of seconds", self.rpc_timeout_secs))?;
+        if !(self.max_busy_share > 0.0 && self.max_busy_share <= 1.0) {
+            anyhow::bail!("design-service.max-busy-share: {} is not in (0, 1]", self.max_busy_share);
+        }
         if self.max_optimize_evaluations == 0 {
             anyhow::bail!("design-service.max-optimize-evaluations: 0 would refuse every Optimize; at least 1");
         }
@@ -75,6 +83,7 @@ impl DesignServiceConfig {
             max_concurrent: positive("max-concurrent", self.max_concurrent)?,
             history_page: positive("history-page", self.history_page)?,
             rpc_timeout,
+            max_busy_share: self.max_busy_share,
             ..ServeConfig::default()
         })
     }

@@ -103,7 +103,7 @@ impl Search {
 
     /// Runs the search on this thread, sending progress to `tx`; a closed `tx` (the client
     /// cancelled) ends the search after the iteration under way.
-    pub(crate) fn run(&self, m: &DesignModel, tx: &mpsc::Sender<Result<pb::OptimizeProgress, Status>>) {
+    pub(crate) fn run(&self, m: &DesignModel, busy_share: f64, tx: &mpsc::Sender<Result<pb::OptimizeProgress, Status>>) {
         let mut cancelled = false;
         let mut ws = ObjectiveWorkspace::default();
         let (mut full, mut spread, mut one) = (Vec::new(), Vec::new(), Vec::new());
@@ -114,7 +114,10 @@ impl Search {
                 full.extend_from_slice(&one);
             }
             spread.resize(scores.len(), 0.0);
+            let t = std::time::Instant::now();
             m.score(&full, scores, &mut spread, &mut ws);
+            // The busy share holds for searches too: rest in proportion after each batch.
+            std::thread::sleep(crate::server::rest_after(busy_share, t.elapsed()));
         };
         let mut best = Vec::new();
         let progress = |p: &coadapt_design_optimizer::swarm::Progress<'_>| {
@@ -174,9 +177,10 @@ pub(crate) async fn start(
 ) -> Result<tokio_stream::wrappers::ReceiverStream<Result<pb::OptimizeProgress, Status>>, Status> {
     let permit = shared.permit().await?;
     let (tx, rx) = mpsc::channel(16);
+    let share = shared.cfg.max_busy_share;
     tokio::task::spawn_blocking(move || {
         let _permit = permit;
-        search.run(&m, &tx);
+        search.run(&m, share, &tx);
     });
     Ok(tokio_stream::wrappers::ReceiverStream::new(rx))
 }

@@ -38,6 +38,11 @@ pub struct ServeConfig {
     pub max_connections: usize,
     /// TLS and accepted tokens (clients, optimisers and operators may query).
     pub auth: coadapt_auth::ServerAuth,
+    /// The share of one core that queries may keep busy, in (0, 1]: after computing for `t`
+    /// the pool rests `t (1/share - 1)` before the next computation (a reply is not delayed,
+    /// the next query is). 1: no rest (a finished run's server); a learner serving during its
+    /// run keeps most of its machine for training with a small share.
+    pub max_busy_share: f64,
 }
 
 impl Default for ServeConfig {
@@ -52,6 +57,7 @@ impl Default for ServeConfig {
             max_connections_per_peer: 64,
             max_connections: 256,
             auth: coadapt_auth::ServerAuth::default(),
+            max_busy_share: 1.0,
         }
     }
 }
@@ -85,18 +91,40 @@ impl Shared {
         self.permits.clone().acquire_owned().await.map_err(|_| Status::unavailable("the server is stopping"))
     }
 
-    /// Eq. 5.6 and its spread for `designs` (checked), on the bounded pool.
+    /// The rest owed after computing for `busy` ([`ServeConfig::max_busy_share`]).
+    pub(crate) fn rest_after(&self, busy: Duration) -> Duration {
+        rest_after(self.cfg.max_busy_share, busy)
+    }
+
+    /// Eq. 5.6 and its spread for `designs` (checked), on the bounded pool; the pool's place
+    /// is kept through the rest the busy share asks for, after the answer is on its way.
     pub(crate) async fn score(&self, m: Arc<DesignModel>, designs: Vec<f32>) -> Result<(Vec<f32>, Vec<f32>), Status> {
-        let _permit = self.permit().await?;
-        tokio::task::spawn_blocking(move || {
+        let permit = self.permit().await?;
+        let (mean, spread, busy) = tokio::task::spawn_blocking(move || {
+            let t = std::time::Instant::now();
             let n = designs.len() / m.design_dim().max(1);
             let (mut mean, mut spread) = (vec![0.0; n], vec![0.0; n]);
             m.score(&designs, &mut mean, &mut spread, &mut ObjectiveWorkspace::default());
-            (mean, spread)
+            (mean, spread, t.elapsed())
         })
         .await
-        .map_err(|e| Status::internal(format!("scoring failed: {e}")))
+        .map_err(|e| Status::internal(format!("scoring failed: {e}")))?;
+        let rest = self.rest_after(busy);
+        if rest.is_zero() {
+            drop(permit);
+        } else {
+            tokio::spawn(async move {
+                tokio::time::sleep(rest).await;
+                drop(permit);
+            });
+        }
+        Ok((mean, spread))
     }
+}
+
+/// `busy (1/share - 1)`, none for a share of 1 or more (or not a number).
+pub(crate) fn rest_after(share: f64, busy: Duration) -> Duration {
+    if share.is_finite() && share > 0.0 && share < 1.0 { busy.mul_f64(1.0 / share - 1.0) } else { Duration::ZERO }
 }
 
 /// `values` as a design of `m`, or INVALID_ARGUMENT naming `field`: its length, a value that
@@ -254,4 +282,21 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
         rt.shutdown_timeout(Duration::from_millis(200));
     })?;
     Ok(DesignServer { local_addr, shutdown, thread: Some(thread) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rest_keeps_the_busy_share() {
+        let busy = Duration::from_millis(10);
+        assert_eq!(rest_after(0.2, busy), Duration::from_millis(40));
+        assert_eq!(rest_after(0.5, busy), busy);
+        assert_eq!(rest_after(1.0, busy), Duration::ZERO);
+        assert_eq!(rest_after(f64::NAN, busy), Duration::ZERO);
+        // Busy 10 of every 10 + 40 ms: a share of 0.2.
+        let share = busy.as_secs_f64() / (busy + rest_after(0.2, busy)).as_secs_f64();
+        assert!((share - 0.2).abs() < 1e-9);
+    }
 }

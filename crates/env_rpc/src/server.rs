@@ -377,13 +377,18 @@ pub struct BackgroundServer {
 impl BackgroundServer {
     /// Binds `addr` (port 0 picks one) and serves `factory`.
     pub fn start(addr: &str, factory: EnvFactory) -> std::io::Result<Self> {
+        Self::start_with(addr, factory, coadapt_auth::ServerAuth::default())
+    }
+
+    /// [`BackgroundServer::start`] with TLS and tokens (actors and operators may step).
+    pub fn start_with(addr: &str, factory: EnvFactory, auth: coadapt_auth::ServerAuth) -> std::io::Result<Self> {
         let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).thread_name("env-serve").enable_all().build()?;
         let listener = rt.block_on(tokio::net::TcpListener::bind(addr))?;
         let addr = listener.local_addr()?;
         let service = EnvService::new(factory);
         let s = service.clone();
         rt.spawn(async move {
-            if let Err(e) = serve_service(listener, s, &coadapt_auth::ServerAuth::default(), std::future::pending()).await {
+            if let Err(e) = serve_service(listener, s, &auth, std::future::pending()).await {
                 eprintln!("env-serve: {e}");
             }
         });
