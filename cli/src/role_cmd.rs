@@ -11,7 +11,7 @@ use coadapt_transport::messages::Dims;
 
 use crate::fleet::TransportKind;
 use crate::progress::shutdown_on_ctrl_c;
-use crate::roles::{self, make_env};
+use crate::roles;
 use crate::run::{RunArgs, RunConfig, check, finish, resolve, resolve_initial_designs};
 
 /// What every role takes.
@@ -58,7 +58,7 @@ impl RoleArgs {
             cfg.fleet.name = f.clone();
         }
         cfg.security = cfg.security.clone().with_args(&self.security);
-        let spec = make_env(&cfg.env)?.spec().clone();
+        let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
         resolve_initial_designs(&mut cfg, &spec);
         check(&cfg, &spec)?;
         Ok((cfg, name))
@@ -139,7 +139,7 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
         None if args.resume => bail!("--resume needs --out RUN_DIR"),
         None => crate::run::default_out(&name, cfg.seed),
     };
-    let spec = make_env(&cfg.env)?.spec().clone();
+    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
@@ -185,7 +185,7 @@ pub fn actor(args: ActorArgs) -> anyhow::Result<()> {
         cfg.fleet.connect = c;
     }
     let id = args.id.unwrap_or_else(default_id);
-    let spec = make_env(&cfg.env)?.spec().clone();
+    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
     eprintln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
@@ -201,7 +201,7 @@ pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
     if let Some(c) = args.connect {
         cfg.fleet.connect = c;
     }
-    let spec = make_env(&cfg.env)?.spec().clone();
+    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let mut links = cfg.fleet.optimizer_links(&cfg.security)?;
     eprintln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::fleet::{FleetConfig, TransportKind};
 use crate::progress::{print_stdout_line, shutdown_on_ctrl_c};
-use crate::roles::{self, make_env};
+use crate::roles;
 
 /// The reference protocol on HalfCheetah, used when no `--config` is given.
 pub const DEFAULT_CONFIG: &str = include_str!("../../configs/half-cheetah-reference.toml");
@@ -251,7 +251,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
 /// Runs the co-adaptation described by `cfg` into `dir`, every role a thread of this process
 /// over the in-process transport.
 pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> anyhow::Result<coadapt::RunOutcome> {
-    let spec = make_env(&cfg.env)?.spec().clone();
+    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     check(cfg, &spec)?;
     let (mut learner_links, actor_links, mut optimizer_links) = in_process::fleet(cfg.actors);
     std::thread::scope(|s| -> anyhow::Result<coadapt::RunOutcome> {
@@ -303,7 +303,7 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
     if n == 0 || outcome.designs.is_empty() {
         return Ok(());
     }
-    let spec = make_env(&cfg.env)?.spec().clone();
+    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let dim = spec.design_dim();
     let designs: Vec<f32> = outcome.designs.iter().flat_map(|d| d.design.clone()).collect();
     let pca = Pca2::fit(&designs, dim)?;
@@ -403,7 +403,7 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
 /// `coadapt run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (mut cfg, name) = resolve(&args)?;
-    let spec = make_env(&cfg.env)?.spec().clone();
+    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     resolve_initial_designs(&mut cfg, &spec);
     check(&cfg, &spec)?;
     let resume = args.resume.is_some();

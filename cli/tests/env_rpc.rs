@@ -303,3 +303,56 @@ fn env_serve_stops_on_sigterm_even_with_a_client_connected() {
     }
     assert!(t.elapsed() >= Duration::from_secs(1), "the open stream got its grace period");
 }
+
+#[test]
+fn a_bridge_across_machines_serves_tls_to_actor_tokens_only() {
+    let dir = tmpdir("bridge-tls");
+    let sec = dir.join("sec");
+    assert!(coadapt(&["tls", "new", "--out", sec.join("tls").to_str().unwrap()]).status.success());
+    for role in ["actor", "client"] {
+        let out = sec.join(format!("{role}.token"));
+        let o = coadapt(&[
+            "token",
+            "new",
+            "--role",
+            role,
+            "--out",
+            out.to_str().unwrap(),
+            "--tokens-file",
+            sec.join("tokens").to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let p = |n: &str| sec.join(n).display().to_string();
+    // Without TLS a bridge refuses an address other than loopback.
+    let o = Command::new(venv().join("bin/coadapt-gym-serve")).args(["--env", "Pendulum-v1", "--host", "0.0.0.0"]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("not a loopback address") && e.contains("--insecure"), "{e}");
+    let server = gym_serve(&[
+        "--factory",
+        "coadapt_bridge.mujoco_half_cheetah:make",
+        "--port",
+        "0",
+        "--tls-cert",
+        &p("tls/server.pem"),
+        "--tls-key",
+        &p("tls/server-key.pem"),
+        "--tokens-file",
+        &p("tokens"),
+    ]);
+    let security = |token: &str| format!("\n[security]\ntls-ca = \"{}\"\ntoken-file = \"{}\"\n", p("tls/ca.pem"), p(token));
+    // The actor's token over TLS: a whole tiny co-adaptation.
+    let (s, _) = run_tiny(&tiny_config(&dir, &server.url, "", &security("actor.token")), &dir.join("run"));
+    assert_eq!(s["designs"], 4, "{s}");
+    // A client's token may not step the robot; plaintext is not served.
+    let cfg = tiny_config(&dir, &server.url, "", &security("client.token"));
+    let o =
+        coadapt(&["run", "--config", cfg.to_str().unwrap(), "--out", dir.join("client").to_str().unwrap(), "--transport", "in-process"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("PermissionDenied") && e.contains("role client"), "{e}");
+    let cfg = tiny_config(&dir, &server.url, "", "");
+    let o = coadapt(&["run", "--config", cfg.to_str().unwrap(), "--out", dir.join("plain").to_str().unwrap(), "--transport", "in-process"]);
+    assert!(!o.status.success(), "a plaintext actor stepped a TLS bridge");
+    let token = std::fs::read_to_string(sec.join("client.token")).unwrap();
+    assert!(!e.contains(token.trim()), "the token is in the error");
+}

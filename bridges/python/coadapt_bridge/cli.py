@@ -121,6 +121,18 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         metavar="N",
         help="simultaneous connections served; more are refused with RESOURCE_EXHAUSTED (default: %(default)s)",
     )
+    p.add_argument("--tls-cert", metavar="PEM", help="serve TLS with this certificate (with --tls-key; `coadapt tls new`)")
+    p.add_argument("--tls-key", metavar="PEM", help="the private key of --tls-cert")
+    p.add_argument(
+        "--tokens-file",
+        metavar="FILE",
+        help="accept only calls with these tokens (`ROLE SHA256` lines, `coadapt token new`); actors and operators may step",
+    )
+    p.add_argument(
+        "--insecure",
+        action="store_true",
+        help="serve plaintext on an address other than loopback (a network you trust: anyone who reaches it drives the robot)",
+    )
     p.add_argument(
         "--log-level",
         default="INFO",
@@ -138,6 +150,15 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error("--step-timeout must be a positive number of seconds")
     if args.max_connections < 1:
         p.error("--max-connections must be at least 1")
+    if (args.tls_cert is None) != (args.tls_key is None):
+        p.error("--tls-cert and --tls-key go together")
+    from .auth import is_loopback
+
+    if not is_loopback(args.host) and args.tls_cert is None and not args.insecure:
+        p.error(
+            f"--host {args.host}: not a loopback address, and no TLS (--tls-cert, --tls-key): anyone who reaches the port "
+            "would drive the environment. Serve TLS, listen on 127.0.0.1, or pass --insecure on a network you trust"
+        )
     return args
 
 
@@ -170,6 +191,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     from .server import BridgeServer
 
+    from .auth import AuthError, load_tokens, read_pem
+
+    try:
+        tls = (read_pem("--tls-cert", args.tls_cert), read_pem("--tls-key", args.tls_key)) if args.tls_cert else None
+        tokens = load_tokens(args.tokens_file) if args.tokens_file else None
+    except AuthError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
     try:
         backend = make_backend(args)
     except BackendError as e:
@@ -183,6 +212,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         seed=args.seed,
         step_timeout=args.step_timeout,
         max_connections=args.max_connections,
+        tls=tls,
+        tokens=tokens,
     )
     try:
         server.start()

@@ -574,8 +574,16 @@ class BridgeServer:
         seed: Optional[int] = None,
         step_timeout: float = 1.0,
         max_connections: int = 32,
+        tls: Optional[tuple] = None,
+        tokens: Optional[Dict[str, str]] = None,
     ):
+        """``tls``: (certificate PEM, key PEM) to serve TLS only; ``tokens``: {sha256: role} of
+        the accepted tokens (see ``coadapt_bridge.auth``)."""
+        from .auth import TokenGate
+
         self.backend = backend
+        self.tls = tls
+        self.gate = TokenGate(tokens) if tokens else None
         self.host = host
         self.requested_port = port
         self.service = EnvironmentService(backend, max_episode_steps, seed, step_timeout)
@@ -583,6 +591,7 @@ class BridgeServer:
             futures.ThreadPoolExecutor(max_workers=max_connections + 2, thread_name_prefix="coadapt-rpc"),
             options=_grpc_options(),
             maximum_concurrent_rpcs=max_connections,
+            interceptors=[self.gate] if self.gate else None,
         )
         dm_env_rpc_pb2_grpc.add_EnvironmentServicer_to_server(self.service, self._server)
         self.port: Optional[int] = None
@@ -597,7 +606,11 @@ class BridgeServer:
     def start(self) -> int:
         host = f"[{self.host}]" if ":" in self.host and not self.host.startswith("[") else self.host
         try:
-            port = self._server.add_insecure_port(f"{host}:{self.requested_port}")
+            if self.tls is not None:
+                creds = grpc.ssl_server_credentials([(self.tls[1], self.tls[0])])
+                port = self._server.add_secure_port(f"{host}:{self.requested_port}", creds)
+            else:
+                port = self._server.add_insecure_port(f"{host}:{self.requested_port}")
         except RuntimeError as e:
             raise OSError(f"cannot listen on {host}:{self.requested_port}: {e}") from None
         if not port:
