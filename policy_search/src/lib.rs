@@ -1,0 +1,38 @@
+//! Episodic policy search from few rollouts (thesis ch. 2 and 3): policies linear in time
+//! features, whose exploration is a perturbation of their parameters drawn once per rollout or
+//! per step, updated by expectation-maximisation on reward-weighted rollouts.
+//!
+//! # Layout
+//! - `features`: normalised Gaussian RBF features of time, [`TimeFeatures`] (the thesis's 11
+//!   features of width 3 for 25 steps, 8 for 15).
+//! - `planar`: the bimanual planar reaching benchmark of ch. 2.4.1, [`PlanarReaching`]: two
+//!   planar 6-joint arms on a shared base, 12 joint angles per step, 25 steps, reward Eq. 2.31
+//!   and the summed end-effector distance the thesis plots. The text leaves the arms and the goal
+//!   paths open; the choices are documented there and fixed.
+//! - `policy`: [`LinearPolicy`], actions `a_t = M phi_t` (M is `actions x features`), and
+//!   [`Rollout`], one rollout's parameters, actions and return.
+//! - `power`: PoWER (Kober and Peters), the EM baseline with exploration in the full parameter
+//!   space and a static variance, best-k selection as in the thesis.
+//!
+//! GrouPS (Alg. 1 and 2), PePPER and NAC come next (issue 14).
+
+mod features;
+mod planar;
+mod policy;
+mod power;
+
+pub use features::TimeFeatures;
+pub use planar::{ArmGeometry, PlanarReaching};
+pub use policy::{LinearPolicy, Rollout};
+pub use power::{Power, PowerConfig};
+
+/// What an episodic task gives back for one rollout's actions.
+pub trait EpisodicTask {
+    /// Steps per rollout.
+    fn steps(&self) -> usize;
+    /// Action dimensions per step.
+    fn action_dim(&self) -> usize;
+    /// The return of `actions` (`steps x action_dim`, row-major), non-negative (the EM
+    /// updates weigh rollouts by it), and the task's cost metric (lower is better).
+    fn evaluate(&self, actions: &[f32]) -> (f64, f64);
+}
