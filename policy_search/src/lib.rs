@@ -13,15 +13,21 @@
 //!   [`Rollout`], one rollout's parameters, actions and return.
 //! - `power`: PoWER (Kober and Peters), the EM baseline with exploration in the full parameter
 //!   space and a static variance, best-k selection as in the thesis.
+//! - `groups`: GrouPS (Alg. 1; the synergy prior W-hat of Alg. 2 with Gamma alpha), the
+//!   variational updates in the order M, W, z, alpha, tau; `linalg`: the small dense algebra.
 //!
-//! GrouPS (Alg. 1 and 2), PePPER and NAC come next (issue 14).
+//! Next (issue 14): the log-linear alpha of ch. 3 with L-BFGS, PePPER, NAC, rollouts through
+//! the fleet, `coadapt search`.
 
 mod features;
+mod groups;
+mod linalg;
 mod planar;
 mod policy;
 mod power;
 
 pub use features::TimeFeatures;
+pub use groups::{Groups, GroupsConfig, Sample};
 pub use planar::{ArmGeometry, PlanarReaching};
 pub use policy::{LinearPolicy, Rollout};
 pub use power::{Power, PowerConfig};

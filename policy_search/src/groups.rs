@@ -1,0 +1,430 @@
+//! GrouPS, Group Factor Policy Search (thesis Alg. 1, Eq. 2.10-2.29, in the implementable form
+//! of `thesis-notes.md` 1.3-1.4), with the synergy prior of Alg. 2 (Eq. 3.15-3.17: W centred on
+//! a previously learned W-hat; W-hat = 0 is chapter 2 exactly) and Gamma-distributed alpha.
+//!
+//! Actions of group m: `a_t^(m) = (W^(m) Z_t + M^(m) + E_t^(m)) phi_t`, with `Z_t` (K x p)
+//! standard normal, drawn once per rollout (default, as the reference port) or per step, and
+//! `E_t^(m)` of variance 1/tau_m. With `z_t = Z_t phi_t` and `s_t = phi_t' phi_t` the policy is
+//! `N(a^(m) | W^(m) z_t + M^(m) phi_t, s_t / tau_m)`. The mean-field posterior
+//! q(M) q(W) q(z) q(alpha) q(tau) is fitted to the best rollouts, weighted by their returns
+//! (`w_i = R_i / sum R`), in the order M, W, z, alpha, tau, with E[tau] throughout; z is not
+//! reward-weighted.
+
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+
+use crate::EpisodicTask;
+use crate::features::TimeFeatures;
+use crate::linalg::{dot, matvec, spd_inverse};
+
+/// GrouPS's settings (the thesis's planar task).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GroupsConfig {
+    /// Latent factors K (synergies per group).
+    pub latent: usize,
+    pub rollouts: usize,
+    /// Rollouts of an iteration the update uses (the best by return).
+    pub best: usize,
+    /// Variational iterations per update.
+    pub inner: usize,
+    pub a_tau: f64,
+    pub b_tau: f64,
+    pub a_alpha: f64,
+    pub b_alpha: f64,
+    /// Prior variance of M around the previous iteration's M.
+    pub sigma2: f64,
+    /// After each update W <- resize E[W], tau <- E[tau] / resize (against collapse).
+    pub resize: f64,
+    /// Initial noise variance 1/tau.
+    pub initial_variance: f64,
+    /// Draw Z every step (false: once per rollout, the reference port's choice).
+    pub z_per_step: bool,
+}
+
+impl Default for GroupsConfig {
+    fn default() -> Self {
+        Self {
+            latent: 6,
+            rollouts: 30,
+            best: 15,
+            inner: 20,
+            a_tau: 1000.0,
+            b_tau: 1000.0,
+            a_alpha: 1.0,
+            b_alpha: 1.0,
+            sigma2: 100.0,
+            resize: 1.5,
+            initial_variance: 10f64.powf(1.5),
+            z_per_step: false,
+        }
+    }
+}
+
+/// One sampled rollout: its actions (`T x D`), the latent draws `z_t` (`T x K`), return, cost.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    pub actions: Vec<f64>,
+    pub z: Vec<f64>,
+    pub ret: f64,
+    pub cost: f64,
+}
+
+/// The learner's state: the posterior means and covariances, per group.
+#[derive(Debug)]
+pub struct Groups {
+    pub cfg: GroupsConfig,
+    /// Action indices of each group.
+    pub groups: Vec<Vec<usize>>,
+    /// Actions D and features p.
+    pub d: usize,
+    pub p: usize,
+    /// E[M] (`D x p`) and each group's row covariance (`p x p`).
+    pub m: Vec<f64>,
+    pub sigma_m: Vec<Vec<f64>>,
+    /// E[W] (`D x K`), each group's row covariance (`K x K`), the prior centre W-hat.
+    pub w: Vec<f64>,
+    pub sigma_w: Vec<Vec<f64>>,
+    pub w_hat: Vec<f64>,
+    /// E[alpha] per group (`K` each) and E[tau] per group.
+    pub alpha: Vec<Vec<f64>>,
+    pub tau: Vec<f64>,
+    rng: rand::rngs::StdRng,
+}
+
+impl Groups {
+    /// A learner for `d` actions in `groups` (each action in exactly one), `p` features: M = 0,
+    /// W ~ N(0, 1), alpha = 1, tau = 1 / initial variance.
+    pub fn new(cfg: GroupsConfig, groups: Vec<Vec<usize>>, d: usize, p: usize, seed: u64) -> Result<Self, String> {
+        let mut seen = vec![0usize; d];
+        for g in &groups {
+            for &j in g {
+                *seen.get_mut(j).ok_or_else(|| format!("group action {j} is beyond the {d} actions"))? += 1;
+            }
+        }
+        if let Some(j) = seen.iter().position(|&c| c != 1) {
+            return Err(format!("action {j} is in {} groups; every action belongs to exactly one", seen[j]));
+        }
+        if !(cfg.initial_variance > 0.0 && cfg.resize > 0.0 && cfg.sigma2 > 0.0) {
+            return Err("initial-variance, resize and sigma2 must be positive".into());
+        }
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let k = cfg.latent;
+        let w: Vec<f64> = (0..d * k).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let n = groups.len();
+        Ok(Self {
+            m: vec![0.0; d * p],
+            sigma_m: vec![identity(p); n],
+            w,
+            sigma_w: vec![identity(k); n],
+            w_hat: vec![0.0; d * k],
+            alpha: vec![vec![1.0; k]; n],
+            tau: vec![1.0 / cfg.initial_variance; n],
+            cfg,
+            groups,
+            d,
+            p,
+            rng,
+        })
+    }
+
+    /// Samples one rollout's actions from the current policy (noise included).
+    pub fn sample(&mut self, phi: &TimeFeatures) -> Sample {
+        let (d, p, k, t_max) = (self.d, self.p, self.cfg.latent, phi.steps());
+        let mut zmat: Vec<f64> = (0..k * p).map(|_| StandardNormal.sample(&mut self.rng)).collect();
+        let (mut actions, mut z) = (Vec::with_capacity(t_max * d), Vec::with_capacity(t_max * k));
+        let mut sd = vec![0.0; d];
+        for (g, idx) in self.groups.iter().enumerate() {
+            for &j in idx {
+                sd[j] = (1.0 / self.tau[g]).sqrt();
+            }
+        }
+        let mut zt = vec![0.0; k];
+        for t in 0..t_max {
+            if self.cfg.z_per_step && t > 0 {
+                for v in zmat.iter_mut() {
+                    *v = StandardNormal.sample(&mut self.rng);
+                }
+            }
+            let f = phi.at(t);
+            matvec(&zmat, k, p, f, &mut zt);
+            for j in 0..d {
+                let e: f64 = f
+                    .iter()
+                    .map(|fi| {
+                        let n: f64 = StandardNormal.sample(&mut self.rng);
+                        fi * sd[j] * n
+                    })
+                    .sum();
+                let a = dot(&self.w[j * k..(j + 1) * k], &zt) + dot(&self.m[j * p..(j + 1) * p], f) + e;
+                actions.push(a);
+            }
+            z.extend_from_slice(&zt);
+        }
+        Sample { actions, z, ret: 0.0, cost: 0.0 }
+    }
+
+    /// One iteration: samples, evaluates, updates from the best; the samples, best first.
+    pub fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Sample> {
+        let mut samples: Vec<Sample> = (0..self.cfg.rollouts)
+            .map(|_| {
+                let mut s = self.sample(phi);
+                let a: Vec<f32> = s.actions.iter().map(|&v| v as f32).collect();
+                (s.ret, s.cost) = task.evaluate(&a);
+                s
+            })
+            .collect();
+        samples.sort_by(|a, b| b.ret.total_cmp(&a.ret));
+        let best = &samples[..self.cfg.best.min(samples.len())];
+        let total: f64 = best.iter().map(|s| s.ret.max(0.0)).sum();
+        if total > 0.0 && total.is_finite() {
+            let weights: Vec<f64> = best.iter().map(|s| s.ret.max(0.0) / total).collect();
+            self.update(best, &weights, phi);
+            self.resize();
+        }
+        samples
+    }
+
+    /// W <- resize E[W], tau <- E[tau] / resize.
+    pub fn resize(&mut self) {
+        let r = self.cfg.resize;
+        self.w.iter_mut().for_each(|v| *v *= r);
+        self.tau.iter_mut().for_each(|v| *v /= r);
+    }
+
+    /// The variational updates on `samples` with data weights `weights` (summing to 1, or all
+    /// 0 for none), `inner` times in the order M, W, z, alpha, tau.
+    pub fn update(&mut self, samples: &[Sample], weights: &[f64], phi: &TimeFeatures) {
+        let (d, p, k, t_max) = (self.d, self.p, self.cfg.latent, phi.steps());
+        let s: Vec<f64> = (0..t_max).map(|t| dot(phi.at(t), phi.at(t))).collect();
+        let m_old = self.m.clone();
+        // q(z): the sampled draws, unit covariance, to start.
+        let mut mu_z: Vec<Vec<f64>> = samples.iter().map(|x| x.z.clone()).collect();
+        let mut sigma_z: Vec<Vec<f64>> = vec![identity(k); t_max];
+        let inv_s2 = 1.0 / self.cfg.sigma2;
+        // sum_t phi phi' / s: the same for every rollout, and the weights sum to 1 (or 0).
+        let wsum: f64 = weights.iter().sum();
+        let mut phiphi = vec![0.0; p * p];
+        for t in 0..t_max {
+            let f = phi.at(t);
+            for a in 0..p {
+                for b in 0..p {
+                    phiphi[a * p + b] += wsum * f[a] * f[b] / s[t];
+                }
+            }
+        }
+        for _ in 0..self.cfg.inner {
+            for (g, idx) in self.groups.iter().enumerate() {
+                let tau = self.tau[g];
+                // q(M) (Eq. 2.19-2.21).
+                let mut prec: Vec<f64> = phiphi.iter().map(|v| tau * v).collect();
+                (0..p).for_each(|a| prec[a * p + a] += inv_s2);
+                let Some(sig) = spd_inverse(&prec, p) else { continue };
+                for &j in idx {
+                    let mut rhs: Vec<f64> = m_old[j * p..(j + 1) * p].iter().map(|v| inv_s2 * v).collect();
+                    let wj = &self.w[j * k..(j + 1) * k];
+                    for (x, (wi, mz)) in samples.iter().zip(weights.iter().zip(&mu_z)) {
+                        for t in 0..t_max {
+                            let r = x.actions[t * d + j] - dot(wj, &mz[t * k..(t + 1) * k]);
+                            let c = tau * wi * r / s[t];
+                            rhs.iter_mut().zip(phi.at(t)).for_each(|(h, f)| *h += c * f);
+                        }
+                    }
+                    matvec(&sig, p, p, &rhs, &mut self.m[j * p..(j + 1) * p]);
+                }
+                self.sigma_m[g] = sig;
+                // q(W) (Eq. 2.22-2.24, with the prior centre W-hat of Eq. 3.16).
+                let mut prec = vec![0.0; k * k];
+                for (wi, mz) in weights.iter().zip(&mu_z) {
+                    for t in 0..t_max {
+                        let z = &mz[t * k..(t + 1) * k];
+                        for a in 0..k {
+                            for b in 0..k {
+                                prec[a * k + b] += tau * wi * (z[a] * z[b] + sigma_z[t][a * k + b]) / s[t];
+                            }
+                        }
+                    }
+                }
+                (0..k).for_each(|a| prec[a * k + a] += self.alpha[g][a]);
+                let Some(sig) = spd_inverse(&prec, k) else { continue };
+                for &j in idx {
+                    let mut rhs: Vec<f64> = (0..k).map(|a| self.alpha[g][a] * self.w_hat[j * k + a]).collect();
+                    let mj = &self.m[j * p..(j + 1) * p];
+                    for (x, (wi, mz)) in samples.iter().zip(weights.iter().zip(&mu_z)) {
+                        for t in 0..t_max {
+                            let r = x.actions[t * d + j] - dot(mj, phi.at(t));
+                            let c = tau * wi * r / s[t];
+                            rhs.iter_mut().zip(&mz[t * k..(t + 1) * k]).for_each(|(h, z)| *h += c * z);
+                        }
+                    }
+                    matvec(&sig, k, k, &rhs, &mut self.w[j * k..(j + 1) * k]);
+                }
+                self.sigma_w[g] = sig;
+            }
+            // q(z) (Eq. 2.25-2.27), per rollout and step, not reward-weighted.
+            let mut a = identity(k);
+            for (g, idx) in self.groups.iter().enumerate() {
+                for &j in idx {
+                    let wj = &self.w[j * k..(j + 1) * k];
+                    for r in 0..k {
+                        for c in 0..k {
+                            a[r * k + c] += self.tau[g] * (wj[r] * wj[c] + self.sigma_w[g][r * k + c]);
+                        }
+                    }
+                }
+            }
+            let Some(a_inv) = spd_inverse(&a, k) else { continue };
+            for t in 0..t_max {
+                sigma_z[t] = a_inv.iter().map(|v| v * s[t]).collect();
+            }
+            let mut rhs = vec![0.0; k];
+            for (x, mz) in samples.iter().zip(mu_z.iter_mut()) {
+                for t in 0..t_max {
+                    rhs.iter_mut().for_each(|v| *v = 0.0);
+                    for (g, idx) in self.groups.iter().enumerate() {
+                        for &j in idx {
+                            let r = x.actions[t * d + j] - dot(&self.m[j * p..(j + 1) * p], phi.at(t));
+                            let c = self.tau[g] * r;
+                            rhs.iter_mut().zip(&self.w[j * k..(j + 1) * k]).for_each(|(h, w)| *h += c * w);
+                        }
+                    }
+                    matvec(&a_inv, k, k, &rhs, &mut mz[t * k..(t + 1) * k]);
+                }
+            }
+            for (g, idx) in self.groups.iter().enumerate() {
+                // q(alpha) (Eq. 2.15-2.17 with deviations from W-hat, Eq. 3.17).
+                let shape = self.cfg.a_alpha + idx.len() as f64 / 2.0;
+                for c in 0..k {
+                    let gamma: f64 =
+                        idx.iter().map(|&j| (self.w[j * k + c] - self.w_hat[j * k + c]).powi(2) + self.sigma_w[g][c * k + c]).sum();
+                    self.alpha[g][c] = shape / (self.cfg.b_alpha + 0.5 * gamma);
+                }
+                // q(tau) (Eq. 2.28-2.29): the expected squared residual, term by term.
+                let (sm, sw) = (&self.sigma_m[g], &self.sigma_w[g]);
+                let mut b = 0.0;
+                for (x, (wi, mz)) in samples.iter().zip(weights.iter().zip(&mu_z)) {
+                    for t in 0..t_max {
+                        let (f, z, sz) = (phi.at(t), &mz[t * k..(t + 1) * k], &sigma_z[t]);
+                        let mut fsf = 0.0;
+                        let mut tmp = vec![0.0; p];
+                        matvec(sm, p, p, f, &mut tmp);
+                        fsf += dot(f, &tmp);
+                        let mut zk = vec![0.0; k];
+                        matvec(sw, k, k, z, &mut zk);
+                        let z_sw_z = dot(z, &zk);
+                        let tr: f64 = (0..k).map(|r| (0..k).map(|c| sw[r * k + c] * sz[c * k + r]).sum::<f64>()).sum();
+                        let mut e = 0.0;
+                        for &j in idx {
+                            let wj = &self.w[j * k..(j + 1) * k];
+                            let r = x.actions[t * d + j] - dot(wj, z) - dot(&self.m[j * p..(j + 1) * p], f);
+                            let mut szw = vec![0.0; k];
+                            matvec(sz, k, k, wj, &mut szw);
+                            e += r * r + dot(wj, &szw) + z_sw_z + tr + fsf;
+                        }
+                        b += wi * e / s[t];
+                    }
+                }
+                let shape = self.cfg.a_tau + 0.5 * idx.len() as f64 * t_max as f64 * wsum;
+                self.tau[g] = shape / (self.cfg.b_tau + 0.5 * b);
+            }
+        }
+    }
+}
+
+fn identity(n: usize) -> Vec<f64> {
+    let mut a = vec![0.0; n * n];
+    (0..n).for_each(|i| a[i * n + i] = 1.0);
+    a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{PlanarReaching, TimeFeatures};
+
+    fn random_samples(n: usize, t: usize, d: usize, k: usize, seed: u64) -> Vec<Sample> {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        (0..n)
+            .map(|_| Sample {
+                actions: (0..t * d).map(|_| StandardNormal.sample(&mut rng)).collect(),
+                z: (0..t * k).map(|_| StandardNormal.sample(&mut rng)).collect(),
+                ret: 1.0,
+                cost: 0.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn without_latent_factors_the_m_update_is_reward_weighted_least_squares() {
+        let phi = TimeFeatures::thesis(25);
+        let (d, p) = (3, phi.len());
+        let cfg = GroupsConfig { latent: 0, sigma2: 1e12, ..GroupsConfig::default() };
+        let mut g = Groups::new(cfg, vec![vec![0, 1, 2]], d, p, 1).unwrap_or_else(|e| panic!("{e}"));
+        let samples = random_samples(3, 25, d, 0, 2);
+        let weights = [0.5, 0.3, 0.2];
+        g.update(&samples, &weights, &phi);
+        // The normal equations of min sum_i w_i sum_t (a_itj - m_j' phi_t)^2 / s_t, checked
+        // directly: the gradient at the update's M is zero.
+        for j in 0..d {
+            let mj = &g.m[j * p..(j + 1) * p];
+            let mut grad = vec![0.0; p];
+            let mut scale = 0.0f64;
+            for (x, w) in samples.iter().zip(weights) {
+                for t in 0..25 {
+                    let f = phi.at(t);
+                    let s = dot(f, f);
+                    let r = x.actions[t * d + j] - dot(mj, f);
+                    grad.iter_mut().zip(f).for_each(|(gr, fi)| *gr += w * r * fi / s);
+                    scale = scale.max((w * x.actions[t * d + j] / s).abs());
+                }
+            }
+            assert!(grad.iter().all(|v| v.abs() < 1e-6 * scale.max(1.0)), "action {j}: gradient {grad:?}");
+        }
+    }
+
+    #[test]
+    fn with_zero_data_weight_the_synergies_are_the_prior_w_hat() {
+        let phi = TimeFeatures::thesis(15);
+        let (d, p, k) = (4, phi.len(), 2);
+        let mut g = Groups::new(GroupsConfig { latent: k, inner: 3, ..GroupsConfig::default() }, vec![vec![0, 1], vec![2, 3]], d, p, 3)
+            .unwrap_or_else(|e| panic!("{e}"));
+        g.w_hat = (0..d * k).map(|i| i as f64 * 0.25 - 1.0).collect();
+        let samples = random_samples(2, 15, d, k, 4);
+        g.update(&samples, &[0.0, 0.0], &phi);
+        for (a, b) in g.w.iter().zip(&g.w_hat) {
+            assert!((a - b).abs() < 1e-12, "{:?} vs {:?}", g.w, g.w_hat);
+        }
+    }
+
+    #[test]
+    fn groups_must_partition_the_actions() {
+        let e = Groups::new(GroupsConfig::default(), vec![vec![0, 1], vec![1]], 3, 11, 0).err().unwrap_or_default();
+        assert!(e.contains("action 1 is in 2 groups"), "{e}");
+        let e = Groups::new(GroupsConfig::default(), vec![vec![0, 5]], 3, 11, 0).err().unwrap_or_default();
+        assert!(e.contains("beyond the 3 actions"), "{e}");
+    }
+
+    #[test]
+    fn groups_with_four_groups_brings_the_arms_nearer_their_goal_paths() {
+        let phi = TimeFeatures::thesis(25);
+        let task = PlanarReaching::default();
+        // Eq. 2.32: joints 1-4 and 5-6 of each arm.
+        let groups = vec![vec![0, 1, 2, 3], vec![4, 5], vec![6, 7, 8, 9], vec![10, 11]];
+        let mut g = Groups::new(GroupsConfig::default(), groups, 12, phi.len(), 1).unwrap_or_else(|e| panic!("{e}"));
+        let mut a = Vec::new();
+        let cost = |g: &Groups, a: &mut Vec<f32>| {
+            crate::LinearPolicy::actions_of(&g.m, 12, &phi, a);
+            task.evaluate(a).1
+        };
+        let before = cost(&g, &mut a);
+        let mut costs = Vec::new();
+        for _ in 0..25 {
+            g.iterate(&task, &phi);
+            costs.push(cost(&g, &mut a));
+        }
+        eprintln!("GrouPS (4 groups) on the planar task, summed distance of M: {before:.1} -> {costs:.1?}");
+        // Measured (seed 1): 184 -> 132, down at every iteration. Slower than PoWER over these 25
+        // (124): whether the thesis's ordering holds is the experiment's question, not this
+        // test's.
+        assert!(costs[24] < 0.8 * before && costs[24] < costs[12] && costs[12] < costs[0], "{before} -> {costs:?}");
+    }
+}
