@@ -37,6 +37,10 @@ pub struct TrainArgs {
     /// Pendulum-v1` or `coadapt env-serve`).
     #[arg(long)]
     pub env: Option<String>,
+    /// TLS and the actor's token for a remote environment across machines (--tls-ca,
+    /// --token-file or COADAPT_TOKEN, --client-cert/--client-key).
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
     /// Learning algorithm.
     #[arg(long, value_enum)]
     pub algo: Option<AlgoArg>,
@@ -159,7 +163,8 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let cfg = resolve(&args)?;
-    let mut env = crate::roles::make_env(&cfg.env)?;
+    let security = crate::security::from_args(&args.security);
+    let mut env = crate::roles::make_env_with(&cfg.env, &crate::roles::RemoteEnvConfig::default(), &security)?;
     // Refuse a bad design before anything is written.
     if let Some(d) = &cfg.design {
         env.spec().design.check("design", d).map_err(coadapt_core::EnvError::Design)?;
