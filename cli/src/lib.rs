@@ -43,6 +43,7 @@ pub mod resume;
 pub mod role_cmd;
 pub mod roles;
 pub mod run;
+pub mod search;
 pub mod security;
 pub mod serve;
 pub mod train;
@@ -70,6 +71,9 @@ pub enum Command {
     EnvServe(env_serve::EnvServeArgs),
     Serve(serve::ServeArgs),
     Score(design_client::ScoreArgs),
+    /// Policy search from few rollouts (thesis ch. 2-3): GrouPS or PoWER on the bimanual
+    /// planar reaching benchmark.
+    Search(search::SearchArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
     #[command(subcommand)]
     Token(credentials::TokenCommand),
@@ -97,6 +101,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::EnvServe(args) => env_serve::run(args),
         Command::Serve(args) => serve::run(args),
         Command::Score(args) => design_client::score(args),
+        Command::Search(args) => search::run(args),
         Command::Token(cmd) => credentials::token(cmd),
         Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),

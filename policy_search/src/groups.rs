@@ -18,7 +18,8 @@ use crate::features::TimeFeatures;
 use crate::linalg::{dot, matvec, spd_inverse};
 
 /// GrouPS's settings (the thesis's planar task).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct GroupsConfig {
     /// Latent factors K (synergies per group).
     pub latent: usize,

@@ -13,7 +13,8 @@ use crate::features::TimeFeatures;
 use crate::policy::{LinearPolicy, Rollout};
 
 /// PoWER's settings (the thesis's planar task: 30 rollouts, the best 15, variance 10^1.5).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct PowerConfig {
     pub rollouts: usize,
     pub best: usize,

@@ -1,0 +1,252 @@
+//! `coadapt search`: episodic policy search from few rollouts (thesis ch. 2-3) on the bimanual
+//! planar reaching benchmark: GrouPS or PoWER, several runs, a run directory like `coadapt
+//! run`'s: the resolved `config.toml`, `iterations.csv` (one row per run and iteration: the
+//! summed end-effector distance of the mean policy, the best and mean return of the
+//! rollouts), `rollouts.csv` (one row per rollout), each run's final M (and W, the synergies) in
+//! `run-<r>/policy.safetensors`, and `plots/learning_curve.svg` (mean and standard deviation
+//! over runs).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+use coadapt_policy_search::{EpisodicTask, Groups, GroupsConfig, LinearPolicy, PlanarReaching, Power, PowerConfig, TimeFeatures};
+use serde::{Deserialize, Serialize};
+
+/// `coadapt search`'s config (TOML, kebab-case; every key has a default).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct SearchConfig {
+    /// The task: `planar` (the bimanual planar reaching benchmark, 12 actions x 25 steps).
+    pub task: String,
+    /// `groups` (GrouPS) or `power` (PoWER).
+    pub method: String,
+    /// Independent runs (seeds seed, seed + 1, ...).
+    pub runs: usize,
+    /// Iterations per run.
+    pub iterations: usize,
+    pub seed: u64,
+    /// GrouPS's groups of action indices (0-5 the left arm's joints, 6-11 the right's).
+    /// Default: Eq. 2.32, joints 1-4 and 5-6 of each arm.
+    pub groups: Vec<Vec<usize>>,
+    /// GrouPS's settings.
+    #[serde(rename = "groups-settings")]
+    pub groups_settings: GroupsConfig,
+    /// PoWER's settings.
+    pub power: PowerConfig,
+}
+
+impl Default for SearchConfig {
+    fn default() -> Self {
+        Self {
+            task: "planar".into(),
+            method: "groups".into(),
+            runs: 10,
+            iterations: 100,
+            seed: 1,
+            groups: vec![vec![0, 1, 2, 3], vec![4, 5], vec![6, 7, 8, 9], vec![10, 11]],
+            groups_settings: GroupsConfig::default(),
+            power: PowerConfig::default(),
+        }
+    }
+}
+
+/// Policy search from few rollouts on the bimanual planar reaching benchmark.
+#[derive(Debug, Args)]
+pub struct SearchArgs {
+    /// The TOML config (default: GrouPS with 4 groups, 10 runs of 100 iterations).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override `method`: groups or power.
+    #[arg(long)]
+    pub method: Option<String>,
+    /// Override `runs`.
+    #[arg(long)]
+    pub runs: Option<usize>,
+    /// Override `iterations`.
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Override `seed`.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// The run directory (default runs/search-<method>-seed<seed>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+enum Learner {
+    Groups(Box<Groups>),
+    Power(Power),
+}
+
+impl Learner {
+    fn mean(&self) -> &[f64] {
+        match self {
+            Learner::Groups(g) => &g.m,
+            Learner::Power(p) => &p.policy.m,
+        }
+    }
+
+    /// One iteration; (return, cost) of each rollout.
+    fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<(f64, f64)> {
+        match self {
+            Learner::Groups(g) => g.iterate(task, phi).into_iter().map(|s| (s.ret, s.cost)).collect(),
+            Learner::Power(p) => p.iterate(task, phi).into_iter().map(|r| (r.ret, r.cost)).collect(),
+        }
+    }
+}
+
+fn resolve(a: &SearchArgs) -> anyhow::Result<SearchConfig> {
+    let mut cfg: SearchConfig = match &a.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            toml::from_str(&text).with_context(|| format!("parsing {}", p.display()))?
+        }
+        None => SearchConfig::default(),
+    };
+    if let Some(m) = &a.method {
+        cfg.method = m.clone();
+    }
+    if let Some(r) = a.runs {
+        cfg.runs = r;
+    }
+    if let Some(i) = a.iterations {
+        cfg.iterations = i;
+    }
+    if let Some(s) = a.seed {
+        cfg.seed = s;
+    }
+    if cfg.task != "planar" {
+        anyhow::bail!("task: {:?}; only \"planar\" (the bimanual planar reaching benchmark) so far", cfg.task);
+    }
+    if !["groups", "power"].contains(&cfg.method.as_str()) {
+        anyhow::bail!("method: {:?}; groups or power", cfg.method);
+    }
+    if cfg.runs == 0 || cfg.iterations == 0 {
+        anyhow::bail!("runs and iterations: at least 1 each");
+    }
+    Ok(cfg)
+}
+
+pub fn run(a: SearchArgs) -> anyhow::Result<()> {
+    let cfg = resolve(&a)?;
+    let out = a.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/search-{}-seed{}", cfg.method, cfg.seed)));
+    if out.join("iterations.csv").exists() {
+        anyhow::bail!("{} already holds a search (iterations.csv); choose another --out", out.display());
+    }
+    std::fs::create_dir_all(out.join("plots")).with_context(|| format!("creating {}", out.display()))?;
+    std::fs::write(out.join("config.toml"), toml::to_string(&cfg)?).context("writing config.toml")?;
+    let task = PlanarReaching::default();
+    let phi = TimeFeatures::thesis(task.steps());
+    let d = task.action_dim();
+    let mut iters = std::io::BufWriter::new(std::fs::File::create(out.join("iterations.csv"))?);
+    writeln!(iters, "run,iteration,rollouts,mean_policy_cost,best_return,mean_return,best_cost")?;
+    let mut rolls = std::io::BufWriter::new(std::fs::File::create(out.join("rollouts.csv"))?);
+    writeln!(rolls, "run,iteration,rollout,return,cost")?;
+    let mut curves: Vec<Vec<f64>> = Vec::new();
+    let mut actions = Vec::new();
+    for r in 0..cfg.runs {
+        let seed = cfg.seed + r as u64;
+        let mut learner = match cfg.method.as_str() {
+            "groups" => Learner::Groups(Box::new(
+                Groups::new(cfg.groups_settings.clone(), cfg.groups.clone(), d, phi.len(), seed)
+                    .map_err(|e| anyhow::anyhow!("groups: {e}"))?,
+            )),
+            _ => Learner::Power(Power::new(LinearPolicy::zeros(d, phi.len()), cfg.power.clone(), seed)),
+        };
+        let mut curve = Vec::with_capacity(cfg.iterations + 1);
+        let cost_of = |m: &[f64], actions: &mut Vec<f32>| {
+            LinearPolicy::actions_of(m, d, &phi, actions);
+            task.evaluate(actions).1
+        };
+        curve.push(cost_of(learner.mean(), &mut actions));
+        let mut total_rollouts = 0;
+        for it in 1..=cfg.iterations {
+            let got = learner.iterate(&task, &phi);
+            total_rollouts += got.len();
+            for (k, (ret, cost)) in got.iter().enumerate() {
+                writeln!(rolls, "{r},{it},{k},{ret},{cost}")?;
+            }
+            let cost = cost_of(learner.mean(), &mut actions);
+            curve.push(cost);
+            let best = got.iter().map(|x| x.0).fold(f64::NEG_INFINITY, f64::max);
+            let best_cost = got.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
+            let mean = got.iter().map(|x| x.0).sum::<f64>() / got.len().max(1) as f64;
+            writeln!(iters, "{r},{it},{total_rollouts},{cost},{best},{mean},{best_cost}")?;
+            if it % 10 == 0 || it == cfg.iterations {
+                eprintln!(
+                    "search: {} run {}/{} iteration {it}/{}: mean policy's summed distance {cost:.2}",
+                    cfg.method,
+                    r + 1,
+                    cfg.runs,
+                    cfg.iterations
+                );
+            }
+        }
+        iters.flush()?;
+        rolls.flush()?;
+        let dir = out.join(format!("run-{r}"));
+        std::fs::create_dir_all(&dir)?;
+        let mut tensors = vec![("M".to_string(), vec![d, phi.len()], learner.mean().to_vec())];
+        if let Learner::Groups(g) = &learner {
+            tensors.push(("W".to_string(), vec![d, g.cfg.latent], g.w.clone()));
+        }
+        save_tensors(&dir.join("policy.safetensors"), &tensors)?;
+        curves.push(curve);
+    }
+    draw(&out.join("plots/learning_curve.svg"), &cfg, &curves)?;
+    let last: Vec<f64> = curves.iter().map(|c| c[c.len() - 1]).collect();
+    let mean = last.iter().sum::<f64>() / last.len() as f64;
+    let sd = (last.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (last.len().max(2) - 1) as f64).sqrt();
+    let summary = serde_json::json!({"method": cfg.method, "runs": cfg.runs, "iterations": cfg.iterations,
+        "final_mean_policy_cost_mean": mean, "final_mean_policy_cost_sd": sd, "out": out.display().to_string()});
+    crate::progress::print_stdout_line(&summary.to_string());
+    Ok(())
+}
+
+/// `(name, shape, values)` as F64 tensors in one safetensors file.
+fn save_tensors(path: &Path, tensors: &[(String, Vec<usize>, Vec<f64>)]) -> anyhow::Result<()> {
+    let bytes: Vec<Vec<u8>> = tensors.iter().map(|(_, _, v)| v.iter().flat_map(|x| x.to_le_bytes()).collect()).collect();
+    let views = tensors
+        .iter()
+        .zip(&bytes)
+        .map(|((name, shape, _), b)| {
+            safetensors::tensor::TensorView::new(safetensors::Dtype::F64, shape.clone(), b).map(|v| (name.clone(), v))
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let buf = safetensors::serialize(views, None).map_err(|e| anyhow::anyhow!("{e}"))?;
+    std::fs::write(path, buf).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Mean and standard deviation over runs of the mean policy's summed distance per iteration.
+fn draw(path: &Path, cfg: &SearchConfig, curves: &[Vec<f64>]) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let n = curves.iter().map(Vec::len).min().unwrap_or(0);
+    let stats: Vec<(f64, f64)> = (0..n)
+        .map(|i| {
+            let v: Vec<f64> = curves.iter().map(|c| c[i]).collect();
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+            (m, sd)
+        })
+        .collect();
+    let top = stats.iter().map(|(m, s)| m + s).fold(0.0, f64::max) * 1.05;
+    let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("{} on the planar task, {} runs", cfg.method, curves.len()), ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0f64..(n.max(2) - 1) as f64, 0f64..top.max(1.0))?;
+    chart.configure_mesh().x_desc("iteration").y_desc("summed end-effector distance").draw()?;
+    // The mean, and the mean plus and minus one standard deviation.
+    chart.draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, _))| (i as f64, *m)), &BLUE))?;
+    for sign in [1.0, -1.0] {
+        chart.draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, s))| (i as f64, m + sign * s)), BLUE.mix(0.35)))?;
+    }
+    root.present()?;
+    Ok(())
+}
