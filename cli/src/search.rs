@@ -77,7 +77,7 @@ pub struct SearchArgs {
 
 enum Learner {
     Groups(Box<Groups>),
-    Power(Power),
+    Power(Box<Power>),
 }
 
 impl Learner {
@@ -153,7 +153,7 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
                 Groups::new(cfg.groups_settings.clone(), cfg.groups.clone(), d, phi.len(), seed)
                     .map_err(|e| anyhow::anyhow!("groups: {e}"))?,
             )),
-            _ => Learner::Power(Power::new(LinearPolicy::zeros(d, phi.len()), cfg.power.clone(), seed)),
+            _ => Learner::Power(Box::new(Power::new(LinearPolicy::zeros(d, phi.len()), cfg.power.clone(), seed))),
         };
         let mut curve = Vec::with_capacity(cfg.iterations + 1);
         let cost_of = |m: &[f64], actions: &mut Vec<f32>| {
