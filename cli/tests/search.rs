@@ -1,0 +1,50 @@
+//! `coadapt search` through the binary: the run directory it writes, and refusals named.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+
+use std::process::Command;
+
+fn coadapt(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_coadapt")).args(args).output().unwrap()
+}
+
+#[test]
+fn a_search_writes_its_run_directory_and_learns() {
+    let dir = std::env::temp_dir().join(format!("coadapt-search-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = dir.join("g4");
+    let o = coadapt(&["search", "--runs", "2", "--iterations", "15", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["method"], "groups");
+    let csv = std::fs::read_to_string(out.join("iterations.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), 30);
+    // The mean policy's distance falls over each run (column 3), rollouts count up by 30.
+    for run in [0.0, 1.0] {
+        let r: Vec<&Vec<f64>> = rows.iter().filter(|x| x[0] == run).collect();
+        assert!(r[14][3] < r[0][3], "run {run}: {} -> {}", r[0][3], r[14][3]);
+        assert_eq!(r[14][2], 450.0);
+    }
+    assert_eq!(std::fs::read_to_string(out.join("rollouts.csv")).unwrap().lines().count(), 1 + 2 * 15 * 30);
+    for f in ["config.toml", "run-0/policy.safetensors", "run-1/policy.safetensors", "plots/learning_curve.svg"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // The policy file holds M (12 x 11) and W (12 x 6) as f64.
+    let bytes = std::fs::read(out.join("run-0/policy.safetensors")).unwrap();
+    let header_len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + header_len]).unwrap();
+    assert_eq!(header["M"]["shape"], serde_json::json!([12, 11]));
+    assert_eq!(header["W"]["shape"], serde_json::json!([12, 6]));
+    assert_eq!(header["M"]["dtype"], "F64");
+    // Refusals: an existing search, an unknown method, a grouping that is not a partition.
+    let o = coadapt(&["search", "--runs", "1", "--iterations", "1", "--out", out.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("already holds a search"));
+    let o = coadapt(&["search", "--method", "sgd", "--out", dir.join("x").to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("method: \"sgd\"; groups or power"));
+    let cfg = dir.join("bad.toml");
+    std::fs::write(&cfg, "groups = [[0, 1, 2], [2, 3]]\n").unwrap();
+    let o = coadapt(&["search", "--config", cfg.to_str().unwrap(), "--iterations", "1", "--out", dir.join("y").to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("groups: action 2 is in 2 groups"), "{e}");
+}
