@@ -16,16 +16,21 @@
 //! - `groups`: GrouPS (Alg. 1; the synergy prior W-hat of Alg. 2 with Gamma alpha), the
 //!   variational updates in the order M, W, z, alpha, tau; `linalg`: the small dense algebra.
 //!
-//! Next (issue 14): the log-linear alpha of ch. 3 with L-BFGS, PePPER, NAC, rollouts through
-//! the fleet, `coadapt search`.
+//! - `alpha`: the log-linear model of alpha (ch. 3) fitted by `lbfgs`, a small L-BFGS.
+//!
+//! Next (issue 14): the log-linear alpha inside GrouPS's loop, PePPER, NAC, rollouts through
+//! the fleet.
 
+mod alpha;
 mod features;
 mod groups;
+mod lbfgs;
 mod linalg;
 mod planar;
 mod policy;
 mod power;
 
+pub use alpha::LogLinearAlpha;
 pub use features::TimeFeatures;
 pub use groups::{Groups, GroupsConfig, Sample};
 pub use planar::{ArmGeometry, PlanarReaching};
