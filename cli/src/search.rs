@@ -20,7 +20,8 @@ use serde::{Deserialize, Serialize};
 pub struct SearchConfig {
     /// The task: `planar` (the bimanual planar reaching benchmark, 12 actions x 25 steps).
     pub task: String,
-    /// `groups` (GrouPS) or `power` (PoWER).
+    /// `groups` (GrouPS), `pepper` (PePPER: the factor model without priors or groups, resize
+    /// sqrt(1.09)) or `power` (PoWER).
     pub method: String,
     /// Independent runs (seeds seed, seed + 1, ...).
     pub runs: usize,
@@ -120,8 +121,8 @@ fn resolve(a: &SearchArgs) -> anyhow::Result<SearchConfig> {
     if cfg.task != "planar" {
         anyhow::bail!("task: {:?}; only \"planar\" (the bimanual planar reaching benchmark) so far", cfg.task);
     }
-    if !["groups", "power"].contains(&cfg.method.as_str()) {
-        anyhow::bail!("method: {:?}; groups or power", cfg.method);
+    if !["groups", "pepper", "power"].contains(&cfg.method.as_str()) {
+        anyhow::bail!("method: {:?}; groups, pepper or power", cfg.method);
     }
     if cfg.runs == 0 || cfg.iterations == 0 {
         anyhow::bail!("runs and iterations: at least 1 each");
@@ -153,6 +154,18 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
                 Groups::new(cfg.groups_settings.clone(), cfg.groups.clone(), d, phi.len(), seed)
                     .map_err(|e| anyhow::anyhow!("groups: {e}"))?,
             )),
+            "pepper" => {
+                let all: Vec<usize> = (0..d).collect();
+                let settings = GroupsConfig {
+                    latent: cfg.groups_settings.latent,
+                    inner: cfg.groups_settings.inner,
+                    rollouts: cfg.groups_settings.rollouts,
+                    best: cfg.groups_settings.best,
+                    initial_variance: cfg.groups_settings.initial_variance,
+                    ..GroupsConfig::pepper()
+                };
+                Learner::Groups(Box::new(Groups::new(settings, vec![all], d, phi.len(), seed).map_err(|e| anyhow::anyhow!("pepper: {e}"))?))
+            }
             _ => Learner::Power(Box::new(Power::new(LinearPolicy::zeros(d, phi.len()), cfg.power.clone(), seed))),
         };
         let mut curve = Vec::with_capacity(cfg.iterations + 1);

@@ -41,7 +41,7 @@ fn a_search_writes_its_run_directory_and_learns() {
     let o = coadapt(&["search", "--runs", "1", "--iterations", "1", "--out", out.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("already holds a search"));
     let o = coadapt(&["search", "--method", "sgd", "--out", dir.join("x").to_str().unwrap()]);
-    assert!(String::from_utf8_lossy(&o.stderr).contains("method: \"sgd\"; groups or power"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("method: \"sgd\"; groups, pepper or power"));
     let cfg = dir.join("bad.toml");
     std::fs::write(&cfg, "groups = [[0, 1, 2], [2, 3]]\n").unwrap();
     let o = coadapt(&["search", "--config", cfg.to_str().unwrap(), "--iterations", "1", "--out", dir.join("y").to_str().unwrap()]);

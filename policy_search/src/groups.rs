@@ -40,6 +40,10 @@ pub struct GroupsConfig {
     pub initial_variance: f64,
     /// Draw Z every step (false: once per rollout, the reference port's choice).
     pub z_per_step: bool,
+    /// The priors on M, W and tau and the posterior covariances of M and W (GrouPS). Without
+    /// (PePPER, Luck et al. 2014): expectation-maximisation of the factor model, point
+    /// estimates of M, W and tau and the posterior of z only.
+    pub priors: bool,
 }
 
 impl Default for GroupsConfig {
@@ -57,7 +61,15 @@ impl Default for GroupsConfig {
             resize: 1.5,
             initial_variance: 10f64.powf(1.5),
             z_per_step: false,
+            priors: true,
         }
+    }
+}
+
+impl GroupsConfig {
+    /// PePPER's settings (thesis ch. 2.4: no priors, no groups, resize sqrt(1.09)).
+    pub fn pepper() -> Self {
+        Self { priors: false, resize: 1.09f64.sqrt(), ..Self::default() }
     }
 }
 
@@ -201,7 +213,8 @@ impl Groups {
         // q(z): the sampled draws, unit covariance, to start.
         let mut mu_z: Vec<Vec<f64>> = samples.iter().map(|x| x.z.clone()).collect();
         let mut sigma_z: Vec<Vec<f64>> = vec![identity(k); t_max];
-        let inv_s2 = 1.0 / self.cfg.sigma2;
+        let priors = self.cfg.priors;
+        let inv_s2 = if priors { 1.0 / self.cfg.sigma2 } else { 0.0 };
         // sum_t phi phi' / s: the same for every rollout, and the weights sum to 1 (or 0).
         let wsum: f64 = weights.iter().sum();
         let mut phiphi = vec![0.0; p * p];
@@ -232,7 +245,7 @@ impl Groups {
                     }
                     matvec(&sig, p, p, &rhs, &mut self.m[j * p..(j + 1) * p]);
                 }
-                self.sigma_m[g] = sig;
+                self.sigma_m[g] = if priors { sig } else { vec![0.0; p * p] };
                 // q(W) (Eq. 2.22-2.24, with the prior centre W-hat of Eq. 3.16).
                 let mut prec = vec![0.0; k * k];
                 for (wi, mz) in weights.iter().zip(&mu_z) {
@@ -245,10 +258,12 @@ impl Groups {
                         }
                     }
                 }
-                (0..k).for_each(|a| prec[a * k + a] += self.alpha[g][a]);
+                if priors {
+                    (0..k).for_each(|a| prec[a * k + a] += self.alpha[g][a]);
+                }
                 let Some(sig) = spd_inverse(&prec, k) else { continue };
                 for &j in idx {
-                    let mut rhs: Vec<f64> = (0..k).map(|a| self.alpha[g][a] * self.w_hat[j * k + a]).collect();
+                    let mut rhs: Vec<f64> = (0..k).map(|a| if priors { self.alpha[g][a] * self.w_hat[j * k + a] } else { 0.0 }).collect();
                     let mj = &self.m[j * p..(j + 1) * p];
                     for (x, (wi, mz)) in samples.iter().zip(weights.iter().zip(&mu_z)) {
                         for t in 0..t_max {
@@ -259,7 +274,7 @@ impl Groups {
                     }
                     matvec(&sig, k, k, &rhs, &mut self.w[j * k..(j + 1) * k]);
                 }
-                self.sigma_w[g] = sig;
+                self.sigma_w[g] = if priors { sig } else { vec![0.0; k * k] };
             }
             // q(z) (Eq. 2.25-2.27), per rollout and step, not reward-weighted.
             let mut a = identity(k);
@@ -324,8 +339,11 @@ impl Groups {
                         b += wi * e / s[t];
                     }
                 }
-                let shape = self.cfg.a_tau + 0.5 * idx.len() as f64 * t_max as f64 * wsum;
-                self.tau[g] = shape / (self.cfg.b_tau + 0.5 * b);
+                let (a_tau, b_tau) = if priors { (self.cfg.a_tau, self.cfg.b_tau) } else { (0.0, 0.0) };
+                let shape = a_tau + 0.5 * idx.len() as f64 * t_max as f64 * wsum;
+                if b > 0.0 || b_tau > 0.0 {
+                    self.tau[g] = shape / (b_tau + 0.5 * b);
+                }
             }
         }
     }
