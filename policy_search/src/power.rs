@@ -19,11 +19,15 @@ pub struct PowerConfig {
     pub rollouts: usize,
     pub best: usize,
     pub variance: f64,
+    /// Draw the perturbation every step (Kober and Peters's state-dependent exploration: the
+    /// update weighs each step's perturbation by `W_t = phi phi' / phi' phi`) instead of once per
+    /// rollout.
+    pub per_step: bool,
 }
 
 impl Default for PowerConfig {
     fn default() -> Self {
-        Self { rollouts: 30, best: 15, variance: 10f64.powf(1.5) }
+        Self { rollouts: 30, best: 15, variance: 10f64.powf(1.5), per_step: false }
     }
 }
 
@@ -43,6 +47,9 @@ impl Power {
     /// One iteration: samples the rollouts, evaluates them on `task`, updates the mean from
     /// the best; returns every rollout of the iteration (best first).
     pub fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Rollout> {
+        if self.cfg.per_step {
+            return self.iterate_per_step(task, phi);
+        }
         let sd = self.cfg.variance.sqrt();
         let noise = Normal::new(0.0, sd).unwrap_or_else(|_| Normal::new(0.0, 1.0).expect("N(0, 1)"));
         let mut actions = Vec::new();
@@ -56,6 +63,65 @@ impl Power {
             .collect();
         rollouts.sort_by(|a, b| b.ret.total_cmp(&a.ret));
         self.update(&rollouts[..self.cfg.best.min(rollouts.len())]);
+        rollouts
+    }
+
+    /// Per-step exploration: `a_t = (M + eps_t) phi_t`; the update solves
+    /// `(sum_i R_i sum_t W_t) dM_j = sum_i R_i sum_t W_t eps_itj` for every action j.
+    fn iterate_per_step(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Rollout> {
+        let (d, p, t_max) = (self.policy.actions, self.policy.features, phi.steps());
+        let sd = self.cfg.variance.sqrt();
+        let noise = Normal::new(0.0, sd).unwrap_or_else(|_| Normal::new(0.0, 1.0).expect("N(0, 1)"));
+        // Each rollout: its perturbations (T x D x p) in `params`, return and cost.
+        let mut rollouts: Vec<Rollout> = (0..self.cfg.rollouts)
+            .map(|_| {
+                let eps: Vec<f64> = (0..t_max * d * p).map(|_| noise.sample(&mut self.rng)).collect();
+                let mut actions = Vec::with_capacity(t_max * d);
+                for t in 0..t_max {
+                    let f = phi.at(t);
+                    for j in 0..d {
+                        let e = &eps[(t * d + j) * p..(t * d + j + 1) * p];
+                        actions.push((0..p).map(|i| (self.policy.m[j * p + i] + e[i]) * f[i]).sum::<f64>() as f32);
+                    }
+                }
+                let (ret, cost) = task.evaluate(&actions);
+                Rollout { params: eps, ret, cost }
+            })
+            .collect();
+        rollouts.sort_by(|a, b| b.ret.total_cmp(&a.ret));
+        let best = &rollouts[..self.cfg.best.min(rollouts.len())];
+        let mut lhs = vec![0.0; p * p];
+        let mut rhs = vec![0.0; d * p];
+        for r in best {
+            let q = r.ret.max(0.0);
+            for t in 0..t_max {
+                let f = phi.at(t);
+                let ff: f64 = f.iter().map(|v| v * v).sum();
+                for a in 0..p {
+                    for b in 0..p {
+                        lhs[a * p + b] += q * f[a] * f[b] / ff;
+                    }
+                }
+                for j in 0..d {
+                    let e = &r.params[(t * d + j) * p..(t * d + j + 1) * p];
+                    // W_t eps = phi (phi' eps) / phi' phi.
+                    let fe: f64 = f.iter().zip(e).map(|(x, y)| x * y).sum::<f64>() / ff;
+                    for a in 0..p {
+                        rhs[j * p + a] += q * f[a] * fe;
+                    }
+                }
+            }
+        }
+        // sum_t W_t has rank min(T, p): regularise lightly so it inverts.
+        let scale = (0..p).map(|a| lhs[a * p + a]).fold(0.0, f64::max).max(1e-300);
+        (0..p).for_each(|a| lhs[a * p + a] += 1e-9 * scale);
+        if let Some(inv) = crate::linalg::spd_inverse(&lhs, p) {
+            for j in 0..d {
+                let mut step = vec![0.0; p];
+                crate::linalg::matvec(&inv, p, p, &rhs[j * p..(j + 1) * p], &mut step);
+                self.policy.m[j * p..(j + 1) * p].iter_mut().zip(step).for_each(|(m, s)| *m += s);
+            }
+        }
         rollouts
     }
 
@@ -119,7 +185,7 @@ mod tests {
         let mut target = Vec::new();
         LinearPolicy::actions_of(&star, dim, &phi, &mut target);
         let task = Target { actions: target, steps: 25, dim };
-        let mut power = Power::new(LinearPolicy::zeros(dim, p), PowerConfig { rollouts: 30, best: 15, variance: 0.5 }, 3);
+        let mut power = Power::new(LinearPolicy::zeros(dim, p), PowerConfig { rollouts: 30, best: 15, variance: 0.5, per_step: false }, 3);
         let mut a = Vec::new();
         LinearPolicy::actions_of(&power.policy.m, dim, &phi, &mut a);
         let before = task.evaluate(&a).1;
@@ -129,6 +195,14 @@ mod tests {
         LinearPolicy::actions_of(&power.policy.m, dim, &phi, &mut a);
         let after = task.evaluate(&a).1;
         assert!(after < 0.05 * before, "squared action error {before} -> {after}");
+        // Per-step exploration reaches it too.
+        let mut power = Power::new(LinearPolicy::zeros(dim, p), PowerConfig { rollouts: 30, best: 15, variance: 0.5, per_step: true }, 3);
+        for _ in 0..150 {
+            power.iterate(&task, &phi);
+        }
+        LinearPolicy::actions_of(&power.policy.m, dim, &phi, &mut a);
+        let per_step = task.evaluate(&a).1;
+        assert!(per_step < 0.1 * before, "per step: squared action error {before} -> {per_step}");
     }
 }
 
