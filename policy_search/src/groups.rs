@@ -44,6 +44,12 @@ pub struct GroupsConfig {
     /// (PePPER, Luck et al. 2014): expectation-maximisation of the factor model, point
     /// estimates of M, W and tau and the posterior of z only.
     pub priors: bool,
+    /// The model of alpha: 0 for independent Gamma factors (ch. 2, Eq. 2.15-2.17); a rank R >= 1
+    /// for the log-linear model of ch. 3 (Eq. 3.4), fitted by L-BFGS with prior precision
+    /// `alpha-lambda` on U and V.
+    pub alpha_rank: usize,
+    /// lambda of the log-linear model (the thesis leaves it open).
+    pub alpha_lambda: f64,
 }
 
 impl Default for GroupsConfig {
@@ -62,6 +68,8 @@ impl Default for GroupsConfig {
             initial_variance: 10f64.powf(1.5),
             z_per_step: false,
             priors: true,
+            alpha_rank: 0,
+            alpha_lambda: 0.1,
         }
     }
 }
@@ -101,6 +109,8 @@ pub struct Groups {
     /// E[alpha] per group (`K` each) and E[tau] per group.
     pub alpha: Vec<Vec<f64>>,
     pub tau: Vec<f64>,
+    /// The log-linear model of alpha, when `alpha-rank` > 0.
+    pub alpha_model: Option<crate::alpha::LogLinearAlpha>,
     rng: rand::rngs::StdRng,
 }
 
@@ -132,6 +142,7 @@ impl Groups {
             w_hat: vec![0.0; d * k],
             alpha: vec![vec![1.0; k]; n],
             tau: vec![1.0 / cfg.initial_variance; n],
+            alpha_model: (cfg.alpha_rank > 0).then(|| crate::alpha::LogLinearAlpha::new(n, k, cfg.alpha_rank, cfg.alpha_lambda)),
             cfg,
             groups,
             d,
@@ -306,13 +317,16 @@ impl Groups {
                     matvec(&a_inv, k, k, &rhs, &mut mz[t * k..(t + 1) * k]);
                 }
             }
+            let mut gammas = vec![0.0; self.groups.len() * k];
             for (g, idx) in self.groups.iter().enumerate() {
-                // q(alpha) (Eq. 2.15-2.17 with deviations from W-hat, Eq. 3.17).
+                // q(alpha) (Eq. 2.15-2.17 with deviations from W-hat, Eq. 3.17); the log-linear
+                // model is fitted to every group at once after this loop.
                 let shape = self.cfg.a_alpha + idx.len() as f64 / 2.0;
                 for c in 0..k {
                     let gamma: f64 =
                         idx.iter().map(|&j| (self.w[j * k + c] - self.w_hat[j * k + c]).powi(2) + self.sigma_w[g][c * k + c]).sum();
                     self.alpha[g][c] = shape / (self.cfg.b_alpha + 0.5 * gamma);
+                    gammas[g * k + c] = gamma;
                 }
                 // q(tau) (Eq. 2.28-2.29): the expected squared residual, term by term.
                 let (sm, sw) = (&self.sigma_m[g], &self.sigma_w[g]);
@@ -343,6 +357,14 @@ impl Groups {
                 let shape = a_tau + 0.5 * idx.len() as f64 * t_max as f64 * wsum;
                 if b > 0.0 || b_tau > 0.0 {
                     self.tau[g] = shape / (b_tau + 0.5 * b);
+                }
+            }
+            // The log-linear alpha of ch. 3 (Eq. 3.4, 3.18-3.21), over every group at once.
+            if priors && let Some(model) = self.alpha_model.as_mut() {
+                let dims: Vec<usize> = self.groups.iter().map(Vec::len).collect();
+                let alpha = model.fit(&dims, &gammas);
+                for (g, row) in self.alpha.iter_mut().enumerate() {
+                    row.copy_from_slice(&alpha[g * k..(g + 1) * k]);
                 }
             }
         }
@@ -412,6 +434,25 @@ mod tests {
         for (a, b) in g.w.iter().zip(&g.w_hat) {
             assert!((a - b).abs() < 1e-12, "{:?} vs {:?}", g.w, g.w_hat);
         }
+    }
+
+    #[test]
+    fn the_log_linear_alpha_is_fitted_in_the_loop() {
+        let phi = TimeFeatures::thesis(15);
+        let (d, p, k) = (6, phi.len(), 3);
+        let cfg = GroupsConfig { latent: k, inner: 2, alpha_rank: 1, ..GroupsConfig::default() };
+        let mut g = Groups::new(cfg, vec![vec![0, 1, 2], vec![3, 4], vec![5]], d, p, 5).unwrap_or_else(|e| panic!("{e}"));
+        let samples = random_samples(4, 15, d, k, 6);
+        g.update(&samples, &[0.4, 0.3, 0.2, 0.1], &phi);
+        let model = g.alpha_model.as_ref().unwrap_or_else(|| panic!("no model"));
+        let l = model.log_alpha(&model.params);
+        for (m, row) in g.alpha.iter().enumerate() {
+            for (c, a) in row.iter().enumerate() {
+                assert!((a - l[m * k + c].exp()).abs() < 1e-12 * a.max(1.0), "alpha[{m}][{c}] = {a}, exp(L) = {}", l[m * k + c].exp());
+            }
+        }
+        // Rank 1: alpha's log is U V' plus the two means, not a free matrix.
+        assert!(g.alpha.iter().flatten().all(|a| a.is_finite() && *a > 0.0));
     }
 
     #[test]

@@ -13,13 +13,13 @@
 //!   [`Rollout`], one rollout's parameters, actions and return.
 //! - `power`: PoWER (Kober and Peters), the EM baseline with exploration in the full parameter
 //!   space and a static variance, best-k selection as in the thesis.
-//! - `groups`: GrouPS (Alg. 1; the synergy prior W-hat of Alg. 2 with Gamma alpha), the
-//!   variational updates in the order M, W, z, alpha, tau; `linalg`: the small dense algebra.
+//! - `groups`: GrouPS (Alg. 1; the synergy prior W-hat of Alg. 2; Gamma or log-linear alpha),
+//!   the variational updates in the order M, W, z, alpha, tau; without priors, PePPER;
+//!   `linalg`: the small dense algebra.
 //!
 //! - `alpha`: the log-linear model of alpha (ch. 3) fitted by `lbfgs`, a small L-BFGS.
 //!
-//! Next (issue 14): the log-linear alpha inside GrouPS's loop, PePPER, NAC, rollouts through
-//! the fleet.
+//! Next (issue 14): NAC, synergy reuse runs, rollouts through the fleet.
 
 mod alpha;
 mod features;
