@@ -36,6 +36,12 @@ pub struct SearchConfig {
     pub groups_settings: GroupsConfig,
     /// PoWER's settings.
     pub power: PowerConfig,
+    /// GrouPS with reuse of synergies (ch. 3): a `policy.safetensors` or `w-iter<N>.safetensors`
+    /// of an earlier search whose W becomes the prior centre W-hat and the starting W (empty:
+    /// none, chapter 2).
+    pub w_hat: String,
+    /// Also save each run's W after this iteration as `run-<r>/w-iter<N>.safetensors` (0: no).
+    pub save_w_at: usize,
 }
 
 impl Default for SearchConfig {
@@ -49,6 +55,8 @@ impl Default for SearchConfig {
             groups: vec![vec![0, 1, 2, 3], vec![4, 5], vec![6, 7, 8, 9], vec![10, 11]],
             groups_settings: GroupsConfig::default(),
             power: PowerConfig::default(),
+            w_hat: String::new(),
+            save_w_at: 0,
         }
     }
 }
@@ -145,15 +153,27 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
     writeln!(iters, "run,iteration,rollouts,mean_policy_cost,best_return,mean_return,best_cost")?;
     let mut rolls = std::io::BufWriter::new(std::fs::File::create(out.join("rollouts.csv"))?);
     writeln!(rolls, "run,iteration,rollout,return,cost")?;
+    let w_hat = if cfg.w_hat.trim().is_empty() {
+        None
+    } else {
+        let k = cfg.groups_settings.latent;
+        Some(load_w(Path::new(cfg.w_hat.trim()), d, k).with_context(|| format!("w-hat = {}", cfg.w_hat))?)
+    };
     let mut curves: Vec<Vec<f64>> = Vec::new();
     let mut actions = Vec::new();
     for r in 0..cfg.runs {
         let seed = cfg.seed + r as u64;
         let mut learner = match cfg.method.as_str() {
-            "groups" => Learner::Groups(Box::new(
-                Groups::new(cfg.groups_settings.clone(), cfg.groups.clone(), d, phi.len(), seed)
-                    .map_err(|e| anyhow::anyhow!("groups: {e}"))?,
-            )),
+            "groups" => {
+                let mut g = Groups::new(cfg.groups_settings.clone(), cfg.groups.clone(), d, phi.len(), seed)
+                    .map_err(|e| anyhow::anyhow!("groups: {e}"))?;
+                if let Some(w) = &w_hat {
+                    // Reuse: the earlier synergies are both the prior's centre and the start.
+                    g.w_hat = w.clone();
+                    g.w = w.clone();
+                }
+                Learner::Groups(Box::new(g))
+            }
             "pepper" => {
                 let all: Vec<usize> = (0..d).collect();
                 let settings = GroupsConfig {
@@ -187,6 +207,13 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
             let best_cost = got.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
             let mean = got.iter().map(|x| x.0).sum::<f64>() / got.len().max(1) as f64;
             writeln!(iters, "{r},{it},{total_rollouts},{cost},{best},{mean},{best_cost}")?;
+            if it == cfg.save_w_at
+                && let Learner::Groups(g) = &learner
+            {
+                let dir = out.join(format!("run-{r}"));
+                std::fs::create_dir_all(&dir)?;
+                save_tensors(&dir.join(format!("w-iter{it}.safetensors")), &[("W".to_string(), vec![d, g.cfg.latent], g.w.clone())])?;
+            }
             if it % 10 == 0 || it == cfg.iterations {
                 eprintln!(
                     "search: {} run {}/{} iteration {it}/{}: mean policy's summed distance {cost:.2}",
@@ -216,6 +243,21 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
         "final_mean_policy_cost_mean": mean, "final_mean_policy_cost_sd": sd, "out": out.display().to_string()});
     crate::progress::print_stdout_line(&summary.to_string());
     Ok(())
+}
+
+/// The tensor `W` (`d x k`, F64) of a file written by `coadapt search`.
+fn load_w(path: &Path, d: usize, k: usize) -> anyhow::Result<Vec<f64>> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let t = st.tensor("W").map_err(|e| anyhow::anyhow!("{}: no tensor W ({e})", path.display()))?;
+    if t.dtype() != safetensors::Dtype::F64 || t.shape() != [d, k] {
+        anyhow::bail!("{}: W is {:?} {:?}; expected F64 [{d}, {k}] (the same latent dimension)", path.display(), t.dtype(), t.shape());
+    }
+    let w: Vec<f64> = t.data().chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8]))).collect();
+    if let Some(i) = w.iter().position(|v| !v.is_finite()) {
+        anyhow::bail!("{}: W[{}, {}] is not finite", path.display(), i / k, i % k);
+    }
+    Ok(w)
 }
 
 /// `(name, shape, values)` as F64 tensors in one safetensors file.

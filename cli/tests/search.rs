@@ -37,6 +37,52 @@ fn a_search_writes_its_run_directory_and_learns() {
     assert_eq!(header["M"]["shape"], serde_json::json!([12, 11]));
     assert_eq!(header["W"]["shape"], serde_json::json!([12, 6]));
     assert_eq!(header["M"]["dtype"], "F64");
+    // Reuse of synergies: a second search takes the first's W after iteration 8 as W-hat.
+    let cfg = dir.join("reuse.toml");
+    let w = out.join("run-0/w-iter8.safetensors");
+    assert!(!w.exists(), "saved without save-w-at");
+    std::fs::write(&cfg, "save-w-at = 3\n").unwrap();
+    let src = dir.join("src");
+    let o = coadapt(&["search", "--config", cfg.to_str().unwrap(), "--runs", "1", "--iterations", "4", "--out", src.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let w = src.join("run-0/w-iter3.safetensors");
+    assert!(w.exists());
+    std::fs::write(
+        &cfg,
+        format!("w-hat = {:?}\n[groups-settings]\npool = 20\nfirst-rollouts = 20\nrollouts = 10\nbest = 10\n", w.display().to_string()),
+    )
+    .unwrap();
+    let o = coadapt(&[
+        "search",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--runs",
+        "1",
+        "--iterations",
+        "3",
+        "--out",
+        dir.join("reuse").to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // 20 rollouts first, then 10 per iteration with the pool.
+    let csv = std::fs::read_to_string(dir.join("reuse/iterations.csv")).unwrap();
+    let counts: Vec<&str> = csv.lines().skip(1).map(|l| l.split(',').nth(2).unwrap()).collect();
+    assert_eq!(counts, ["20", "30", "40"]);
+    // A W of another latent dimension is refused, naming the shapes.
+    std::fs::write(&cfg, format!("w-hat = {:?}\n[groups-settings]\nlatent = 4\n", w.display().to_string())).unwrap();
+    let o = coadapt(&[
+        "search",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--runs",
+        "1",
+        "--iterations",
+        "1",
+        "--out",
+        dir.join("bad-w").to_str().unwrap(),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("expected F64 [12, 4]"), "{e}");
     // Refusals: an existing search, an unknown method, a grouping that is not a partition.
     let o = coadapt(&["search", "--runs", "1", "--iterations", "1", "--out", out.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("already holds a search"));

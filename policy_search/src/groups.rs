@@ -50,6 +50,12 @@ pub struct GroupsConfig {
     pub alpha_rank: usize,
     /// lambda of the log-linear model (the thesis leaves it open).
     pub alpha_lambda: f64,
+    /// Rollouts kept from iteration to iteration (ch. 3's Baxter protocol: a pool of 20 of the
+    /// best so far, joined by `rollouts` new ones; old samples are not importance-weighted).
+    /// 0: every iteration starts afresh (ch. 2).
+    pub pool: usize,
+    /// Rollouts of the first iteration when a pool is kept (ch. 3: 20); 0: `rollouts`.
+    pub first_rollouts: usize,
 }
 
 impl Default for GroupsConfig {
@@ -70,6 +76,8 @@ impl Default for GroupsConfig {
             priors: true,
             alpha_rank: 0,
             alpha_lambda: 0.1,
+            pool: 0,
+            first_rollouts: 0,
         }
     }
 }
@@ -111,6 +119,8 @@ pub struct Groups {
     pub tau: Vec<f64>,
     /// The log-linear model of alpha, when `alpha-rank` > 0.
     pub alpha_model: Option<crate::alpha::LogLinearAlpha>,
+    /// The rollouts kept for the next iteration (`pool` > 0).
+    pub kept: Vec<Sample>,
     rng: rand::rngs::StdRng,
 }
 
@@ -142,6 +152,7 @@ impl Groups {
             w_hat: vec![0.0; d * k],
             alpha: vec![vec![1.0; k]; n],
             tau: vec![1.0 / cfg.initial_variance; n],
+            kept: Vec::new(),
             alpha_model: (cfg.alpha_rank > 0).then(|| crate::alpha::LogLinearAlpha::new(n, k, cfg.alpha_rank, cfg.alpha_lambda)),
             cfg,
             groups,
@@ -188,8 +199,15 @@ impl Groups {
     }
 
     /// One iteration: samples, evaluates, updates from the best; the samples, best first.
+    /// With a pool, the new rollouts join the kept ones; the best `pool` of them are kept for
+    /// the next iteration. Returns the new rollouts, best first.
     pub fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Sample> {
-        let mut samples: Vec<Sample> = (0..self.cfg.rollouts)
+        let n = if self.cfg.pool > 0 && self.kept.is_empty() && self.cfg.first_rollouts > 0 {
+            self.cfg.first_rollouts
+        } else {
+            self.cfg.rollouts
+        };
+        let mut samples: Vec<Sample> = (0..n)
             .map(|_| {
                 let mut s = self.sample(phi);
                 let a: Vec<f32> = s.actions.iter().map(|&v| v as f32).collect();
@@ -198,7 +216,13 @@ impl Groups {
             })
             .collect();
         samples.sort_by(|a, b| b.ret.total_cmp(&a.ret));
-        let best = &samples[..self.cfg.best.min(samples.len())];
+        let mut all = samples.clone();
+        if self.cfg.pool > 0 {
+            all.append(&mut self.kept);
+            all.sort_by(|a, b| b.ret.total_cmp(&a.ret));
+            self.kept = all.iter().take(self.cfg.pool).cloned().collect();
+        }
+        let best = &all[..self.cfg.best.min(all.len())];
         let total: f64 = best.iter().map(|s| s.ret.max(0.0)).sum();
         if total > 0.0 && total.is_finite() {
             let weights: Vec<f64> = best.iter().map(|s| s.ret.max(0.0) / total).collect();
