@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
 use std::io::{BufRead, BufReader};
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
@@ -157,11 +158,13 @@ fn serve_refuses_what_it_cannot_serve_safely() {
 }
 
 /// A fleet killed when the test ends.
+/// A fleet in a process group of its own, killed whole when the test ends: killing only `coadapt
+/// run` on a failed assertion left its actor and optimiser reconnecting for ever.
 struct Fleet(std::process::Child);
 
 impl Drop for Fleet {
     fn drop(&mut self) {
-        let _ = self.0.kill();
+        let _ = Command::new("kill").args(["-KILL", "--", &format!("-{}", self.0.id())]).status();
         let _ = self.0.wait();
     }
 }
@@ -177,6 +180,7 @@ fn python_clients_query_a_running_fleet_and_watch_its_designs() {
             .arg(&dir)
             .stderr(Stdio::piped())
             .stdout(Stdio::null())
+            .process_group(0)
             .spawn()
             .unwrap(),
     );
