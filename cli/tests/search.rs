@@ -94,3 +94,24 @@ fn a_search_writes_its_run_directory_and_learns() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("groups: action 2 is in 2 groups"), "{e}");
 }
+
+/// Every shipped search config (`configs/search/`) parses and names a method and a partition.
+#[test]
+fn every_shipped_search_config_is_valid() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/search");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let c: coadapt_cli::search::SearchConfig =
+            toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        assert!(["groups", "pepper", "power"].contains(&c.method.as_str()), "{}: {}", path.display(), c.method);
+        let mut all: Vec<usize> = c.groups.iter().flatten().copied().collect();
+        all.sort_unstable();
+        assert_eq!(all, (0..12).collect::<Vec<_>>(), "{}: the groups partition the 12 actions", path.display());
+        seen += 1;
+    }
+    assert!(seen >= 10, "{seen} configs");
+}
