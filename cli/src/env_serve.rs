@@ -18,6 +18,16 @@ pub struct EnvServeArgs {
     /// Loopback only unless TLS is configured (--tls-cert, --tls-key) or --insecure is given.
     #[arg(long, default_value = "127.0.0.1:0")]
     pub listen: String,
+    /// Worlds (live simulations) at once from all clients; CreateWorld beyond it is refused
+    /// with RESOURCE_EXHAUSTED and the worlds already made go on.
+    #[arg(long, default_value_t = coadapt_env_rpc::ServerLimits::default().max_worlds)]
+    pub max_worlds: usize,
+    /// TCP connections from one remote host at once; more are closed as they are accepted.
+    #[arg(long, default_value_t = coadapt_env_rpc::ServerLimits::default().max_connections_per_peer)]
+    pub max_connections_per_peer: usize,
+    /// TCP connections at once from all hosts.
+    #[arg(long, default_value_t = coadapt_env_rpc::ServerLimits::default().max_connections)]
+    pub max_connections: usize,
     /// TLS and tokens (actors and operators may step the robot).
     #[command(flatten)]
     pub security: crate::security::SecurityArgs,
@@ -41,14 +51,24 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
         eprintln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);
         crate::progress::print_stdout_line(&format!("dm-env-rpc://{addr}"));
         let (stopped_tx, stopped_rx) = tokio::sync::oneshot::channel::<()>();
-        let server = tokio::spawn(async move {
-            coadapt_env_rpc::server::serve(listener, factory, &auth, async {
-                let _ = stopped_rx.await;
-            })
-            .await
+        if args.max_worlds == 0 || args.max_connections_per_peer == 0 || args.max_connections == 0 {
+            anyhow::bail!("--max-worlds, --max-connections-per-peer and --max-connections must be at least 1");
+        }
+        let limits = coadapt_env_rpc::ServerLimits {
+            max_worlds: args.max_worlds,
+            max_connections_per_peer: args.max_connections_per_peer,
+            max_connections: args.max_connections,
+        };
+        let (handle, served) = coadapt_env_rpc::server::serve(listener, factory, &auth, limits, async {
+            let _ = stopped_rx.await;
         });
+        let server = tokio::spawn(served);
         wait_for_signal().await;
-        eprintln!("env-serve: stopping (open streams get {GRACE:?} to finish)");
+        let r = handle.refusals();
+        eprintln!(
+            "env-serve: stopping (open streams get {GRACE:?} to finish); refused: {} worlds beyond --max-worlds, {} connections beyond --max-connections-per-peer, {} beyond --max-connections",
+            r.worlds, r.connections_per_peer, r.connections_total
+        );
         let _ = stopped_tx.send(());
         // Clients that keep their stream open would hold a graceful shutdown for ever.
         match tokio::time::timeout(GRACE, server).await {

@@ -10,17 +10,21 @@
 //! - `gate`: the interceptors: [`Gate`] on a server (UNAUTHENTICATED for a missing or unknown
 //!   token, PERMISSION_DENIED for a role the service does not serve; the caller's [`Role`] put
 //!   in the request's extensions for finer checks), [`Bearer`] on a client.
+//! - `peers`: [`LimitedIncoming`], a listener that closes connections beyond a limit per remote
+//!   host and in all (tonic has no such setting), for every server that faces the network.
 //!
 //! Tokens travel only inside TLS in a real deployment: a server refuses to listen in plaintext
 //! on anything but loopback unless told `insecure` (the binaries check it).
 
 mod gate;
 mod generate;
+pub mod peers;
 mod tls;
 mod tokens;
 
 pub use gate::{AuthChannel, Bearer, Gate, GateCounts, caller_role, require};
 pub use generate::Credentials;
+pub use peers::{LimitedIncoming, LimitedStream, PeerLimits};
 pub use tls::{ClientTls, ServerTls, TlsError};
 pub use tokens::{Role, Token, TokenError, TokenTable, hash_token, new_token};
 

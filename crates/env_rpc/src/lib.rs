@@ -21,7 +21,7 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 pub use client::{RemoteEnv, RemoteError, RemoteStats};
-pub use server::{BackgroundServer, EnvFactory, EnvService};
+pub use server::{BackgroundServer, EnvFactory, EnvService, ServerHandle, ServerLimits, ServerRefusals};
 
 /// The scheme of remote environment names.
 pub const SCHEME: &str = "dm-env-rpc://";

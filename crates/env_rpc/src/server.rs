@@ -65,12 +65,47 @@ struct Session {
     scratch: Vec<f32>,
 }
 
+/// What a server holds at most for its peers: each world is a live simulation (memory and a
+/// physics state), each connection a task, so a peer that opens them in a loop must be stopped
+/// before it takes the machine.
+#[derive(Clone, Copy, Debug)]
+pub struct ServerLimits {
+    /// Worlds alive at once, from all connections; CreateWorld beyond it gets
+    /// RESOURCE_EXHAUSTED and the worlds already made go on.
+    pub max_worlds: usize,
+    /// TCP connections from one remote host at once; more are closed as they are accepted.
+    pub max_connections_per_peer: usize,
+    /// TCP connections at once from all hosts.
+    pub max_connections: usize,
+}
+
+impl Default for ServerLimits {
+    fn default() -> Self {
+        // A fleet's actors each hold one connection and one world; 64 actors on one robot
+        // server is already far past what one simulator process steps usefully.
+        Self { max_worlds: 64, max_connections_per_peer: 32, max_connections: 256 }
+    }
+}
+
+/// What a server refused, for its logs and tests.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ServerRefusals {
+    /// CreateWorld refused: `max_worlds` were alive.
+    pub worlds: u64,
+    /// Connections closed as accepted: their host held `max_connections_per_peer`.
+    pub connections_per_peer: u64,
+    /// Connections closed as accepted: `max_connections` were open.
+    pub connections_total: u64,
+}
+
 /// The dm_env_rpc service over an environment factory.
 #[derive(Clone)]
 pub struct EnvService {
     factory: EnvFactory,
     worlds: Arc<Mutex<Worlds>>,
     sessions: Arc<AtomicU64>,
+    max_worlds: usize,
+    refused_worlds: Arc<AtomicU64>,
 }
 
 impl std::fmt::Debug for EnvService {
@@ -90,7 +125,17 @@ fn profile_of(spec: &EnvSpec) -> Profile {
 
 impl EnvService {
     pub fn new(factory: EnvFactory) -> Self {
-        Self { factory, worlds: Arc::default(), sessions: Arc::new(AtomicU64::new(0)) }
+        Self::with_max_worlds(factory, ServerLimits::default().max_worlds)
+    }
+
+    /// A service that refuses CreateWorld while `max_worlds` worlds are alive.
+    pub fn with_max_worlds(factory: EnvFactory, max_worlds: usize) -> Self {
+        Self { factory, worlds: Arc::default(), sessions: Arc::new(AtomicU64::new(0)), max_worlds, refused_worlds: Arc::default() }
+    }
+
+    /// CreateWorld calls refused because `max_worlds` were alive.
+    pub fn refused_worlds(&self) -> u64 {
+        self.refused_worlds.load(Ordering::Relaxed)
     }
 
     /// Worlds currently alive (for tests and logs).
@@ -132,11 +177,27 @@ impl EnvService {
     }
 
     fn create_world(&self, session: &Session, r: pb::CreateWorldRequest) -> Result<Resp, Failure> {
+        // Checked before building the environment (the expensive part), and again under the
+        // lock when inserting: two connections may race past the first check.
+        let full = |n: usize| {
+            self.refused_worlds.fetch_add(1, Ordering::Relaxed);
+            status(
+                Code::ResourceExhausted,
+                format!("the server holds {n} worlds, its limit (max-worlds): destroy one or close a connection first"),
+            )
+        };
+        let alive = self.world_count();
+        if alive >= self.max_worlds {
+            return Err(full(alive));
+        }
         let env = (self.factory)().map_err(|e| status(Code::Internal, format!("building the environment: {e}")))?;
         let spec = env.spec().clone();
         let mut world = World { design: spec.default_design.clone(), env, spec, next_seed: 0, epoch: 0, joined: false, owner: session.id };
         Self::apply_settings(&mut world, &r.settings)?;
         let mut worlds = lock(&self.worlds);
+        if worlds.map.len() >= self.max_worlds {
+            return Err(full(worlds.map.len()));
+        }
         worlds.next += 1;
         let name = format!("world-{}", worlds.next);
         worlds.map.insert(name.clone(), Arc::new(Mutex::new(world)));
@@ -334,21 +395,50 @@ impl Environment for EnvService {
     }
 }
 
+/// A running server's view of what it refused.
+#[derive(Clone, Debug)]
+pub struct ServerHandle {
+    service: EnvService,
+    peers: Arc<coadapt_auth::PeerLimits>,
+}
+
+impl ServerHandle {
+    pub fn refusals(&self) -> ServerRefusals {
+        ServerRefusals {
+            worlds: self.service.refused_worlds(),
+            connections_per_peer: self.peers.refused_per_peer.load(Ordering::Relaxed),
+            connections_total: self.peers.refused_total.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Worlds alive.
+    pub fn world_count(&self) -> usize {
+        self.service.world_count()
+    }
+}
+
 /// Serves `factory` over dm_env_rpc on `listener` until `shutdown` resolves, with `auth`'s
-/// TLS and tokens (actors and operators may step environments).
-pub async fn serve(
+/// TLS and tokens (actors and operators may step environments) and within `limits`. The
+/// handle reads the refusals while the server runs.
+pub fn serve<S: std::future::Future<Output = ()> + Send>(
     listener: tokio::net::TcpListener,
     factory: EnvFactory,
     auth: &coadapt_auth::ServerAuth,
-    shutdown: impl std::future::Future<Output = ()> + Send,
-) -> Result<(), tonic::transport::Error> {
-    serve_service(listener, EnvService::new(factory), auth, shutdown).await
+    limits: ServerLimits,
+    shutdown: S,
+) -> (ServerHandle, impl std::future::Future<Output = Result<(), tonic::transport::Error>> + Send + use<S>) {
+    let service = EnvService::with_max_worlds(factory, limits.max_worlds);
+    let peers = coadapt_auth::PeerLimits::new(limits.max_connections_per_peer, limits.max_connections);
+    let handle = ServerHandle { service: service.clone(), peers: peers.clone() };
+    let auth = auth.clone();
+    (handle, async move { serve_service(listener, service, &auth, peers, shutdown).await })
 }
 
 async fn serve_service(
     listener: tokio::net::TcpListener,
     service: EnvService,
     auth: &coadapt_auth::ServerAuth,
+    peers: Arc<coadapt_auth::PeerLimits>,
     shutdown: impl std::future::Future<Output = ()> + Send,
 ) -> Result<(), tonic::transport::Error> {
     let mut builder = tonic::transport::Server::builder();
@@ -359,9 +449,8 @@ async fn serve_service(
     builder
         .http2_keepalive_interval(Some(Duration::from_secs(10)))
         .http2_keepalive_timeout(Some(Duration::from_secs(20)))
-        .tcp_nodelay(true)
         .add_service(tonic::service::interceptor::InterceptedService::new(EnvironmentServer::new(service), gate))
-        .serve_with_incoming_shutdown(tokio_stream::wrappers::TcpListenerStream::new(listener), shutdown)
+        .serve_with_incoming_shutdown(coadapt_auth::LimitedIncoming::new(listener, peers, "env-serve"), shutdown)
         .await
 }
 
@@ -370,7 +459,7 @@ async fn serve_service(
 #[derive(Debug)]
 pub struct BackgroundServer {
     pub addr: SocketAddr,
-    service: EnvService,
+    handle: ServerHandle,
     rt: Option<tokio::runtime::Runtime>,
 }
 
@@ -382,22 +471,34 @@ impl BackgroundServer {
 
     /// [`BackgroundServer::start`] with TLS and tokens (actors and operators may step).
     pub fn start_with(addr: &str, factory: EnvFactory, auth: coadapt_auth::ServerAuth) -> std::io::Result<Self> {
+        Self::start_limited(addr, factory, auth, ServerLimits::default())
+    }
+
+    /// [`BackgroundServer::start_with`] within `limits`.
+    pub fn start_limited(addr: &str, factory: EnvFactory, auth: coadapt_auth::ServerAuth, limits: ServerLimits) -> std::io::Result<Self> {
         let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).thread_name("env-serve").enable_all().build()?;
         let listener = rt.block_on(tokio::net::TcpListener::bind(addr))?;
         let addr = listener.local_addr()?;
-        let service = EnvService::new(factory);
-        let s = service.clone();
+        let (handle, served) = {
+            let _in_rt = rt.enter();
+            serve(listener, factory, &auth, limits, std::future::pending())
+        };
         rt.spawn(async move {
-            if let Err(e) = serve_service(listener, s, &auth, std::future::pending()).await {
+            if let Err(e) = served.await {
                 eprintln!("env-serve: {e}");
             }
         });
-        Ok(Self { addr, service, rt: Some(rt) })
+        Ok(Self { addr, handle, rt: Some(rt) })
+    }
+
+    /// What the server refused so far.
+    pub fn refusals(&self) -> ServerRefusals {
+        self.handle.refusals()
     }
 
     /// Worlds alive on the server.
     pub fn world_count(&self) -> usize {
-        self.service.world_count()
+        self.handle.world_count()
     }
 
     /// The URL a coadapt client takes: `dm-env-rpc://HOST:PORT`.

@@ -59,8 +59,8 @@ mod frames;
 mod server;
 
 pub use client::{actor_links, optimizer_links};
+pub use coadapt_auth::peers::{LimitedIncoming, LimitedStream, PeerLimits};
 pub use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks, TransportError};
-pub use server::peers::{LimitedIncoming, LimitedStream, PeerLimits};
 pub use server::{ActorStatus, ClientRole, HealthSwitch, LearnerServer, Refusals, serve_learner};
 
 /// The protocol version in `Hello`/`Welcome`; a learner refuses clients of another one.

@@ -15,7 +15,7 @@
 //! reachable by the fleet.
 
 mod episodes;
-pub mod peers;
+use coadapt_auth::peers;
 mod queues;
 mod service;
 mod topic;
