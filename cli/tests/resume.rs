@@ -343,3 +343,92 @@ fn over_shared_memory_no_process_outlives_a_killed_learner() {
     }
     eprintln!("the fleet ended {:.1} s after its learner", t.elapsed().as_secs_f64());
 }
+
+/// The Kubernetes shared-memory pod (deploy/k8s/examples/shm-pod): one container per role,
+/// each started again by the kubelet whenever it ends, with no supervisor of ours. The learner
+/// is killed with SIGKILL mid-run: it comes back alone with `--resume`, the actors and the
+/// optimiser end with it (their channels close) and come back too, in whatever order, over the
+/// dead start's shared memory; the run completes with the rows of a run never stopped.
+#[test]
+fn a_shared_memory_pod_restarted_role_by_role_resumes_to_the_rows_of_a_run_never_stopped() {
+    let dir = tmpdir("pod");
+    let c = config();
+    let want = reference(&dir, &c);
+    let mut rng = kill_seed();
+    let config = write_config(&dir, &c);
+    let cfg = config.to_str().unwrap();
+    let out = dir.join("run");
+    let out_s = out.to_str().unwrap().to_string();
+    let state = dir.join("optimizer-state");
+    let state_s = state.to_str().unwrap().to_string();
+    let fleet = format!("coadapt-test-{}-pod", std::process::id());
+    let args = |role: &str| -> Vec<String> {
+        let mut a: Vec<String> =
+            vec![role.into(), "--config".into(), cfg.into(), "--transport".into(), "shm".into(), "--fleet".into(), fleet.clone()];
+        match role {
+            "learner" => a.extend(["--out".into(), out_s.clone(), "--resume".into()]),
+            "optimizer" => a.extend(["--state-dir".into(), state_s.clone()]),
+            _ => a.extend(["--id".into(), "0".into()]),
+        }
+        a
+    };
+    let log = |role: &str, start: usize| dir.join(format!("{role}-{start}.txt"));
+    let logs = || {
+        let mut names: Vec<_> =
+            std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "txt")).collect();
+        names.sort();
+        names.iter().map(|p| format!("== {}\n{}", p.display(), std::fs::read_to_string(p).unwrap_or_default())).collect::<String>()
+    };
+    let roles = ["actor", "learner", "optimizer"];
+    let mut starts = [0usize; 3];
+    let start = |i: usize, starts: &mut [usize; 3]| {
+        starts[i] += 1;
+        let a = args(roles[i]);
+        coadapt(&a.iter().map(String::as_str).collect::<Vec<_>>(), &log(roles[i], starts[i]))
+    };
+    // The kubelet starts the containers in no particular order: the actor first here.
+    let mut procs: Vec<Child> = (0..3).map(|i| start(i, &mut starts)).collect();
+    let episodes = out.join("episodes.csv");
+    let at = 7 + draw(&mut rng, 5);
+    let mut killed = false;
+    let mut finished = false;
+    let t = Instant::now();
+    loop {
+        assert!(t.elapsed() < Duration::from_secs(300), "the pod did not finish in 5 minutes; {}", logs());
+        if !killed && rows(&episodes) >= at {
+            std::thread::sleep(Duration::from_millis(draw(&mut rng, 150) as u64));
+            kill9(procs[1].id());
+            killed = true;
+        }
+        for i in 0..3 {
+            if let Some(status) = procs[i].try_wait().unwrap() {
+                if i == 1 && status.success() {
+                    finished = true;
+                }
+                // Restarted like a container with restartPolicy Always, until the run is done.
+                if !finished && !(i == 1 && status.success()) {
+                    assert!(starts[i] < 6, "{} restarted {} times; {}", roles[i], starts[i], logs());
+                    procs[i] = start(i, &mut starts);
+                }
+            }
+        }
+        if finished {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // The others end by themselves once the learner has finished the run.
+    for (i, p) in procs.iter_mut().enumerate() {
+        let t = Instant::now();
+        while p.try_wait().unwrap().is_none() {
+            assert!(t.elapsed() < Duration::from_secs(60), "{} outlived the finished run; {}", roles[i], logs());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+    assert!(killed, "the run ended before the kill point ({at} rows); {}", logs());
+    assert!(starts[1] >= 2, "the learner was not started again; {}", logs());
+    assert!(std::fs::read_to_string(log("learner", 2)).unwrap().contains("learner: resuming"), "{}", logs());
+    let got = tables(&out);
+    assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped; {}", logs());
+    assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped; {}", logs());
+}
