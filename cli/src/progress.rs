@@ -13,7 +13,7 @@ pub fn shutdown_on_ctrl_c() -> Arc<AtomicBool> {
         if f.swap(true, Ordering::SeqCst) {
             std::process::exit(130);
         }
-        eprintln!("\ninterrupted: finishing the current episode and saving (Ctrl-C again to abort)");
+        eprintln!("\ninterrupted: stopping and keeping what is written (Ctrl-C again to abort)");
     });
     flag
 }
