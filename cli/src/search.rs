@@ -11,7 +11,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
-use coadapt_policy_search::{EpisodicTask, Groups, GroupsConfig, LinearPolicy, PlanarReaching, Power, PowerConfig, TimeFeatures};
+use coadapt_policy_search::{
+    EpisodicTask, Groups, GroupsConfig, LinearPolicy, Nac, NacConfig, PlanarReaching, Power, PowerConfig, TimeFeatures,
+};
 use serde::{Deserialize, Serialize};
 
 /// `coadapt search`'s config (TOML, kebab-case; every key has a default).
@@ -21,7 +23,7 @@ pub struct SearchConfig {
     /// The task: `planar` (the bimanual planar reaching benchmark, 12 actions x 25 steps).
     pub task: String,
     /// `groups` (GrouPS), `pepper` (PePPER: the factor model without priors or groups, resize
-    /// sqrt(1.09)) or `power` (PoWER).
+    /// sqrt(1.09)), `power` (PoWER) or `nac` (episodic Natural Actor-Critic).
     pub method: String,
     /// Independent runs (seeds seed, seed + 1, ...).
     pub runs: usize,
@@ -36,6 +38,8 @@ pub struct SearchConfig {
     pub groups_settings: GroupsConfig,
     /// PoWER's settings.
     pub power: PowerConfig,
+    /// eNAC's settings.
+    pub nac: NacConfig,
     /// GrouPS with reuse of synergies (ch. 3): a `policy.safetensors` or `w-iter<N>.safetensors`
     /// of an earlier search whose W becomes the prior centre W-hat and the starting W (empty:
     /// none, chapter 2).
@@ -55,6 +59,7 @@ impl Default for SearchConfig {
             groups: vec![vec![0, 1, 2, 3], vec![4, 5], vec![6, 7, 8, 9], vec![10, 11]],
             groups_settings: GroupsConfig::default(),
             power: PowerConfig::default(),
+            nac: NacConfig::default(),
             w_hat: String::new(),
             save_w_at: 0,
         }
@@ -67,7 +72,7 @@ pub struct SearchArgs {
     /// The TOML config (default: GrouPS with 4 groups, 10 runs of 100 iterations).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Override `method`: groups or power.
+    /// Override `method`: groups, pepper, power or nac.
     #[arg(long)]
     pub method: Option<String>,
     /// Override `runs`.
@@ -87,6 +92,7 @@ pub struct SearchArgs {
 enum Learner {
     Groups(Box<Groups>),
     Power(Box<Power>),
+    Nac(Box<Nac>),
 }
 
 impl Learner {
@@ -94,6 +100,7 @@ impl Learner {
         match self {
             Learner::Groups(g) => &g.m,
             Learner::Power(p) => &p.policy.m,
+            Learner::Nac(n) => &n.policy.m,
         }
     }
 
@@ -102,6 +109,7 @@ impl Learner {
         match self {
             Learner::Groups(g) => g.iterate(task, phi).into_iter().map(|s| (s.ret, s.cost)).collect(),
             Learner::Power(p) => p.iterate(task, phi).into_iter().map(|r| (r.ret, r.cost)).collect(),
+            Learner::Nac(n) => n.iterate(task, phi).into_iter().map(|r| (r.ret, r.cost)).collect(),
         }
     }
 }
@@ -129,8 +137,22 @@ fn resolve(a: &SearchArgs) -> anyhow::Result<SearchConfig> {
     if cfg.task != "planar" {
         anyhow::bail!("task: {:?}; only \"planar\" (the bimanual planar reaching benchmark) so far", cfg.task);
     }
-    if !["groups", "pepper", "power"].contains(&cfg.method.as_str()) {
-        anyhow::bail!("method: {:?}; groups, pepper or power", cfg.method);
+    if !["groups", "pepper", "power", "nac"].contains(&cfg.method.as_str()) {
+        anyhow::bail!("method: {:?}; groups, pepper, power or nac", cfg.method);
+    }
+    // Settings that would degrade silently (a sampler falling back to another variance, a
+    // selection clipped to what exists) are refused, naming the key.
+    let p = &cfg.power;
+    if cfg.method == "power" {
+        if !(p.variance > 0.0 && p.variance.is_finite()) {
+            anyhow::bail!("power.variance = {}: must be positive", p.variance);
+        }
+        if p.best == 0 || p.best > p.rollouts {
+            anyhow::bail!("power.best = {}: between 1 and power.rollouts ({})", p.best, p.rollouts);
+        }
+    }
+    if cfg.method == "nac" {
+        cfg.nac.check().map_err(|e| anyhow::anyhow!(e))?;
     }
     if cfg.runs == 0 || cfg.iterations == 0 {
         anyhow::bail!("runs and iterations: at least 1 each");
@@ -185,6 +207,9 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
                     ..GroupsConfig::pepper()
                 };
                 Learner::Groups(Box::new(Groups::new(settings, vec![all], d, phi.len(), seed).map_err(|e| anyhow::anyhow!("pepper: {e}"))?))
+            }
+            "nac" => {
+                Learner::Nac(Box::new(Nac::new(LinearPolicy::zeros(d, phi.len()), cfg.nac.clone(), seed).map_err(|e| anyhow::anyhow!(e))?))
             }
             _ => Learner::Power(Box::new(Power::new(LinearPolicy::zeros(d, phi.len()), cfg.power.clone(), seed))),
         };

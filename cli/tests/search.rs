@@ -87,12 +87,24 @@ fn a_search_writes_its_run_directory_and_learns() {
     let o = coadapt(&["search", "--runs", "1", "--iterations", "1", "--out", out.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&o.stderr).contains("already holds a search"));
     let o = coadapt(&["search", "--method", "sgd", "--out", dir.join("x").to_str().unwrap()]);
-    assert!(String::from_utf8_lossy(&o.stderr).contains("method: \"sgd\"; groups, pepper or power"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("method: \"sgd\"; groups, pepper, power or nac"));
     let cfg = dir.join("bad.toml");
     std::fs::write(&cfg, "groups = [[0, 1, 2], [2, 3]]\n").unwrap();
     let o = coadapt(&["search", "--config", cfg.to_str().unwrap(), "--iterations", "1", "--out", dir.join("y").to_str().unwrap()]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("groups: action 2 is in 2 groups"), "{e}");
+    // Settings that would degrade silently are refused, naming the key.
+    for (text, key) in [
+        ("method = \"power\"\n[power]\nvariance = 0.0\n", "power.variance = 0"),
+        ("method = \"power\"\n[power]\nbest = 40\n", "power.best = 40"),
+        ("method = \"nac\"\n[nac]\nlearning-rate = -1.0\n", "nac.learning-rate = -1"),
+        ("[groups-settings]\nbest = 31\n", "best = 31"),
+    ] {
+        std::fs::write(&cfg, text).unwrap();
+        let o = coadapt(&["search", "--config", cfg.to_str().unwrap(), "--iterations", "1", "--out", dir.join("z").to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && e.contains(key), "{text}: {e}");
+    }
 }
 
 /// Every shipped search config (`configs/search/`) parses and names a method and a partition.
@@ -107,7 +119,7 @@ fn every_shipped_search_config_is_valid() {
         }
         let c: coadapt_cli::search::SearchConfig =
             toml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        assert!(["groups", "pepper", "power"].contains(&c.method.as_str()), "{}: {}", path.display(), c.method);
+        assert!(["groups", "pepper", "power", "nac"].contains(&c.method.as_str()), "{}: {}", path.display(), c.method);
         let mut all: Vec<usize> = c.groups.iter().flatten().copied().collect();
         all.sort_unstable();
         assert_eq!(all, (0..12).collect::<Vec<_>>(), "{}: the groups partition the 12 actions", path.display());

@@ -140,6 +140,12 @@ impl Groups {
         if !(cfg.initial_variance > 0.0 && cfg.resize > 0.0 && cfg.sigma2 > 0.0) {
             return Err("initial-variance, resize and sigma2 must be positive".into());
         }
+        if cfg.best == 0 || cfg.best > cfg.rollouts + cfg.pool {
+            return Err(format!(
+                "best = {}: between 1 and the rollouts an iteration has (rollouts {} + pool {})",
+                cfg.best, cfg.rollouts, cfg.pool
+            ));
+        }
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         let k = cfg.latent;
         let w: Vec<f64> = (0..d * k).map(|_| StandardNormal.sample(&mut rng)).collect();

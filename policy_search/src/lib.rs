@@ -18,14 +18,17 @@
 //!   `linalg`: the small dense algebra.
 //!
 //! - `alpha`: the log-linear model of alpha (ch. 3) fitted by `lbfgs`, a small L-BFGS.
+//! - `nac`: the episodic Natural Actor-Critic (eNAC), the gradient baseline: per-step Gaussian
+//!   exploration, the natural gradient from a linear fit of the returns, [`Nac`].
 //!
-//! Next (issue 14): NAC, synergy reuse runs, rollouts through the fleet.
+//! Next (issue 14): rollouts through the fleet.
 
 mod alpha;
 mod features;
 mod groups;
 mod lbfgs;
 mod linalg;
+mod nac;
 mod planar;
 mod policy;
 mod power;
@@ -33,6 +36,7 @@ mod power;
 pub use alpha::LogLinearAlpha;
 pub use features::TimeFeatures;
 pub use groups::{Groups, GroupsConfig, Sample};
+pub use nac::{Nac, NacConfig, natural_gradient};
 pub use planar::{ArmGeometry, PlanarReaching};
 pub use policy::{LinearPolicy, Rollout};
 pub use power::{Power, PowerConfig};
