@@ -71,9 +71,11 @@ pub enum Command {
     EnvServe(env_serve::EnvServeArgs),
     Serve(serve::ServeArgs),
     Score(design_client::ScoreArgs),
-    /// Policy search from few rollouts (thesis ch. 2-3): GrouPS or PoWER on the bimanual
-    /// planar reaching benchmark.
+    /// Policy search from few rollouts (thesis ch. 2-3): GrouPS, PePPER, PoWER or NAC on the
+    /// bimanual planar reaching benchmark, in process or on a fleet of actors.
     Search(search::SearchArgs),
+    /// Runs the rollouts a `coadapt search` hands out (shm or gRPC), on this machine's robot.
+    SearchActor(search::SearchActorArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
     #[command(subcommand)]
     Token(credentials::TokenCommand),
@@ -102,6 +104,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(args) => serve::run(args),
         Command::Score(args) => design_client::score(args),
         Command::Search(args) => search::run(args),
+        Command::SearchActor(args) => search::actor(args),
         Command::Token(cmd) => credentials::token(cmd),
         Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),

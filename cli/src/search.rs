@@ -5,6 +5,10 @@
 //! rollouts), `rollouts.csv` (one row per rollout), each run's final M (and W, the synergies) in
 //! `run-<r>/policy.safetensors`, and `plots/learning_curve.svg` (mean and standard deviation
 //! over runs).
+//!
+//! The rollouts run in this process by default; with `actors = N` they go to N actors over
+//! `[fleet] transport` (in-process threads, or `coadapt search-actor` processes over shared
+//! memory or gRPC, started here or, with `start-actors = false`, by you on the robots' hosts).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -12,9 +16,12 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use coadapt_policy_search::{
-    EpisodicTask, Groups, GroupsConfig, LinearPolicy, Nac, NacConfig, PlanarReaching, Power, PowerConfig, TimeFeatures,
+    EpisodicTask, FleetRunner, Groups, GroupsConfig, LinearPolicy, Nac, NacConfig, PlanarEnv, PlanarReaching, Power, PowerConfig,
+    RolloutRunner, TimeFeatures,
 };
 use serde::{Deserialize, Serialize};
+
+use crate::fleet::{FleetConfig, LearnerGuard, TransportKind};
 
 /// `coadapt search`'s config (TOML, kebab-case; every key has a default).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -46,6 +53,21 @@ pub struct SearchConfig {
     pub w_hat: String,
     /// Also save each run's W after this iteration as `run-<r>/w-iter<N>.safetensors` (0: no).
     pub save_w_at: usize,
+    /// Where the rollouts run: 0 in this process, one after the other; N > 0 on N actors over
+    /// `fleet.transport` (each rollout's actions go out, its transitions and return come back).
+    pub actors: usize,
+    /// With actors over shm or gRPC: start them here as `coadapt search-actor` processes
+    /// (true), or wait for actors started elsewhere, e.g. on robots' hosts (false).
+    pub start_actors: bool,
+    /// A rollout that sent nothing for this many seconds goes to another actor.
+    pub rollout_lease_secs: f64,
+    /// An iteration whose rollouts are not all back after this many seconds stops the search.
+    pub iteration_deadline_secs: f64,
+    /// How the search and its actors talk (`transport`, `name`, `listen`, `connect`, ...:
+    /// the `[fleet]` table of a run config).
+    pub fleet: FleetConfig,
+    /// TLS and tokens of a gRPC fleet (the `[security]` table of a run config).
+    pub security: crate::security::SecurityConfig,
 }
 
 impl Default for SearchConfig {
@@ -62,6 +84,12 @@ impl Default for SearchConfig {
             nac: NacConfig::default(),
             w_hat: String::new(),
             save_w_at: 0,
+            actors: 0,
+            start_actors: true,
+            rollout_lease_secs: 60.0,
+            iteration_deadline_secs: 3600.0,
+            fleet: FleetConfig { transport: TransportKind::InProcess, listen: "127.0.0.1:0".into(), ..FleetConfig::default() },
+            security: crate::security::SecurityConfig::default(),
         }
     }
 }
@@ -87,6 +115,38 @@ pub struct SearchArgs {
     /// The run directory (default runs/search-<method>-seed<seed>).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Override `actors`: run the rollouts on N actors (0: in this process).
+    #[arg(long)]
+    pub actors: Option<usize>,
+    /// Override fleet.transport: in-process (threads), shm or grpc.
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportKind>,
+    /// TLS and tokens of a gRPC fleet (over [security]).
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
+}
+
+/// `coadapt search-actor`: runs the rollouts a search hands out on this machine's robot.
+#[derive(Debug, Args)]
+pub struct SearchActorArgs {
+    /// The search's config (its `config.toml`, or the file the search was started with).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// This actor's id, unique among the search's actors.
+    #[arg(long)]
+    pub id: u64,
+    /// Override fleet.transport: shm or grpc.
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportKind>,
+    /// Override fleet.name: the shared-memory fleet to join.
+    #[arg(long)]
+    pub fleet: Option<String>,
+    /// Override fleet.connect: the search's gRPC address.
+    #[arg(long)]
+    pub connect: Option<String>,
+    /// TLS and the actor's token (over [security]).
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
 }
 
 enum Learner {
@@ -105,12 +165,12 @@ impl Learner {
     }
 
     /// One iteration; (return, cost) of each rollout.
-    fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<(f64, f64)> {
-        match self {
-            Learner::Groups(g) => g.iterate(task, phi).into_iter().map(|s| (s.ret, s.cost)).collect(),
-            Learner::Power(p) => p.iterate(task, phi).into_iter().map(|r| (r.ret, r.cost)).collect(),
-            Learner::Nac(n) => n.iterate(task, phi).into_iter().map(|r| (r.ret, r.cost)).collect(),
-        }
+    fn iterate(&mut self, task: &dyn RolloutRunner, phi: &TimeFeatures) -> anyhow::Result<Vec<(f64, f64)>> {
+        Ok(match self {
+            Learner::Groups(g) => g.iterate(task, phi)?.into_iter().map(|s| (s.ret, s.cost)).collect(),
+            Learner::Power(p) => p.iterate(task, phi)?.into_iter().map(|r| (r.ret, r.cost)).collect(),
+            Learner::Nac(n) => n.iterate(task, phi)?.into_iter().map(|r| (r.ret, r.cost)).collect(),
+        })
     }
 }
 
@@ -133,6 +193,18 @@ fn resolve(a: &SearchArgs) -> anyhow::Result<SearchConfig> {
     }
     if let Some(s) = a.seed {
         cfg.seed = s;
+    }
+    if let Some(n) = a.actors {
+        cfg.actors = n;
+    }
+    if let Some(t) = a.transport {
+        cfg.fleet.transport = t;
+    }
+    cfg.security = cfg.security.clone().with_args(&a.security);
+    for (key, v) in [("rollout-lease-secs", cfg.rollout_lease_secs), ("iteration-deadline-secs", cfg.iteration_deadline_secs)] {
+        if !(v > 0.0 && v.is_finite()) {
+            anyhow::bail!("{key} = {v}: a positive number of seconds");
+        }
     }
     if cfg.task != "planar" {
         anyhow::bail!("task: {:?}; only \"planar\" (the bimanual planar reaching benchmark) so far", cfg.task);
@@ -171,6 +243,11 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
     let task = PlanarReaching::default();
     let phi = TimeFeatures::thesis(task.steps());
     let d = task.action_dim();
+    let fleet = if cfg.actors > 0 { Some(Fleet::start(&cfg, &out)?) } else { None };
+    let runner: &dyn RolloutRunner = match &fleet {
+        Some(f) => &f.runner,
+        None => &task,
+    };
     let mut iters = std::io::BufWriter::new(std::fs::File::create(out.join("iterations.csv"))?);
     writeln!(iters, "run,iteration,rollouts,mean_policy_cost,best_return,mean_return,best_cost")?;
     let mut rolls = std::io::BufWriter::new(std::fs::File::create(out.join("rollouts.csv"))?);
@@ -221,7 +298,7 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
         curve.push(cost_of(learner.mean(), &mut actions));
         let mut total_rollouts = 0;
         for it in 1..=cfg.iterations {
-            let got = learner.iterate(&task, &phi);
+            let got = learner.iterate(runner, &phi).with_context(|| format!("run {r} iteration {it}"))?;
             total_rollouts += got.len();
             for (k, (ret, cost)) in got.iter().enumerate() {
                 writeln!(rolls, "{r},{it},{k},{ret},{cost}")?;
@@ -259,6 +336,9 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
         }
         save_tensors(&dir.join("policy.safetensors"), &tensors)?;
         curves.push(curve);
+    }
+    if let Some(f) = fleet {
+        f.finish();
     }
     draw(&out.join("plots/learning_curve.svg"), &cfg, &curves)?;
     let last: Vec<f64> = curves.iter().map(|c| c[c.len() - 1]).collect();
@@ -328,5 +408,151 @@ fn draw(path: &Path, cfg: &SearchConfig, curves: &[Vec<f64>]) -> anyhow::Result<
         chart.draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, s))| (i as f64, m + sign * s)), BLUE.mix(0.35)))?;
     }
     root.present()?;
+    Ok(())
+}
+
+/// The search's fleet: the runner over the learner's links, and what keeps them up.
+struct Fleet {
+    runner: FleetRunner,
+    guard: LearnerGuard,
+    threads: Vec<std::thread::JoinHandle<Result<u64, coadapt_policy_search::RolloutError>>>,
+    children: Children,
+}
+
+/// Actor processes started by the search; killed if the search fails before they end.
+struct Children(Vec<std::process::Child>);
+
+impl Fleet {
+    fn start(cfg: &SearchConfig, out: &Path) -> anyhow::Result<Self> {
+        let env = PlanarEnv::default();
+        let spec = coadapt_core::Env::spec(&env).clone();
+        let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
+        let lease = std::time::Duration::from_secs_f64(cfg.rollout_lease_secs);
+        let deadline = std::time::Duration::from_secs_f64(cfg.iteration_deadline_secs);
+        let (links, guard, mut threads, mut children) = match cfg.fleet.transport {
+            TransportKind::InProcess => {
+                let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
+                let threads = actors
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, mut links)| {
+                        std::thread::spawn(move || {
+                            let stop = std::sync::atomic::AtomicBool::new(false);
+                            coadapt_policy_search::run_actor(&mut PlanarEnv::default(), i as u64, &mut links, &stop)
+                        })
+                    })
+                    .collect();
+                (learner, LearnerGuard::None, threads, Vec::new())
+            }
+            _ => {
+                let mut fleet = cfg.fleet.clone();
+                if fleet.transport == TransportKind::Shm && fleet.name.is_empty() {
+                    fleet.name = format!("coadapt-search-{}", std::process::id());
+                }
+                let (links, guard) = fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
+                let connect = match &guard {
+                    LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
+                    LearnerGuard::None => String::new(),
+                };
+                let mut children = Vec::new();
+                if cfg.start_actors {
+                    let exe = std::env::current_exe().context("finding the coadapt binary to start actors")?;
+                    let config = out.join("config.toml");
+                    let logs = out.join("logs");
+                    std::fs::create_dir_all(&logs)?;
+                    for i in 0..cfg.actors {
+                        let mut cmd = std::process::Command::new(&exe);
+                        cmd.arg("search-actor").arg("--config").arg(&config).arg("--id").arg(i.to_string());
+                        cmd.arg("--transport").arg(fleet.transport.name()).arg("--fleet").arg(&fleet.name);
+                        if !connect.is_empty() {
+                            cmd.arg("--connect").arg(&connect);
+                        }
+                        let log = std::fs::File::create(logs.join(format!("actor-{i}.log")))?;
+                        cmd.stdin(std::process::Stdio::null()).stdout(log.try_clone()?).stderr(log);
+                        children.push(cmd.spawn().with_context(|| format!("starting search actor {i}"))?);
+                    }
+                    eprintln!("search: {} actors over {} (logs in {})", cfg.actors, fleet.transport.name(), logs.display());
+                } else {
+                    eprintln!(
+                        "search: waiting for {} actors over {} ({})",
+                        cfg.actors,
+                        fleet.transport.name(),
+                        if connect.is_empty() { &fleet.name } else { &connect }
+                    );
+                }
+                (links, guard, Vec::new(), children)
+            }
+        };
+        let mut runner = FleetRunner::new(links, spec.max_episode_steps, spec.act_dim(), spec.obs_dim(), PlanarEnv::step_cost);
+        runner.lease = lease;
+        runner.deadline = deadline;
+        // Nothing to join yet; keep the handles so that a failure can still end them.
+        threads.shrink_to_fit();
+        children.shrink_to_fit();
+        Ok(Self { runner, guard, threads, children: Children(children) })
+    }
+
+    /// Closes the assignment queue (the actors end by themselves) and waits for them.
+    fn finish(self) {
+        let Self { runner, guard, threads, mut children } = self;
+        drop(runner);
+        drop(guard);
+        for t in threads {
+            match t.join() {
+                Ok(Err(e)) => eprintln!("search: an actor thread failed: {e}"),
+                Err(_) => eprintln!("search: an actor thread panicked"),
+                Ok(Ok(_)) => {}
+            }
+        }
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        for c in &mut children.0 {
+            while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            if matches!(c.try_wait(), Ok(None)) {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        // A search that failed: its actor processes must not outlive it.
+        for c in &mut self.0 {
+            if matches!(c.try_wait(), Ok(None)) {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+}
+
+/// `coadapt search-actor`.
+pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&a.config).with_context(|| format!("reading {}", a.config.display()))?;
+    let mut cfg: SearchConfig = toml::from_str(&text).with_context(|| format!("parsing {}", a.config.display()))?;
+    if cfg.task != "planar" {
+        anyhow::bail!("task: {:?}; only \"planar\" so far", cfg.task);
+    }
+    if let Some(t) = a.transport {
+        cfg.fleet.transport = t;
+    }
+    if let Some(f) = &a.fleet {
+        cfg.fleet.name = f.clone();
+    }
+    if let Some(c) = &a.connect {
+        cfg.fleet.connect = c.clone();
+    }
+    if cfg.fleet.transport == TransportKind::InProcess {
+        anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
+    }
+    let security = cfg.security.clone().with_args(&a.security);
+    let mut links = cfg.fleet.actor_links(a.id, &security)?;
+    let shutdown = crate::progress::shutdown_on_ctrl_c();
+    eprintln!("search actor {}: planar over {}", a.id, cfg.fleet.transport.name());
+    let n = coadapt_policy_search::run_actor(&mut PlanarEnv::default(), a.id, &mut links, &shutdown)?;
+    eprintln!("search actor {}: done after {n} rollouts", a.id);
     Ok(())
 }

@@ -127,3 +127,62 @@ fn every_shipped_search_config_is_valid() {
     }
     assert!(seen >= 10, "{seen} configs");
 }
+
+/// The rollouts through a fleet of actor processes (shared memory and gRPC, started by the
+/// search) and of actor threads: every transport gives the same iterations, within the f32
+/// rewards' precision of the search run in process, and every rollout ran once on an actor.
+#[test]
+fn a_search_runs_its_rollouts_on_a_fleet_of_actor_processes() {
+    let dir = std::env::temp_dir().join(format!("coadapt-search-fleet-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let table = |out: &std::path::Path| -> Vec<Vec<f64>> {
+        let csv = std::fs::read_to_string(out.join("iterations.csv")).unwrap();
+        csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect()
+    };
+    let local = dir.join("local");
+    let o = coadapt(&["search", "--runs", "1", "--iterations", "4", "--out", local.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let want = table(&local);
+    let mut fleets = Vec::new();
+    for transport in ["in-process", "shm", "grpc"] {
+        let out = dir.join(transport);
+        let o = coadapt(&[
+            "search",
+            "--runs",
+            "1",
+            "--iterations",
+            "4",
+            "--actors",
+            "3",
+            "--transport",
+            transport,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{transport}: {err}");
+        let got = table(&out);
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            for (c, (x, y)) in g.iter().zip(w).enumerate() {
+                assert!((x - y).abs() <= 1e-5 * y.abs().max(1.0), "{transport}: column {c}: {x} vs {y} in process");
+            }
+        }
+        if transport != "in-process" {
+            // Each actor process says how many rollouts it ran: 4 iterations of 30 in all.
+            let ran: u64 = (0..3)
+                .map(|i| {
+                    let log = std::fs::read_to_string(out.join(format!("logs/actor-{i}.log"))).unwrap();
+                    let n =
+                        log.lines().find_map(|l| l.split("done after ").nth(1)).unwrap_or_else(|| panic!("{transport} actor {i}: {log}"));
+                    n.split_whitespace().next().unwrap().parse::<u64>().unwrap()
+                })
+                .sum();
+            assert_eq!(ran, 120, "{transport}: every rollout once");
+        }
+        fleets.push(got);
+    }
+    // The transports carry the same f32 values: identical iterations.
+    assert_eq!(fleets[0], fleets[1]);
+    assert_eq!(fleets[1], fleets[2]);
+}

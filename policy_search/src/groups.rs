@@ -13,9 +13,9 @@
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::EpisodicTask;
 use crate::features::TimeFeatures;
 use crate::linalg::{dot, matvec, spd_inverse};
+use crate::{RolloutError, RolloutRunner};
 
 /// GrouPS's settings (the thesis's planar task).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -207,20 +207,17 @@ impl Groups {
     /// One iteration: samples, evaluates, updates from the best; the samples, best first.
     /// With a pool, the new rollouts join the kept ones; the best `pool` of them are kept for
     /// the next iteration. Returns the new rollouts, best first.
-    pub fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Sample> {
+    pub fn iterate(&mut self, task: &dyn RolloutRunner, phi: &TimeFeatures) -> Result<Vec<Sample>, RolloutError> {
         let n = if self.cfg.pool > 0 && self.kept.is_empty() && self.cfg.first_rollouts > 0 {
             self.cfg.first_rollouts
         } else {
             self.cfg.rollouts
         };
-        let mut samples: Vec<Sample> = (0..n)
-            .map(|_| {
-                let mut s = self.sample(phi);
-                let a: Vec<f32> = s.actions.iter().map(|&v| v as f32).collect();
-                (s.ret, s.cost) = task.evaluate(&a);
-                s
-            })
-            .collect();
+        let mut samples: Vec<Sample> = (0..n).map(|_| self.sample(phi)).collect();
+        let actions: Vec<Vec<f32>> = samples.iter().map(|s| s.actions.iter().map(|&v| v as f32).collect()).collect();
+        for (s, (ret, cost)) in samples.iter_mut().zip(crate::run_all(task, &actions)?) {
+            (s.ret, s.cost) = (ret, cost);
+        }
         samples.sort_by(|a, b| b.ret.total_cmp(&a.ret));
         let mut all = samples.clone();
         if self.cfg.pool > 0 {
@@ -235,7 +232,7 @@ impl Groups {
             self.update(best, &weights, phi);
             self.resize();
         }
-        samples
+        Ok(samples)
     }
 
     /// W <- resize E[W], tau <- E[tau] / resize.
@@ -495,6 +492,7 @@ mod tests {
 
     #[test]
     fn groups_with_four_groups_brings_the_arms_nearer_their_goal_paths() {
+        use crate::EpisodicTask;
         let phi = TimeFeatures::thesis(25);
         let task = PlanarReaching::default();
         // Eq. 2.32: joints 1-4 and 5-6 of each arm.
@@ -508,7 +506,7 @@ mod tests {
         let before = cost(&g, &mut a);
         let mut costs = Vec::new();
         for _ in 0..25 {
-            g.iterate(&task, &phi);
+            g.iterate(&task, &phi).unwrap();
             costs.push(cost(&g, &mut a));
         }
         eprintln!("GrouPS (4 groups) on the planar task, summed distance of M: {before:.1} -> {costs:.1?}");

@@ -21,10 +21,13 @@
 //! - `nac`: the episodic Natural Actor-Critic (eNAC), the gradient baseline: per-step Gaussian
 //!   exploration, the natural gradient from a linear fit of the returns, [`Nac`].
 //!
-//! Next (issue 14): rollouts through the fleet.
+//! - `fleet`: rollouts through a fleet of actors over the co-adaptation's transports:
+//!   [`FleetRunner`] (the learner's side, a [`RolloutRunner`]), [`run_actor`], and
+//!   [`PlanarEnv`], the planar benchmark as a robot an actor steps.
 
 mod alpha;
 mod features;
+mod fleet;
 mod groups;
 mod lbfgs;
 mod linalg;
@@ -35,6 +38,7 @@ mod power;
 
 pub use alpha::LogLinearAlpha;
 pub use features::TimeFeatures;
+pub use fleet::{FleetRunner, PlanarEnv, run_actor};
 pub use groups::{Groups, GroupsConfig, Sample};
 pub use nac::{Nac, NacConfig, natural_gradient};
 pub use planar::{ArmGeometry, PlanarReaching};
@@ -50,4 +54,31 @@ pub trait EpisodicTask {
     /// The return of `actions` (`steps x action_dim`, row-major), non-negative (the EM
     /// updates weigh rollouts by it), and the task's cost metric (lower is better).
     fn evaluate(&self, actions: &[f32]) -> (f64, f64);
+}
+
+/// Why an iteration's rollouts could not be run (a fleet gone, a deadline passed).
+#[derive(Debug, thiserror::Error)]
+#[error("running rollouts: {0}")]
+pub struct RolloutError(pub String);
+
+/// What runs an iteration's rollouts: every rollout's actions (`steps x action_dim`) at once,
+/// so a fleet of actors can run them side by side; gives back each one's (return, cost) in
+/// order. Every [`EpisodicTask`] runs them one after the other in process.
+pub trait RolloutRunner {
+    fn run(&self, rollouts: &[Vec<f32>]) -> Result<Vec<(f64, f64)>, RolloutError>;
+}
+
+/// `task.run`, checked to give one result per rollout.
+pub(crate) fn run_all(task: &dyn RolloutRunner, rollouts: &[Vec<f32>]) -> Result<Vec<(f64, f64)>, RolloutError> {
+    let got = task.run(rollouts)?;
+    if got.len() != rollouts.len() {
+        return Err(RolloutError(format!("{} results for {} rollouts", got.len(), rollouts.len())));
+    }
+    Ok(got)
+}
+
+impl<T: EpisodicTask + ?Sized> RolloutRunner for T {
+    fn run(&self, rollouts: &[Vec<f32>]) -> Result<Vec<(f64, f64)>, RolloutError> {
+        Ok(rollouts.iter().map(|a| self.evaluate(a)).collect())
+    }
 }

@@ -18,9 +18,11 @@
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
+#[cfg(test)]
 use crate::EpisodicTask;
 use crate::features::TimeFeatures;
 use crate::policy::{LinearPolicy, Rollout};
+use crate::{RolloutError, RolloutRunner};
 
 /// eNAC's settings (the thesis's planar task: 30 rollouts, learning rate 0.5, variance 10^1.5).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -71,21 +73,19 @@ impl Nac {
 
     /// One iteration: samples the rollouts (each rollout's `params` holds its noise, `T x D`),
     /// evaluates them on `task`, takes one natural-gradient step; returns the rollouts.
-    pub fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Rollout> {
+    pub fn iterate(&mut self, task: &dyn RolloutRunner, phi: &TimeFeatures) -> Result<Vec<Rollout>, RolloutError> {
         let (d, t_max) = (self.policy.actions, phi.steps());
         let noise = Normal::new(0.0, self.cfg.variance.sqrt()).expect("checked positive variance");
         let mut mean = Vec::new();
         LinearPolicy::actions_of(&self.policy.m, d, phi, &mut mean);
-        let mut actions = Vec::with_capacity(t_max * d);
-        let rollouts: Vec<Rollout> = (0..self.cfg.rollouts)
-            .map(|_| {
-                let eps: Vec<f64> = (0..t_max * d).map(|_| noise.sample(&mut self.rng)).collect();
-                actions.clear();
-                actions.extend(mean.iter().zip(&eps).map(|(m, e)| (f64::from(*m) + e) as f32));
-                let (ret, cost) = task.evaluate(&actions);
-                Rollout { params: eps, ret, cost }
-            })
+        let mut rollouts: Vec<Rollout> = (0..self.cfg.rollouts)
+            .map(|_| Rollout { params: (0..t_max * d).map(|_| noise.sample(&mut self.rng)).collect(), ret: 0.0, cost: 0.0 })
             .collect();
+        let actions: Vec<Vec<f32>> =
+            rollouts.iter().map(|r| mean.iter().zip(&r.params).map(|(m, e)| (f64::from(*m) + e) as f32).collect()).collect();
+        for (r, (ret, cost)) in rollouts.iter_mut().zip(crate::run_all(task, &actions)?) {
+            (r.ret, r.cost) = (ret, cost);
+        }
         let psi: Vec<Vec<f64>> = rollouts.iter().map(|r| self.psi(&r.params, phi)).collect();
         let returns: Vec<f64> = rollouts.iter().map(|r| r.ret).collect();
         if let Some(w) = natural_gradient(&psi, &returns) {
@@ -93,7 +93,7 @@ impl Nac {
                 *m += self.cfg.learning_rate * g;
             }
         }
-        rollouts
+        Ok(rollouts)
     }
 
     /// `psi = sum_t eps_t phi_t' / sigma^2`, as `D x P` row-major (the layout of M).
@@ -295,7 +295,7 @@ mod tests {
             LinearPolicy::actions_of(&nac.policy.m, dim, &phi, &mut a);
             let before = task.evaluate(&a).1;
             for _ in 0..150 {
-                nac.iterate(&task, &phi);
+                nac.iterate(&task, &phi).unwrap();
             }
             LinearPolicy::actions_of(&nac.policy.m, dim, &phi, &mut a);
             let after = task.evaluate(&a).1;

@@ -8,9 +8,11 @@
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
+#[cfg(test)]
 use crate::EpisodicTask;
 use crate::features::TimeFeatures;
 use crate::policy::{LinearPolicy, Rollout};
+use crate::{RolloutError, RolloutRunner};
 
 /// PoWER's settings (the thesis's planar task: 30 rollouts, the best 15, variance 10^1.5).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -46,48 +48,60 @@ impl Power {
 
     /// One iteration: samples the rollouts, evaluates them on `task`, updates the mean from
     /// the best; returns every rollout of the iteration (best first).
-    pub fn iterate(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Rollout> {
+    pub fn iterate(&mut self, task: &dyn RolloutRunner, phi: &TimeFeatures) -> Result<Vec<Rollout>, RolloutError> {
         if self.cfg.per_step {
             return self.iterate_per_step(task, phi);
         }
         let sd = self.cfg.variance.sqrt();
         let noise = Normal::new(0.0, sd).unwrap_or_else(|_| Normal::new(0.0, 1.0).expect("N(0, 1)"));
-        let mut actions = Vec::new();
         let mut rollouts: Vec<Rollout> = (0..self.cfg.rollouts)
             .map(|_| {
                 let params: Vec<f64> = self.policy.m.iter().map(|m| m + noise.sample(&mut self.rng)).collect();
-                LinearPolicy::actions_of(&params, self.policy.actions, phi, &mut actions);
-                let (ret, cost) = task.evaluate(&actions);
-                Rollout { params, ret, cost }
+                Rollout { params, ret: 0.0, cost: 0.0 }
             })
             .collect();
+        let actions: Vec<Vec<f32>> = rollouts
+            .iter()
+            .map(|r| {
+                let mut a = Vec::new();
+                LinearPolicy::actions_of(&r.params, self.policy.actions, phi, &mut a);
+                a
+            })
+            .collect();
+        for (r, (ret, cost)) in rollouts.iter_mut().zip(crate::run_all(task, &actions)?) {
+            (r.ret, r.cost) = (ret, cost);
+        }
         rollouts.sort_by(|a, b| b.ret.total_cmp(&a.ret));
         self.update(&rollouts[..self.cfg.best.min(rollouts.len())]);
-        rollouts
+        Ok(rollouts)
     }
 
     /// Per-step exploration: `a_t = (M + eps_t) phi_t`; the update solves
     /// `(sum_i R_i sum_t W_t) dM_j = sum_i R_i sum_t W_t eps_itj` for every action j.
-    fn iterate_per_step(&mut self, task: &dyn EpisodicTask, phi: &TimeFeatures) -> Vec<Rollout> {
+    fn iterate_per_step(&mut self, task: &dyn RolloutRunner, phi: &TimeFeatures) -> Result<Vec<Rollout>, RolloutError> {
         let (d, p, t_max) = (self.policy.actions, self.policy.features, phi.steps());
         let sd = self.cfg.variance.sqrt();
         let noise = Normal::new(0.0, sd).unwrap_or_else(|_| Normal::new(0.0, 1.0).expect("N(0, 1)"));
         // Each rollout: its perturbations (T x D x p) in `params`, return and cost.
+        let mut actions: Vec<Vec<f32>> = Vec::with_capacity(self.cfg.rollouts);
         let mut rollouts: Vec<Rollout> = (0..self.cfg.rollouts)
             .map(|_| {
                 let eps: Vec<f64> = (0..t_max * d * p).map(|_| noise.sample(&mut self.rng)).collect();
-                let mut actions = Vec::with_capacity(t_max * d);
+                let mut a = Vec::with_capacity(t_max * d);
                 for t in 0..t_max {
                     let f = phi.at(t);
                     for j in 0..d {
                         let e = &eps[(t * d + j) * p..(t * d + j + 1) * p];
-                        actions.push((0..p).map(|i| (self.policy.m[j * p + i] + e[i]) * f[i]).sum::<f64>() as f32);
+                        a.push((0..p).map(|i| (self.policy.m[j * p + i] + e[i]) * f[i]).sum::<f64>() as f32);
                     }
                 }
-                let (ret, cost) = task.evaluate(&actions);
-                Rollout { params: eps, ret, cost }
+                actions.push(a);
+                Rollout { params: eps, ret: 0.0, cost: 0.0 }
             })
             .collect();
+        for (r, (ret, cost)) in rollouts.iter_mut().zip(crate::run_all(task, &actions)?) {
+            (r.ret, r.cost) = (ret, cost);
+        }
         rollouts.sort_by(|a, b| b.ret.total_cmp(&a.ret));
         let best = &rollouts[..self.cfg.best.min(rollouts.len())];
         let mut lhs = vec![0.0; p * p];
@@ -122,7 +136,7 @@ impl Power {
                 self.policy.m[j * p..(j + 1) * p].iter_mut().zip(step).for_each(|(m, s)| *m += s);
             }
         }
-        rollouts
+        Ok(rollouts)
     }
 
     /// The M-step on `best`: the return-weighted mean of their perturbations.
@@ -190,7 +204,7 @@ mod tests {
         LinearPolicy::actions_of(&power.policy.m, dim, &phi, &mut a);
         let before = task.evaluate(&a).1;
         for _ in 0..150 {
-            power.iterate(&task, &phi);
+            power.iterate(&task, &phi).unwrap();
         }
         LinearPolicy::actions_of(&power.policy.m, dim, &phi, &mut a);
         let after = task.evaluate(&a).1;
@@ -198,7 +212,7 @@ mod tests {
         // Per-step exploration reaches it too.
         let mut power = Power::new(LinearPolicy::zeros(dim, p), PowerConfig { rollouts: 30, best: 15, variance: 0.5, per_step: true }, 3);
         for _ in 0..150 {
-            power.iterate(&task, &phi);
+            power.iterate(&task, &phi).unwrap();
         }
         LinearPolicy::actions_of(&power.policy.m, dim, &phi, &mut a);
         let per_step = task.evaluate(&a).1;
@@ -224,7 +238,7 @@ mod planar_tests {
         let before = cost(&power, &mut a);
         let mut costs = Vec::new();
         for _ in 0..40 {
-            power.iterate(&task, &phi);
+            power.iterate(&task, &phi).unwrap();
             costs.push(cost(&power, &mut a));
         }
         eprintln!("PoWER on the planar task, summed distance of the mean policy: {before:.1} -> {costs:.1?}");
