@@ -20,6 +20,9 @@
 //! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
 //!   [`design_client`]: `coadapt score`, `coadapt optimize` and `coadapt history`, its
 //!   command-line clients.
+//! - [`search`]: `coadapt search`, episodic policy search (GrouPS, PePPER, PoWER, NAC) on the
+//!   planar benchmark; [`search_fleet`]: its rollouts on actors and `coadapt search-actor`;
+//!   `search_plot`: its learning-curve and synergy plots.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
@@ -44,6 +47,8 @@ pub mod role_cmd;
 pub mod roles;
 pub mod run;
 pub mod search;
+pub mod search_fleet;
+mod search_plot;
 pub mod security;
 pub mod serve;
 pub mod train;
@@ -75,7 +80,7 @@ pub enum Command {
     /// bimanual planar reaching benchmark, in process or on a fleet of actors.
     Search(search::SearchArgs),
     /// Runs the rollouts a `coadapt search` hands out (shm or gRPC), on this machine's robot.
-    SearchActor(search::SearchActorArgs),
+    SearchActor(search_fleet::SearchActorArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
     #[command(subcommand)]
     Token(credentials::TokenCommand),
@@ -104,7 +109,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(args) => serve::run(args),
         Command::Score(args) => design_client::score(args),
         Command::Search(args) => search::run(args),
-        Command::SearchActor(args) => search::actor(args),
+        Command::SearchActor(args) => search_fleet::actor(args),
         Command::Token(cmd) => credentials::token(cmd),
         Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),

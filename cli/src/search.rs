@@ -16,12 +16,11 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use coadapt_policy_search::{
-    EpisodicTask, FleetRunner, Groups, GroupsConfig, LinearPolicy, Nac, NacConfig, PlanarEnv, PlanarReaching, Power, PowerConfig,
-    RolloutRunner, TimeFeatures,
+    EpisodicTask, Groups, GroupsConfig, LinearPolicy, Nac, NacConfig, PlanarReaching, Power, PowerConfig, RolloutRunner, TimeFeatures,
 };
 use serde::{Deserialize, Serialize};
 
-use crate::fleet::{FleetConfig, LearnerGuard, TransportKind};
+use crate::fleet::{FleetConfig, TransportKind};
 
 /// `coadapt search`'s config (TOML, kebab-case; every key has a default).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -126,29 +125,6 @@ pub struct SearchArgs {
     pub security: crate::security::SecurityArgs,
 }
 
-/// `coadapt search-actor`: runs the rollouts a search hands out on this machine's robot.
-#[derive(Debug, Args)]
-pub struct SearchActorArgs {
-    /// The search's config (its `config.toml`, or the file the search was started with).
-    #[arg(long)]
-    pub config: PathBuf,
-    /// This actor's id, unique among the search's actors.
-    #[arg(long)]
-    pub id: u64,
-    /// Override fleet.transport: shm or grpc.
-    #[arg(long, value_enum)]
-    pub transport: Option<TransportKind>,
-    /// Override fleet.name: the shared-memory fleet to join.
-    #[arg(long)]
-    pub fleet: Option<String>,
-    /// Override fleet.connect: the search's gRPC address.
-    #[arg(long)]
-    pub connect: Option<String>,
-    /// TLS and the actor's token (over [security]).
-    #[command(flatten)]
-    pub security: crate::security::SecurityArgs,
-}
-
 enum Learner {
     Groups(Box<Groups>),
     Power(Box<Power>),
@@ -243,7 +219,7 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
     let task = PlanarReaching::default();
     let phi = TimeFeatures::thesis(task.steps());
     let d = task.action_dim();
-    let fleet = if cfg.actors > 0 { Some(Fleet::start(&cfg, &out)?) } else { None };
+    let fleet = if cfg.actors > 0 { Some(crate::search_fleet::Fleet::start(&cfg, &out)?) } else { None };
     let runner: &dyn RolloutRunner = match &fleet {
         Some(f) => &f.runner,
         None => &task,
@@ -340,7 +316,7 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
     if let Some(f) = fleet {
         f.finish();
     }
-    draw(&out.join("plots/learning_curve.svg"), &cfg, &curves)?;
+    crate::search_plot::draw(&out.join("plots/learning_curve.svg"), &cfg, &curves)?;
     let last: Vec<f64> = curves.iter().map(|c| c[c.len() - 1]).collect();
     let mean = last.iter().sum::<f64>() / last.len() as f64;
     let sd = (last.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (last.len().max(2) - 1) as f64).sqrt();
@@ -378,181 +354,4 @@ fn save_tensors(path: &Path, tensors: &[(String, Vec<usize>, Vec<f64>)]) -> anyh
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let buf = safetensors::serialize(views, None).map_err(|e| anyhow::anyhow!("{e}"))?;
     std::fs::write(path, buf).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Mean and standard deviation over runs of the mean policy's summed distance per iteration.
-fn draw(path: &Path, cfg: &SearchConfig, curves: &[Vec<f64>]) -> anyhow::Result<()> {
-    use plotters::prelude::*;
-    let n = curves.iter().map(Vec::len).min().unwrap_or(0);
-    let stats: Vec<(f64, f64)> = (0..n)
-        .map(|i| {
-            let v: Vec<f64> = curves.iter().map(|c| c[i]).collect();
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            let sd = (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
-            (m, sd)
-        })
-        .collect();
-    let top = stats.iter().map(|(m, s)| m + s).fold(0.0, f64::max) * 1.05;
-    let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(format!("{} on the planar task, {} runs", cfg.method, curves.len()), ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0f64..(n.max(2) - 1) as f64, 0f64..top.max(1.0))?;
-    chart.configure_mesh().x_desc("iteration").y_desc("summed end-effector distance").draw()?;
-    // The mean, and the mean plus and minus one standard deviation.
-    chart.draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, _))| (i as f64, *m)), &BLUE))?;
-    for sign in [1.0, -1.0] {
-        chart.draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, s))| (i as f64, m + sign * s)), BLUE.mix(0.35)))?;
-    }
-    root.present()?;
-    Ok(())
-}
-
-/// The search's fleet: the runner over the learner's links, and what keeps them up.
-struct Fleet {
-    runner: FleetRunner,
-    guard: LearnerGuard,
-    threads: Vec<std::thread::JoinHandle<Result<u64, coadapt_policy_search::RolloutError>>>,
-    children: Children,
-}
-
-/// Actor processes started by the search; killed if the search fails before they end.
-struct Children(Vec<std::process::Child>);
-
-impl Fleet {
-    fn start(cfg: &SearchConfig, out: &Path) -> anyhow::Result<Self> {
-        let env = PlanarEnv::default();
-        let spec = coadapt_core::Env::spec(&env).clone();
-        let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
-        let lease = std::time::Duration::from_secs_f64(cfg.rollout_lease_secs);
-        let deadline = std::time::Duration::from_secs_f64(cfg.iteration_deadline_secs);
-        let (links, guard, mut threads, mut children) = match cfg.fleet.transport {
-            TransportKind::InProcess => {
-                let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
-                let threads = actors
-                    .into_iter()
-                    .enumerate()
-                    .map(|(i, mut links)| {
-                        std::thread::spawn(move || {
-                            let stop = std::sync::atomic::AtomicBool::new(false);
-                            coadapt_policy_search::run_actor(&mut PlanarEnv::default(), i as u64, &mut links, &stop)
-                        })
-                    })
-                    .collect();
-                (learner, LearnerGuard::None, threads, Vec::new())
-            }
-            _ => {
-                let mut fleet = cfg.fleet.clone();
-                if fleet.transport == TransportKind::Shm && fleet.name.is_empty() {
-                    fleet.name = format!("coadapt-search-{}", std::process::id());
-                }
-                let (links, guard) = fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
-                let connect = match &guard {
-                    LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
-                    LearnerGuard::None => String::new(),
-                };
-                let mut children = Vec::new();
-                if cfg.start_actors {
-                    let exe = std::env::current_exe().context("finding the coadapt binary to start actors")?;
-                    let config = out.join("config.toml");
-                    let logs = out.join("logs");
-                    std::fs::create_dir_all(&logs)?;
-                    for i in 0..cfg.actors {
-                        let mut cmd = std::process::Command::new(&exe);
-                        cmd.arg("search-actor").arg("--config").arg(&config).arg("--id").arg(i.to_string());
-                        cmd.arg("--transport").arg(fleet.transport.name()).arg("--fleet").arg(&fleet.name);
-                        if !connect.is_empty() {
-                            cmd.arg("--connect").arg(&connect);
-                        }
-                        let log = std::fs::File::create(logs.join(format!("actor-{i}.log")))?;
-                        cmd.stdin(std::process::Stdio::null()).stdout(log.try_clone()?).stderr(log);
-                        children.push(cmd.spawn().with_context(|| format!("starting search actor {i}"))?);
-                    }
-                    eprintln!("search: {} actors over {} (logs in {})", cfg.actors, fleet.transport.name(), logs.display());
-                } else {
-                    eprintln!(
-                        "search: waiting for {} actors over {} ({})",
-                        cfg.actors,
-                        fleet.transport.name(),
-                        if connect.is_empty() { &fleet.name } else { &connect }
-                    );
-                }
-                (links, guard, Vec::new(), children)
-            }
-        };
-        let mut runner = FleetRunner::new(links, spec.max_episode_steps, spec.act_dim(), spec.obs_dim(), PlanarEnv::step_cost);
-        runner.lease = lease;
-        runner.deadline = deadline;
-        // Nothing to join yet; keep the handles so that a failure can still end them.
-        threads.shrink_to_fit();
-        children.shrink_to_fit();
-        Ok(Self { runner, guard, threads, children: Children(children) })
-    }
-
-    /// Closes the assignment queue (the actors end by themselves) and waits for them.
-    fn finish(self) {
-        let Self { runner, guard, threads, mut children } = self;
-        drop(runner);
-        drop(guard);
-        for t in threads {
-            match t.join() {
-                Ok(Err(e)) => eprintln!("search: an actor thread failed: {e}"),
-                Err(_) => eprintln!("search: an actor thread panicked"),
-                Ok(Ok(_)) => {}
-            }
-        }
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        for c in &mut children.0 {
-            while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
-                std::thread::sleep(std::time::Duration::from_millis(20));
-            }
-            if matches!(c.try_wait(), Ok(None)) {
-                let _ = c.kill();
-                let _ = c.wait();
-            }
-        }
-    }
-}
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        // A search that failed: its actor processes must not outlive it.
-        for c in &mut self.0 {
-            if matches!(c.try_wait(), Ok(None)) {
-                let _ = c.kill();
-                let _ = c.wait();
-            }
-        }
-    }
-}
-
-/// `coadapt search-actor`.
-pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&a.config).with_context(|| format!("reading {}", a.config.display()))?;
-    let mut cfg: SearchConfig = toml::from_str(&text).with_context(|| format!("parsing {}", a.config.display()))?;
-    if cfg.task != "planar" {
-        anyhow::bail!("task: {:?}; only \"planar\" so far", cfg.task);
-    }
-    if let Some(t) = a.transport {
-        cfg.fleet.transport = t;
-    }
-    if let Some(f) = &a.fleet {
-        cfg.fleet.name = f.clone();
-    }
-    if let Some(c) = &a.connect {
-        cfg.fleet.connect = c.clone();
-    }
-    if cfg.fleet.transport == TransportKind::InProcess {
-        anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
-    }
-    let security = cfg.security.clone().with_args(&a.security);
-    let mut links = cfg.fleet.actor_links(a.id, &security)?;
-    let shutdown = crate::progress::shutdown_on_ctrl_c();
-    eprintln!("search actor {}: planar over {}", a.id, cfg.fleet.transport.name());
-    let n = coadapt_policy_search::run_actor(&mut PlanarEnv::default(), a.id, &mut links, &shutdown)?;
-    eprintln!("search actor {}: done after {n} rollouts", a.id);
-    Ok(())
 }

@@ -1,0 +1,180 @@
+//! `coadapt search`'s fleet: the rollouts on N actors (threads, or `coadapt search-actor`
+//! processes over shared memory or gRPC), and the actor command itself.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+use coadapt_policy_search::{FleetRunner, PlanarEnv};
+
+use crate::fleet::{LearnerGuard, TransportKind};
+use crate::search::SearchConfig;
+
+/// `coadapt search-actor`: runs the rollouts a search hands out on this machine's robot.
+#[derive(Debug, Args)]
+pub struct SearchActorArgs {
+    /// The search's config (its `config.toml`, or the file the search was started with).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// This actor's id, unique among the search's actors.
+    #[arg(long)]
+    pub id: u64,
+    /// Override fleet.transport: shm or grpc.
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportKind>,
+    /// Override fleet.name: the shared-memory fleet to join.
+    #[arg(long)]
+    pub fleet: Option<String>,
+    /// Override fleet.connect: the search's gRPC address.
+    #[arg(long)]
+    pub connect: Option<String>,
+    /// TLS and the actor's token (over [security]).
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
+}
+
+/// The search's fleet: the runner over the learner's links, and what keeps them up.
+pub(crate) struct Fleet {
+    pub(crate) runner: FleetRunner,
+    guard: LearnerGuard,
+    threads: Vec<std::thread::JoinHandle<Result<u64, coadapt_policy_search::RolloutError>>>,
+    children: Children,
+}
+
+/// Actor processes started by the search; killed if the search fails before they end.
+struct Children(Vec<std::process::Child>);
+
+impl Fleet {
+    pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> anyhow::Result<Self> {
+        let env = PlanarEnv::default();
+        let spec = coadapt_core::Env::spec(&env).clone();
+        let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
+        let lease = std::time::Duration::from_secs_f64(cfg.rollout_lease_secs);
+        let deadline = std::time::Duration::from_secs_f64(cfg.iteration_deadline_secs);
+        let (links, guard, mut threads, mut children) = match cfg.fleet.transport {
+            TransportKind::InProcess => {
+                let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
+                let threads = actors
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, mut links)| {
+                        std::thread::spawn(move || {
+                            let stop = std::sync::atomic::AtomicBool::new(false);
+                            coadapt_policy_search::run_actor(&mut PlanarEnv::default(), i as u64, &mut links, &stop)
+                        })
+                    })
+                    .collect();
+                (learner, LearnerGuard::None, threads, Vec::new())
+            }
+            _ => {
+                let mut fleet = cfg.fleet.clone();
+                if fleet.transport == TransportKind::Shm && fleet.name.is_empty() {
+                    fleet.name = format!("coadapt-search-{}", std::process::id());
+                }
+                let (links, guard) = fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
+                let connect = match &guard {
+                    LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
+                    LearnerGuard::None => String::new(),
+                };
+                let mut children = Vec::new();
+                if cfg.start_actors {
+                    let exe = std::env::current_exe().context("finding the coadapt binary to start actors")?;
+                    let config = out.join("config.toml");
+                    let logs = out.join("logs");
+                    std::fs::create_dir_all(&logs)?;
+                    for i in 0..cfg.actors {
+                        let mut cmd = std::process::Command::new(&exe);
+                        cmd.arg("search-actor").arg("--config").arg(&config).arg("--id").arg(i.to_string());
+                        cmd.arg("--transport").arg(fleet.transport.name()).arg("--fleet").arg(&fleet.name);
+                        if !connect.is_empty() {
+                            cmd.arg("--connect").arg(&connect);
+                        }
+                        let log = std::fs::File::create(logs.join(format!("actor-{i}.log")))?;
+                        cmd.stdin(std::process::Stdio::null()).stdout(log.try_clone()?).stderr(log);
+                        children.push(cmd.spawn().with_context(|| format!("starting search actor {i}"))?);
+                    }
+                    eprintln!("search: {} actors over {} (logs in {})", cfg.actors, fleet.transport.name(), logs.display());
+                } else {
+                    eprintln!(
+                        "search: waiting for {} actors over {} ({})",
+                        cfg.actors,
+                        fleet.transport.name(),
+                        if connect.is_empty() { &fleet.name } else { &connect }
+                    );
+                }
+                (links, guard, Vec::new(), children)
+            }
+        };
+        let mut runner = FleetRunner::new(links, spec.max_episode_steps, spec.act_dim(), spec.obs_dim(), PlanarEnv::step_cost);
+        runner.lease = lease;
+        runner.deadline = deadline;
+        // Nothing to join yet; keep the handles so that a failure can still end them.
+        threads.shrink_to_fit();
+        children.shrink_to_fit();
+        Ok(Self { runner, guard, threads, children: Children(children) })
+    }
+
+    /// Closes the assignment queue (the actors end by themselves) and waits for them.
+    pub(crate) fn finish(self) {
+        let Self { runner, guard, threads, mut children } = self;
+        drop(runner);
+        drop(guard);
+        for t in threads {
+            match t.join() {
+                Ok(Err(e)) => eprintln!("search: an actor thread failed: {e}"),
+                Err(_) => eprintln!("search: an actor thread panicked"),
+                Ok(Ok(_)) => {}
+            }
+        }
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        for c in &mut children.0 {
+            while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            if matches!(c.try_wait(), Ok(None)) {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+}
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        // A search that failed: its actor processes must not outlive it.
+        for c in &mut self.0 {
+            if matches!(c.try_wait(), Ok(None)) {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+}
+
+/// `coadapt search-actor`.
+pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&a.config).with_context(|| format!("reading {}", a.config.display()))?;
+    let mut cfg: SearchConfig = toml::from_str(&text).with_context(|| format!("parsing {}", a.config.display()))?;
+    if cfg.task != "planar" {
+        anyhow::bail!("task: {:?}; only \"planar\" so far", cfg.task);
+    }
+    if let Some(t) = a.transport {
+        cfg.fleet.transport = t;
+    }
+    if let Some(f) = &a.fleet {
+        cfg.fleet.name = f.clone();
+    }
+    if let Some(c) = &a.connect {
+        cfg.fleet.connect = c.clone();
+    }
+    if cfg.fleet.transport == TransportKind::InProcess {
+        anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
+    }
+    let security = cfg.security.clone().with_args(&a.security);
+    let mut links = cfg.fleet.actor_links(a.id, &security)?;
+    let shutdown = crate::progress::shutdown_on_ctrl_c();
+    eprintln!("search actor {}: planar over {}", a.id, cfg.fleet.transport.name());
+    let n = coadapt_policy_search::run_actor(&mut PlanarEnv::default(), a.id, &mut links, &shutdown)?;
+    eprintln!("search actor {}: done after {n} rollouts", a.id);
+    Ok(())
+}
