@@ -4,7 +4,9 @@
 //! summed end-effector distance of the mean policy, the best and mean return of the
 //! rollouts), `rollouts.csv` (one row per rollout), each run's final M (and W, the synergies) in
 //! `run-<r>/policy.safetensors`, and `plots/learning_curve.svg` (mean and standard deviation
-//! over runs).
+//! over runs). With synergies (GrouPS, PePPER): run 0's W and M after every iteration in
+//! `run-0/history.safetensors`, `plots/synergies.svg` (W over the iterations, thesis Fig. 3.9)
+//! and `plots/synergy_poses.svg` (the arms moved along the two strongest synergies, Fig. 3.10).
 //!
 //! The rollouts run in this process by default; with `actors = N` they go to N actors over
 //! `[fleet] transport` (in-process threads, or `coadapt search-actor` processes over shared
@@ -52,6 +54,9 @@ pub struct SearchConfig {
     pub w_hat: String,
     /// Also save each run's W after this iteration as `run-<r>/w-iter<N>.safetensors` (0: no).
     pub save_w_at: usize,
+    /// `plots/synergy_poses.svg` shows the two strongest synergies of run 0 after this
+    /// iteration (the thesis found the most useful ones at iterations 7-8).
+    pub synergy_iteration: usize,
     /// Where the rollouts run: 0 in this process, one after the other; N > 0 on N actors over
     /// `fleet.transport` (each rollout's actions go out, its transitions and return come back).
     pub actors: usize,
@@ -83,6 +88,7 @@ impl Default for SearchConfig {
             nac: NacConfig::default(),
             w_hat: String::new(),
             save_w_at: 0,
+            synergy_iteration: 8,
             actors: 0,
             start_actors: true,
             rollout_lease_secs: 60.0,
@@ -272,6 +278,11 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
             task.evaluate(actions).1
         };
         curve.push(cost_of(learner.mean(), &mut actions));
+        // Run 0's synergies and mean after every iteration (from the start), for the plots.
+        let mut history = crate::search_plot::History::default();
+        if r == 0 {
+            history.record(&learner_w(&learner), learner.mean());
+        }
         let mut total_rollouts = 0;
         for it in 1..=cfg.iterations {
             let got = learner.iterate(runner, &phi).with_context(|| format!("run {r} iteration {it}"))?;
@@ -281,6 +292,9 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
             }
             let cost = cost_of(learner.mean(), &mut actions);
             curve.push(cost);
+            if r == 0 {
+                history.record(&learner_w(&learner), learner.mean());
+            }
             let best = got.iter().map(|x| x.0).fold(f64::NEG_INFINITY, f64::max);
             let best_cost = got.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
             let mean = got.iter().map(|x| x.0).sum::<f64>() / got.len().max(1) as f64;
@@ -311,6 +325,16 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
             tensors.push(("W".to_string(), vec![d, g.cfg.latent], g.w.clone()));
         }
         save_tensors(&dir.join("policy.safetensors"), &tensors)?;
+        if let (0, Learner::Groups(g)) = (r, &learner) {
+            let (n, k) = (history.m.len(), g.cfg.latent);
+            save_tensors(
+                &dir.join("history.safetensors"),
+                &[("W".to_string(), vec![n, d, k], history.w.concat()), ("M".to_string(), vec![n, d, phi.len()], history.m.concat())],
+            )?;
+            crate::search_plot::synergies(&out.join("plots/synergies.svg"), &history, d, k)?;
+            let at = cfg.synergy_iteration.min(cfg.iterations);
+            crate::search_plot::synergy_poses(&out.join("plots/synergy_poses.svg"), &history, at, d, k, &phi, &task)?;
+        }
         curves.push(curve);
     }
     if let Some(f) = fleet {
@@ -324,6 +348,14 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
         "final_mean_policy_cost_mean": mean, "final_mean_policy_cost_sd": sd, "out": out.display().to_string()});
     crate::progress::print_stdout_line(&summary.to_string());
     Ok(())
+}
+
+/// The learner's W (empty for methods without synergies).
+fn learner_w(l: &Learner) -> Vec<f64> {
+    match l {
+        Learner::Groups(g) => g.w.clone(),
+        _ => Vec::new(),
+    }
 }
 
 /// The tensor `W` (`d x k`, F64) of a file written by `coadapt search`.

@@ -30,6 +30,18 @@ fn a_search_writes_its_run_directory_and_learns() {
     for f in ["config.toml", "run-0/policy.safetensors", "run-1/policy.safetensors", "plots/learning_curve.svg"] {
         assert!(out.join(f).exists(), "{f} missing");
     }
+    // Run 0's synergies after every iteration (and before the first), and their plots.
+    let bytes = std::fs::read(out.join("run-0/history.safetensors")).unwrap();
+    let header_len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + header_len]).unwrap();
+    assert_eq!(header["W"]["shape"], serde_json::json!([16, 12, 6]));
+    assert_eq!(header["M"]["shape"], serde_json::json!([16, 12, 11]));
+    // A square per entry of W in each of the 5 panels (iterations 1, 2, 4, 8, 15); both arms in
+    // each of the 9 poses.
+    let svg = std::fs::read_to_string(out.join("plots/synergies.svg")).unwrap();
+    assert!(svg.matches("<rect").count() >= 5 * 12 * 6 * 2, "synergies.svg: {svg:.300}");
+    let svg = std::fs::read_to_string(out.join("plots/synergy_poses.svg")).unwrap();
+    assert_eq!(svg.matches("<polyline").count(), 18, "synergy_poses.svg: {svg:.300}");
     // The policy file holds M (12 x 11) and W (12 x 6) as f64.
     let bytes = std::fs::read(out.join("run-0/policy.safetensors")).unwrap();
     let header_len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
