@@ -30,6 +30,9 @@ use crate::fleet::{FleetConfig, TransportKind};
 pub struct SearchConfig {
     /// The task: `planar` (the bimanual planar reaching benchmark, 12 actions x 25 steps).
     pub task: String,
+    /// The planar task's joint angles: `degrees` (the default: what makes the thesis's
+    /// exploration variance sensible) or `radians` (a probe of the thesis's units).
+    pub units: String,
     /// `groups` (GrouPS), `pepper` (PePPER: the factor model without priors or groups, resize
     /// sqrt(1.09)), `power` (PoWER) or `nac` (episodic Natural Actor-Critic).
     pub method: String,
@@ -74,10 +77,20 @@ pub struct SearchConfig {
     pub security: crate::security::SecurityConfig,
 }
 
+impl SearchConfig {
+    /// The planar benchmark in the config's units.
+    pub fn planar(&self) -> PlanarReaching {
+        let mut t = PlanarReaching::default();
+        t.geometry.radians = self.units == "radians";
+        t
+    }
+}
+
 impl Default for SearchConfig {
     fn default() -> Self {
         Self {
             task: "planar".into(),
+            units: "degrees".into(),
             method: "groups".into(),
             runs: 10,
             iterations: 100,
@@ -191,6 +204,9 @@ fn resolve(a: &SearchArgs) -> anyhow::Result<SearchConfig> {
     if cfg.task != "planar" {
         anyhow::bail!("task: {:?}; only \"planar\" (the bimanual planar reaching benchmark) so far", cfg.task);
     }
+    if !["degrees", "radians"].contains(&cfg.units.as_str()) {
+        anyhow::bail!("units: {:?}; degrees or radians", cfg.units);
+    }
     if !["groups", "pepper", "power", "nac"].contains(&cfg.method.as_str()) {
         anyhow::bail!("method: {:?}; groups, pepper, power or nac", cfg.method);
     }
@@ -222,7 +238,7 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(out.join("plots")).with_context(|| format!("creating {}", out.display()))?;
     std::fs::write(out.join("config.toml"), toml::to_string(&cfg)?).context("writing config.toml")?;
-    let task = PlanarReaching::default();
+    let task = cfg.planar();
     let phi = TimeFeatures::thesis(task.steps());
     let d = task.action_dim();
     let fleet = if cfg.actors > 0 { Some(crate::search_fleet::Fleet::start(&cfg, &out)?) } else { None };

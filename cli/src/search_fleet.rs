@@ -46,7 +46,7 @@ struct Children(Vec<std::process::Child>);
 
 impl Fleet {
     pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> anyhow::Result<Self> {
-        let env = PlanarEnv::default();
+        let env = PlanarEnv::new(cfg.planar());
         let spec = coadapt_core::Env::spec(&env).clone();
         let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
         let lease = std::time::Duration::from_secs_f64(cfg.rollout_lease_secs);
@@ -58,9 +58,10 @@ impl Fleet {
                     .into_iter()
                     .enumerate()
                     .map(|(i, mut links)| {
+                        let task = cfg.planar();
                         std::thread::spawn(move || {
                             let stop = std::sync::atomic::AtomicBool::new(false);
-                            coadapt_policy_search::run_actor(&mut PlanarEnv::default(), i as u64, &mut links, &stop)
+                            coadapt_policy_search::run_actor(&mut PlanarEnv::new(task), i as u64, &mut links, &stop)
                         })
                     })
                     .collect();
@@ -174,7 +175,7 @@ pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
     let mut links = cfg.fleet.actor_links(a.id, &security)?;
     let shutdown = crate::progress::shutdown_on_ctrl_c();
     eprintln!("search actor {}: planar over {}", a.id, cfg.fleet.transport.name());
-    let n = coadapt_policy_search::run_actor(&mut PlanarEnv::default(), a.id, &mut links, &shutdown)?;
+    let n = coadapt_policy_search::run_actor(&mut PlanarEnv::new(cfg.planar()), a.id, &mut links, &shutdown)?;
     eprintln!("search actor {}: done after {n} rollouts", a.id);
     Ok(())
 }

@@ -40,7 +40,13 @@ pub struct PlanarEnv {
 
 impl Default for PlanarEnv {
     fn default() -> Self {
-        let task = PlanarReaching::default();
+        Self::new(PlanarReaching::default())
+    }
+}
+
+impl PlanarEnv {
+    /// The robot of `task` (its geometry and units).
+    pub fn new(task: PlanarReaching) -> Self {
         let steps = task.steps();
         // Joint angles are not limited (the policy search's exploration may turn a joint
         // round); the box only refuses the absurd.
@@ -57,9 +63,7 @@ impl Default for PlanarEnv {
         };
         Self { task, spec, t: None, obs: [0.0; 3] }
     }
-}
 
-impl PlanarEnv {
     /// Each step's cost from its observation: the summed end-effector distance.
     pub fn step_cost(obs: &[f32]) -> f64 {
         obs.get(1..3).map_or(f64::NAN, |d| f64::from(d[0]) + f64::from(d[1]))
