@@ -30,9 +30,10 @@ use crate::fleet::{FleetConfig, TransportKind};
 pub struct SearchConfig {
     /// The task: `planar` (the bimanual planar reaching benchmark, 12 actions x 25 steps).
     pub task: String,
-    /// The planar task's joint angles: `degrees` (the default: what makes the thesis's
-    /// exploration variance sensible) or `radians` (a probe of the thesis's units).
-    pub units: String,
+    /// Degrees one unit of the planar task's actions turns a joint: 1 (degrees, the default:
+    /// what makes the thesis's exploration variance sensible), 57.29578 (radians), or any scale
+    /// between (a probe of the thesis's units).
+    pub action_unit_degrees: f64,
     /// `groups` (GrouPS), `pepper` (PePPER: the factor model without priors or groups, resize
     /// sqrt(1.09)), `power` (PoWER) or `nac` (episodic Natural Actor-Critic).
     pub method: String,
@@ -81,7 +82,7 @@ impl SearchConfig {
     /// The planar benchmark in the config's units.
     pub fn planar(&self) -> PlanarReaching {
         let mut t = PlanarReaching::default();
-        t.geometry.radians = self.units == "radians";
+        t.geometry.unit_degrees = self.action_unit_degrees;
         t
     }
 }
@@ -90,7 +91,7 @@ impl Default for SearchConfig {
     fn default() -> Self {
         Self {
             task: "planar".into(),
-            units: "degrees".into(),
+            action_unit_degrees: 1.0,
             method: "groups".into(),
             runs: 10,
             iterations: 100,
@@ -204,8 +205,8 @@ fn resolve(a: &SearchArgs) -> anyhow::Result<SearchConfig> {
     if cfg.task != "planar" {
         anyhow::bail!("task: {:?}; only \"planar\" (the bimanual planar reaching benchmark) so far", cfg.task);
     }
-    if !["degrees", "radians"].contains(&cfg.units.as_str()) {
-        anyhow::bail!("units: {:?}; degrees or radians", cfg.units);
+    if !(cfg.action_unit_degrees > 0.0 && cfg.action_unit_degrees.is_finite()) {
+        anyhow::bail!("action-unit-degrees = {}: a positive number of degrees", cfg.action_unit_degrees);
     }
     if !["groups", "pepper", "power", "nac"].contains(&cfg.method.as_str()) {
         anyhow::bail!("method: {:?}; groups, pepper, power or nac", cfg.method);

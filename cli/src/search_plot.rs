@@ -70,7 +70,7 @@ fn arm(task: &PlanarReaching, q: &[f64]) -> Vec<(f64, f64)> {
     let (mut x, mut y, mut angle) = (0.0, 0.0, std::f64::consts::FRAC_PI_2);
     let mut pts = vec![(x, y)];
     for (l, qi) in task.geometry.links.iter().zip(q) {
-        angle += if task.geometry.radians { *qi } else { qi.to_radians() };
+        angle += (qi * task.geometry.unit_degrees).to_radians();
         x += l * angle.cos();
         y += l * angle.sin();
         pts.push((x, y));

@@ -29,14 +29,14 @@ pub struct ArmGeometry {
     pub right_start: [f64; 2],
     pub goal: [f64; 2],
     pub steps: usize,
-    /// Joint angles in radians instead of degrees (a probe of the thesis's units; see the
-    /// module doc for why degrees are the default).
-    pub radians: bool,
+    /// Degrees one unit of action turns a joint: 1 (degrees, the default; see the module doc
+    /// for why), 180/pi (radians), or any scale between (a probe of the thesis's units).
+    pub unit_degrees: f64,
 }
 
 impl Default for ArmGeometry {
     fn default() -> Self {
-        Self { links: [1.0; 6], left_start: [-4.0, 2.0], right_start: [4.0, 2.0], goal: [0.0, 4.0], steps: 25, radians: false }
+        Self { links: [1.0; 6], left_start: [-4.0, 2.0], right_start: [4.0, 2.0], goal: [0.0, 4.0], steps: 25, unit_degrees: 1.0 }
     }
 }
 
@@ -51,7 +51,7 @@ impl PlanarReaching {
     pub fn end_effector(&self, q: &[f32]) -> [f64; 2] {
         let (mut x, mut y, mut angle) = (0.0, 0.0, std::f64::consts::FRAC_PI_2);
         for (l, &qi) in self.geometry.links.iter().zip(q) {
-            angle += if self.geometry.radians { f64::from(qi) } else { f64::from(qi).to_radians() };
+            angle += (f64::from(qi) * self.geometry.unit_degrees).to_radians();
             x += l * angle.cos();
             y += l * angle.sin();
         }
