@@ -6,17 +6,21 @@
 //! - [`optim`]: [`Adam`], element-wise gradient clamping and Polyak averaging on flat buffers.
 //! - [`squashed`]: the tanh-squashed Gaussian of the SAC policy (sample, log-probability, backward).
 //! - [`io`]: save and load networks as safetensors, in PyTorch's `nn.Sequential` naming.
+//! - [`conv`]: [`Conv2d`] and [`ConvTranspose2d`] over NCHW batches (im2col and faer GEMM, in
+//!   PyTorch's parameter layouts), for encoders and decoders of images.
 //!
 //! Every network's parameters live in one contiguous `f32` buffer laid out exactly as PyTorch's
 //! `parameters_to_vector(nn.Sequential(Linear, ReLU, ..., Linear))`: per layer the weight
 //! `[out, in]` row-major, then the bias `[out]`. That buffer is what transports broadcast and
 //! what a PyTorch user loads.
 
+pub mod conv;
 pub mod io;
 pub mod mlp;
 pub mod optim;
 pub mod squashed;
 
+pub use conv::{Conv2d, ConvScratch, ConvTranspose2d};
 pub use io::{NamedNetwork, load_networks, save_networks};
 pub use mlp::{Activations, HiddenInit, Layer, Mlp};
 pub use optim::{Adam, AdamConfig, clamp_elementwise, polyak};
