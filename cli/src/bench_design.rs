@@ -148,10 +148,16 @@ pub fn run(a: &DesignBenchArgs) -> anyhow::Result<()> {
             let server = serve(model(&sac)?, tls)?;
             let mut c = rt.block_on(client(server.local_addr(), tls))?;
             let req = request(&d);
-            time_calls(&format!("{name}-batch{n}-{STATES}states"), n, a.seconds, || req.clone(), |req| {
-                let r = rt.block_on(c.score(req));
-                assert!(r.is_ok_and(|r| r.get_ref().scores.len() == n), "a Score call failed");
-            });
+            time_calls(
+                &format!("{name}-batch{n}-{STATES}states"),
+                n,
+                a.seconds,
+                || req.clone(),
+                |req| {
+                    let r = rt.block_on(c.score(req));
+                    assert!(r.is_ok_and(|r| r.get_ref().scores.len() == n), "a Score call failed");
+                },
+            );
         }
     }
     if !a.score_only {
