@@ -1,8 +1,8 @@
 """Ratios of coadapt's figures to the peers' from one JSON-lines file (>1: coadapt is faster).
 
-Peers: PyTorch (`"impl": "pytorch"`), MuJoCo (`"mujoco"`), Python grpcio (`"grpcio"`). Each pair
-says whether its unit is higher-is-better (updates/s, MB/s) or lower-is-better (s, ms), so the
-ratio is always ours-is-better-by.
+Peers: PyTorch (`"impl": "pytorch"`), MuJoCo (`"mujoco"`), Python grpcio (`"grpcio"`), NumPy
+(`"numpy"`). Each pair says whether its unit is higher-is-better (updates/s, MB/s) or
+lower-is-better (s, ms), so the ratio is always ours-is-better-by.
 
 usage: python3 bench/ratios.py runs/bench-nn-*.jsonl
 """
@@ -21,8 +21,9 @@ PAIRS = [
     ("sim_seconds", "half-cheetah", "half-cheetah", "sim-s/s", True),
     ("pso_over_q", "700x250x32", "700x250x32", "s", False),
     ("pso_over_q", "700x250x256", "700x250x256", "s", False),
+    ("groups_update", "r30-b15-d12-p11-t25-k6-i20-g4", "r30-b15-d12-p11-t25-k6-i20-g4", "ms", False),
 ]
-PEERS = ("pytorch", "mujoco", "grpcio")
+PEERS = ("pytorch", "mujoco", "grpcio", "numpy")
 
 # `coadapt bench transport` (benches below) is paired with bench/peers/transport_grpc.py by
 # config, found in the file: our grpc-* configs against the same grpcio config, and (for

@@ -33,6 +33,10 @@ pub enum BenchCommand {
     /// (and TLS) against the same in process; the learner's updates/s with and without a client
     /// scoring in a loop.
     Design(crate::bench_design::DesignBenchArgs),
+    /// Policy search: one GrouPS update (30 rollouts, the best 15, 12 actions in 4 groups, 11
+    /// features, 6 latent dimensions, 20 inner iterations), median and p10/p90 over
+    /// repetitions from the same state.
+    Groups(crate::bench_groups::GroupsBenchArgs),
 }
 
 #[derive(Debug, Args)]
@@ -84,6 +88,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Transport(a) => crate::bench_transport::run(&a),
         BenchCommand::Env(a) => crate::bench_env::run(&a),
         BenchCommand::Design(a) => crate::bench_design::run(&a),
+        BenchCommand::Groups(a) => crate::bench_groups::run(&a),
     }
 }
 

@@ -14,7 +14,7 @@
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
 //! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure
 //!   ([`bench_transport`]: the fleet's transports between processes; [`bench_env`]:
-//!   environments over dm_env_rpc).
+//!   environments over dm_env_rpc; [`bench_groups`]: one GrouPS update).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
 //! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
@@ -28,6 +28,7 @@
 pub mod bench;
 pub mod bench_design;
 pub mod bench_env;
+pub mod bench_groups;
 pub mod bench_snapshot;
 pub mod bench_transport;
 pub mod confirm;

@@ -99,7 +99,7 @@ pub struct Sample {
 }
 
 /// The learner's state: the posterior means and covariances, per group.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Groups {
     pub cfg: GroupsConfig,
     /// Action indices of each group.
