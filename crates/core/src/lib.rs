@@ -8,16 +8,22 @@
 //! - [`replay`]: [`ReplayBuffer`] of flat transitions and [`Batch`], including batches drawn from
 //!   several buffers in fixed proportions (FEAR's 26 population + 230 species samples).
 //! - [`conformance`]: the suite every `Env` implementation runs in its tests.
+//! - [`render`]: a small rasteriser of bodies ([`Shape`]s) into palette-indexed frames;
+//!   [`pixels`]: [`Pixels`], the wrapper that gives any drawable robot stacked RGB frames as its
+//!   observation, with action repeat.
 //!
 //! Randomness everywhere is [`Rng64`] (PCG-64 MCG): fast, seedable, and the same stream on every
 //! platform, so a seed reproduces a run.
 
 pub mod conformance;
 pub mod env;
+pub mod pixels;
+pub mod render;
 pub mod replay;
 pub mod space;
 
 pub use env::{Env, EnvError, EnvSpec, Shape, Step, TimeLimit};
+pub use pixels::{Pixels, PixelsConfig};
 pub use replay::{Batch, ReplayBuffer, ReplayError, Transition};
 pub use space::{BoxSpace, SpaceError};
 
