@@ -251,6 +251,17 @@ impl Groups {
         // q(z): the sampled draws, unit covariance, to start.
         let mut mu_z: Vec<Vec<f64>> = samples.iter().map(|x| x.z.clone()).collect();
         let mut sigma_z: Vec<Vec<f64>> = vec![identity(k); t_max];
+        // What the inner loop would otherwise recompute for every rollout (the same
+        // arithmetic, done once: the results are bit for bit those of the direct loops):
+        // M phi_t per action and step, and the tau step's per-step terms.
+        let mut mphi = vec![0.0; d * t_max];
+        for j in 0..d {
+            for t in 0..t_max {
+                mphi[j * t_max + t] = dot(&self.m[j * p..(j + 1) * p], phi.at(t));
+            }
+        }
+        let (mut fsf, mut tr, mut wszw) = (vec![0.0; t_max], vec![0.0; t_max], vec![0.0; d * t_max]);
+        let (mut tmp, mut zk, mut szw, mut rhs_z) = (vec![0.0; p], vec![0.0; k], vec![0.0; k], vec![0.0; k]);
         let priors = self.cfg.priors;
         let inv_s2 = if priors { 1.0 / self.cfg.sigma2 } else { 0.0 };
         // sum_t phi phi' / s: the same for every rollout, and the weights sum to 1 (or 0).
@@ -264,7 +275,21 @@ impl Groups {
                 }
             }
         }
+        // sum_x w_x sum_t (mu_z mu_z' + Sigma_z) / s_t, refreshed after every z step.
+        let mut zz = vec![0.0; k * k];
         for _ in 0..self.cfg.inner {
+            zz.iter_mut().for_each(|v| *v = 0.0);
+            for (wi, mz) in weights.iter().zip(&mu_z) {
+                for (t, sz) in sigma_z.iter().enumerate() {
+                    let z = &mz[t * k..(t + 1) * k];
+                    let c = wi / s[t];
+                    for a in 0..k {
+                        for b in 0..k {
+                            zz[a * k + b] += c * (z[a] * z[b] + sz[a * k + b]);
+                        }
+                    }
+                }
+            }
             for (g, idx) in self.groups.iter().enumerate() {
                 let tau = self.tau[g];
                 // q(M) (Eq. 2.19-2.21).
@@ -282,30 +307,23 @@ impl Groups {
                         }
                     }
                     matvec(&sig, p, p, &rhs, &mut self.m[j * p..(j + 1) * p]);
-                }
-                self.sigma_m[g] = if priors { sig } else { vec![0.0; p * p] };
-                // q(W) (Eq. 2.22-2.24, with the prior centre W-hat of Eq. 3.16).
-                let mut prec = vec![0.0; k * k];
-                for (wi, mz) in weights.iter().zip(&mu_z) {
                     for t in 0..t_max {
-                        let z = &mz[t * k..(t + 1) * k];
-                        for a in 0..k {
-                            for b in 0..k {
-                                prec[a * k + b] += tau * wi * (z[a] * z[b] + sigma_z[t][a * k + b]) / s[t];
-                            }
-                        }
+                        mphi[j * t_max + t] = dot(&self.m[j * p..(j + 1) * p], phi.at(t));
                     }
                 }
+                self.sigma_m[g] = if priors { sig } else { vec![0.0; p * p] };
+                // q(W) (Eq. 2.22-2.24, with the prior centre W-hat of Eq. 3.16): the precision
+                // is tau times E[z z'] summed over the weighted data, the same for every group.
+                let mut prec: Vec<f64> = zz.iter().map(|v| tau * v).collect();
                 if priors {
                     (0..k).for_each(|a| prec[a * k + a] += self.alpha[g][a]);
                 }
                 let Some(sig) = spd_inverse(&prec, k) else { continue };
                 for &j in idx {
                     let mut rhs: Vec<f64> = (0..k).map(|a| if priors { self.alpha[g][a] * self.w_hat[j * k + a] } else { 0.0 }).collect();
-                    let mj = &self.m[j * p..(j + 1) * p];
                     for (x, (wi, mz)) in samples.iter().zip(weights.iter().zip(&mu_z)) {
                         for t in 0..t_max {
-                            let r = x.actions[t * d + j] - dot(mj, phi.at(t));
+                            let r = x.actions[t * d + j] - mphi[j * t_max + t];
                             let c = tau * wi * r / s[t];
                             rhs.iter_mut().zip(&mz[t * k..(t + 1) * k]).for_each(|(h, z)| *h += c * z);
                         }
@@ -327,21 +345,20 @@ impl Groups {
                 }
             }
             let Some(a_inv) = spd_inverse(&a, k) else { continue };
-            for t in 0..t_max {
-                sigma_z[t] = a_inv.iter().map(|v| v * s[t]).collect();
+            for (t, sz) in sigma_z.iter_mut().enumerate() {
+                sz.iter_mut().zip(&a_inv).for_each(|(v, a)| *v = a * s[t]);
             }
-            let mut rhs = vec![0.0; k];
             for (x, mz) in samples.iter().zip(mu_z.iter_mut()) {
                 for t in 0..t_max {
-                    rhs.iter_mut().for_each(|v| *v = 0.0);
+                    rhs_z.iter_mut().for_each(|v| *v = 0.0);
                     for (g, idx) in self.groups.iter().enumerate() {
                         for &j in idx {
-                            let r = x.actions[t * d + j] - dot(&self.m[j * p..(j + 1) * p], phi.at(t));
+                            let r = x.actions[t * d + j] - mphi[j * t_max + t];
                             let c = self.tau[g] * r;
-                            rhs.iter_mut().zip(&self.w[j * k..(j + 1) * k]).for_each(|(h, w)| *h += c * w);
+                            rhs_z.iter_mut().zip(&self.w[j * k..(j + 1) * k]).for_each(|(h, w)| *h += c * w);
                         }
                     }
-                    matvec(&a_inv, k, k, &rhs, &mut mz[t * k..(t + 1) * k]);
+                    matvec(&a_inv, k, k, &rhs_z, &mut mz[t * k..(t + 1) * k]);
                 }
             }
             let mut gammas = vec![0.0; self.groups.len() * k];
@@ -357,25 +374,30 @@ impl Groups {
                 }
                 // q(tau) (Eq. 2.28-2.29): the expected squared residual, term by term.
                 let (sm, sw) = (&self.sigma_m[g], &self.sigma_w[g]);
+                // The terms that do not depend on the rollout: f' Sigma_M f, tr(Sigma_W
+                // Sigma_z), w_j' Sigma_z w_j, per step.
+                for t in 0..t_max {
+                    let (f, sz) = (phi.at(t), &sigma_z[t]);
+                    matvec(sm, p, p, f, &mut tmp);
+                    fsf[t] = dot(f, &tmp);
+                    tr[t] = (0..k).map(|r| (0..k).map(|c| sw[r * k + c] * sz[c * k + r]).sum::<f64>()).sum();
+                    for &j in idx {
+                        let wj = &self.w[j * k..(j + 1) * k];
+                        matvec(sz, k, k, wj, &mut szw);
+                        wszw[j * t_max + t] = dot(wj, &szw);
+                    }
+                }
                 let mut b = 0.0;
                 for (x, (wi, mz)) in samples.iter().zip(weights.iter().zip(&mu_z)) {
                     for t in 0..t_max {
-                        let (f, z, sz) = (phi.at(t), &mz[t * k..(t + 1) * k], &sigma_z[t]);
-                        let mut fsf = 0.0;
-                        let mut tmp = vec![0.0; p];
-                        matvec(sm, p, p, f, &mut tmp);
-                        fsf += dot(f, &tmp);
-                        let mut zk = vec![0.0; k];
+                        let z = &mz[t * k..(t + 1) * k];
                         matvec(sw, k, k, z, &mut zk);
                         let z_sw_z = dot(z, &zk);
-                        let tr: f64 = (0..k).map(|r| (0..k).map(|c| sw[r * k + c] * sz[c * k + r]).sum::<f64>()).sum();
                         let mut e = 0.0;
                         for &j in idx {
                             let wj = &self.w[j * k..(j + 1) * k];
-                            let r = x.actions[t * d + j] - dot(wj, z) - dot(&self.m[j * p..(j + 1) * p], f);
-                            let mut szw = vec![0.0; k];
-                            matvec(sz, k, k, wj, &mut szw);
-                            e += r * r + dot(wj, &szw) + z_sw_z + tr + fsf;
+                            let r = x.actions[t * d + j] - dot(wj, z) - mphi[j * t_max + t];
+                            e += r * r + wszw[j * t_max + t] + z_sw_z + tr[t] + fsf[t];
                         }
                         b += wi * e / s[t];
                     }
