@@ -323,15 +323,14 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
                 std::fs::create_dir_all(&dir)?;
                 save_tensors(&dir.join(format!("w-iter{it}.safetensors")), &[("W".to_string(), vec![d, g.cfg.latent], g.w.clone())])?;
             }
-            if it % 10 == 0 || it == cfg.iterations {
-                eprintln!(
-                    "search: {} run {}/{} iteration {it}/{}: mean policy's summed distance {cost:.2}",
-                    cfg.method,
-                    r + 1,
-                    cfg.runs,
-                    cfg.iterations
-                );
-            }
+            // Progress every iteration: on a robot an iteration takes minutes.
+            eprintln!(
+                "search: {} run {}/{} iteration {it}/{} ({total_rollouts} rollouts): mean policy's summed distance {cost:.2}, best rollout's return {best:.3}",
+                cfg.method,
+                r + 1,
+                cfg.runs,
+                cfg.iterations
+            );
         }
         iters.flush()?;
         rolls.flush()?;
