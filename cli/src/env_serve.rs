@@ -11,7 +11,8 @@ use clap::Args;
 /// and `seed`. Each client connection creates its own worlds; they end with it.
 #[derive(Debug, Args)]
 pub struct EnvServeArgs {
-    /// The robot: pendulum, half-cheetah, walker, hopper, daisy.
+    /// The robot: pendulum, half-cheetah, walker, hopper, daisy, or planar (the policy-search
+    /// benchmark's two arms, for `coadapt search` with `robot = URL`).
     #[arg(long)]
     pub env: String,
     /// Address to listen on (port 0 picks a free port; the address is printed on stdout).
@@ -37,10 +38,17 @@ pub struct EnvServeArgs {
 pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
     let name = args.env.clone();
     // Fail now, not at the first CreateWorld, on an unknown robot.
-    coadapt_robots::make(&name)?;
+    if name != "planar" {
+        coadapt_robots::make(&name)?;
+    }
     let security = crate::security::from_args(&args.security);
     let auth = security.server_auth()?;
-    let factory: coadapt_env_rpc::EnvFactory = std::sync::Arc::new(move || coadapt_robots::make(&name).map_err(|e| e.to_string()));
+    let factory: coadapt_env_rpc::EnvFactory = if name == "planar" {
+        // The policy-search benchmark as a robot (`coadapt search` with `robot = URL`).
+        std::sync::Arc::new(|| Ok(Box::new(coadapt_policy_search::PlanarEnv::default()) as Box<dyn coadapt_core::Env>))
+    } else {
+        std::sync::Arc::new(move || coadapt_robots::make(&name).map_err(|e| e.to_string()))
+    };
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the runtime")?;
     rt.block_on(async move {
         let want: std::net::SocketAddr =

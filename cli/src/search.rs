@@ -76,6 +76,12 @@ pub struct SearchConfig {
     pub fleet: FleetConfig,
     /// TLS and tokens of a gRPC fleet (the `[security]` table of a run config).
     pub security: crate::security::SecurityConfig,
+    /// The robot the actors step: empty for the built-in planar robot, or
+    /// `dm-env-rpc://HOST:PORT` for one served over dm_env_rpc (`coadapt env-serve --env
+    /// planar`, or a real robot's server with the planar task's shape).
+    pub robot: String,
+    /// Deadlines and retries of a dm_env_rpc robot.
+    pub remote: crate::roles::RemoteEnvConfig,
 }
 
 impl SearchConfig {
@@ -109,6 +115,8 @@ impl Default for SearchConfig {
             iteration_deadline_secs: 3600.0,
             fleet: FleetConfig { transport: TransportKind::InProcess, listen: "127.0.0.1:0".into(), ..FleetConfig::default() },
             security: crate::security::SecurityConfig::default(),
+            robot: String::new(),
+            remote: crate::roles::RemoteEnvConfig::default(),
         }
     }
 }

@@ -28,6 +28,10 @@ pub struct SearchActorArgs {
     /// Override fleet.connect: the search's gRPC address.
     #[arg(long)]
     pub connect: Option<String>,
+    /// Override `robot`: step this dm_env_rpc robot (`dm-env-rpc://HOST:PORT`) instead of the
+    /// built-in planar one.
+    #[arg(long)]
+    pub robot: Option<String>,
     /// TLS and the actor's token (over [security]).
     #[command(flatten)]
     pub security: crate::security::SecurityArgs,
@@ -42,7 +46,11 @@ pub(crate) struct Fleet {
 }
 
 /// Actor processes started by the search; killed if the search fails before they end.
-struct Children(Vec<std::process::Child>);
+struct Children(std::sync::Arc<std::sync::Mutex<Vec<std::process::Child>>>);
+
+fn lock(c: &Children) -> std::sync::MutexGuard<'_, Vec<std::process::Child>> {
+    c.0.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 impl Fleet {
     pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> anyhow::Result<Self> {
@@ -58,13 +66,14 @@ impl Fleet {
                     .into_iter()
                     .enumerate()
                     .map(|(i, mut links)| {
-                        let task = cfg.planar();
-                        std::thread::spawn(move || {
+                        let mut robot = robot(cfg, &cfg.security)?;
+                        let steps = spec.max_episode_steps;
+                        Ok(std::thread::spawn(move || {
                             let stop = std::sync::atomic::AtomicBool::new(false);
-                            coadapt_policy_search::run_actor(&mut PlanarEnv::new(task), i as u64, &mut links, &stop)
-                        })
+                            coadapt_policy_search::run_actor(&mut *robot, steps, i as u64, &mut links, &stop)
+                        }))
                     })
-                    .collect();
+                    .collect::<anyhow::Result<Vec<_>>>()?;
                 (learner, LearnerGuard::None, threads, Vec::new())
             }
             _ => {
@@ -112,12 +121,26 @@ impl Fleet {
         // Nothing to join yet; keep the handles so that a failure can still end them.
         threads.shrink_to_fit();
         children.shrink_to_fit();
-        Ok(Self { runner, guard, threads, children: Children(children) })
+        let started = !children.is_empty();
+        let children = Children(std::sync::Arc::new(std::sync::Mutex::new(children)));
+        if started {
+            // Actors started here that have all ended (a robot unreachable, a bad config) will
+            // never bring the rollouts back: say so instead of waiting for the deadline.
+            let kids = children.0.clone();
+            let logs = out.join("logs").display().to_string();
+            runner.abort = Some(Box::new(move || {
+                let mut kids = kids.lock().unwrap_or_else(|e| e.into_inner());
+                kids.iter_mut()
+                    .all(|c| matches!(c.try_wait(), Ok(Some(_))))
+                    .then(|| format!("every search actor has ended; see {logs}/actor-*.log"))
+            }));
+        }
+        Ok(Self { runner, guard, threads, children })
     }
 
     /// Closes the assignment queue (the actors end by themselves) and waits for them.
     pub(crate) fn finish(self) {
-        let Self { runner, guard, threads, mut children } = self;
+        let Self { runner, guard, threads, children } = self;
         drop(runner);
         drop(guard);
         for t in threads {
@@ -128,7 +151,7 @@ impl Fleet {
             }
         }
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        for c in &mut children.0 {
+        for c in lock(&children).iter_mut() {
             while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
                 std::thread::sleep(std::time::Duration::from_millis(20));
             }
@@ -143,7 +166,7 @@ impl Fleet {
 impl Drop for Children {
     fn drop(&mut self) {
         // A search that failed: its actor processes must not outlive it.
-        for c in &mut self.0 {
+        for c in lock(self).iter_mut() {
             if matches!(c.try_wait(), Ok(None)) {
                 let _ = c.kill();
                 let _ = c.wait();
@@ -171,11 +194,78 @@ pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
     if cfg.fleet.transport == TransportKind::InProcess {
         anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
     }
+    if let Some(r) = &a.robot {
+        cfg.robot = r.clone();
+    }
     let security = cfg.security.clone().with_args(&a.security);
+    let mut robot = robot(&cfg, &security)?;
     let mut links = cfg.fleet.actor_links(a.id, &security)?;
     let shutdown = crate::progress::shutdown_on_ctrl_c();
-    eprintln!("search actor {}: planar over {}", a.id, cfg.fleet.transport.name());
-    let n = coadapt_policy_search::run_actor(&mut PlanarEnv::new(cfg.planar()), a.id, &mut links, &shutdown)?;
+    let name = if cfg.robot.is_empty() { "the planar robot" } else { cfg.robot.as_str() };
+    eprintln!("search actor {}: {name} over {}", a.id, cfg.fleet.transport.name());
+    let steps = coadapt_core::Env::spec(&PlanarEnv::new(cfg.planar())).max_episode_steps;
+    let n = coadapt_policy_search::run_actor(&mut *robot, steps, a.id, &mut links, &shutdown)?;
     eprintln!("search actor {}: done after {n} rollouts", a.id);
     Ok(())
+}
+
+/// The robot an actor steps: the built-in planar one, or `cfg.robot` over dm_env_rpc (which
+/// must have the planar task's shape: 12 actions, a 3-value observation, no design).
+fn robot(cfg: &SearchConfig, security: &crate::security::SecurityConfig) -> anyhow::Result<Box<dyn coadapt_core::Env>> {
+    if cfg.robot.is_empty() {
+        return Ok(Box::new(PlanarEnv::new(cfg.planar())));
+    }
+    if !coadapt_env_rpc::is_remote(&cfg.robot) {
+        anyhow::bail!("robot = {:?}: empty (the built-in planar robot) or dm-env-rpc://HOST:PORT", cfg.robot);
+    }
+    let remote =
+        coadapt_env_rpc::RemoteEnv::connect(&cfg.robot, cfg.remote.options(security)?).with_context(|| format!("robot = {}", cfg.robot))?;
+    let env = ServerUnits::new(remote);
+    let (want, got) = (PlanarEnv::new(cfg.planar()), coadapt_core::Env::spec(&env));
+    let want = coadapt_core::Env::spec(&want);
+    // (A remote robot need not say its episode length: the actor plays the task's steps.)
+    if (got.act_dim(), got.obs_dim()) != (want.act_dim(), want.obs_dim()) {
+        anyhow::bail!(
+            "robot = {}: {} actions and {}-value observations; the planar task needs {} and {}",
+            cfg.robot,
+            got.act_dim(),
+            got.obs_dim(),
+            want.act_dim(),
+            want.obs_dim()
+        );
+    }
+    Ok(Box::new(env))
+}
+
+/// A dm_env_rpc robot stepped in its server's own action units: the search's actions are joint
+/// angles, which this maps into the `[-1, 1]` a `RemoteEnv` takes (and the server maps back).
+struct ServerUnits {
+    inner: coadapt_env_rpc::RemoteEnv,
+    spec: coadapt_core::EnvSpec,
+    scaled: Vec<f32>,
+}
+
+impl ServerUnits {
+    fn new(inner: coadapt_env_rpc::RemoteEnv) -> Self {
+        let mut spec = coadapt_core::Env::spec(&inner).clone();
+        spec.action = inner.server_action().clone();
+        Self { inner, spec, scaled: Vec::new() }
+    }
+}
+
+impl coadapt_core::Env for ServerUnits {
+    fn spec(&self) -> &coadapt_core::EnvSpec {
+        &self.spec
+    }
+
+    fn reset(&mut self, seed: u64, design: &[f32]) -> Result<&[f32], coadapt_core::EnvError> {
+        self.inner.reset(seed, design)
+    }
+
+    fn step(&mut self, action: &[f32]) -> Result<coadapt_core::Step<'_>, coadapt_core::EnvError> {
+        let b = &self.spec.action;
+        self.scaled.clear();
+        self.scaled.extend(action.iter().zip(b.low.iter().zip(&b.high)).map(|(a, (lo, hi))| 2.0 * (a - lo) / (hi - lo) - 1.0));
+        self.inner.step(&self.scaled)
+    }
 }

@@ -198,3 +198,59 @@ fn a_search_runs_its_rollouts_on_a_fleet_of_actor_processes() {
     assert_eq!(fleets[0], fleets[1]);
     assert_eq!(fleets[1], fleets[2]);
 }
+
+/// The search's actors stepping a robot served over dm_env_rpc (`coadapt env-serve --env
+/// planar`): the same iterations as in process, within f32; and actors that cannot reach their
+/// robot end the search at once, naming their logs.
+#[test]
+fn a_search_runs_its_rollouts_on_a_dm_env_rpc_robot() {
+    let dir = std::env::temp_dir().join(format!("coadapt-search-remote-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut server = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["env-serve", "--env", "planar", "--listen", "127.0.0.1:0"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(server.stdout.take().unwrap()), &mut line).unwrap();
+    let url = line.trim().to_string();
+    assert!(url.starts_with("dm-env-rpc://"), "{url}");
+    let table = |out: &std::path::Path| -> Vec<Vec<f64>> {
+        let csv = std::fs::read_to_string(out.join("iterations.csv")).unwrap();
+        csv.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect()
+    };
+    let local = dir.join("local");
+    let o = coadapt(&["search", "--runs", "1", "--iterations", "3", "--out", local.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cfg = dir.join("remote.toml");
+    std::fs::write(&cfg, format!("robot = \"{url}\"\nactors = 2\n[fleet]\ntransport = \"shm\"\n")).unwrap();
+    let out = dir.join("remote");
+    let o = coadapt(&["search", "--config", cfg.to_str().unwrap(), "--runs", "1", "--iterations", "3", "--out", out.to_str().unwrap()]);
+    let _ = server.kill();
+    let _ = server.wait();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for (g, w) in table(&out).iter().zip(&table(&local)) {
+        for (c, (x, y)) in g.iter().zip(w).enumerate() {
+            assert!((x - y).abs() <= 1e-5 * y.abs().max(1.0), "column {c}: {x} over dm_env_rpc vs {y} in process");
+        }
+    }
+    // Nobody at the robot's address: the actors fail, the search says so at once.
+    std::fs::write(&cfg, "robot = \"dm-env-rpc://127.0.0.1:1\"\nactors = 2\n[fleet]\ntransport = \"shm\"\n[remote]\nconnect-timeout-secs = 0.5\nreconnect-secs = 1.0\n").unwrap();
+    let t = std::time::Instant::now();
+    let o = coadapt(&[
+        "search",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--runs",
+        "1",
+        "--iterations",
+        "3",
+        "--out",
+        dir.join("bad").to_str().unwrap(),
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("every search actor has ended"), "{e}");
+    assert!(t.elapsed() < std::time::Duration::from_secs(60), "the search waited {:?} for actors that had ended", t.elapsed());
+}

@@ -25,6 +25,10 @@ use coadapt_transport::{ActorLinks, LearnerLinks, TransportError, newest_or_stop
 use crate::planar::PlanarReaching;
 use crate::{EpisodicTask, RolloutError, RolloutRunner};
 
+/// The planar robot's joint-angle limit (action units: degrees by default); beyond it actions
+/// are clipped, as every robot clips.
+pub const MAX_ANGLE: f32 = 720.0;
+
 /// The planar benchmark as a robot an actor steps: the action is the twelve joint angles
 /// (degrees), the observation `[step / steps, distance of the left end effector to its goal,
 /// distance of the right one]` after the step, the reward Eq. 2.31's term of the step. No
@@ -48,9 +52,10 @@ impl PlanarEnv {
     /// The robot of `task` (its geometry and units).
     pub fn new(task: PlanarReaching) -> Self {
         let steps = task.steps();
-        // Joint angles are not limited (the policy search's exploration may turn a joint
-        // round); the box only refuses the absurd.
-        let action = BoxSpace::new(vec![-1e6; 12], vec![1e6; 12]).unwrap_or_else(|_| unreachable!("a valid box"));
+        // Two turns each way: wide enough that the searches never reach it (their angles stay
+        // within tens of units), narrow enough that a robot server mapping [-1, 1] onto it
+        // (dm_env_rpc's coadapt profile) keeps f32 precision (4e-5 units).
+        let action = BoxSpace::new(vec![-MAX_ANGLE; 12], vec![MAX_ANGLE; 12]).unwrap_or_else(|_| unreachable!("a valid box"));
         let design = BoxSpace::new(vec![], vec![]).unwrap_or_else(|_| unreachable!("a valid box"));
         let spec = EnvSpec {
             name: "planar".into(),
@@ -86,7 +91,15 @@ impl Env for PlanarEnv {
 
     fn step(&mut self, action: &[f32]) -> Result<Step<'_>, EnvError> {
         let t = self.t.ok_or(EnvError::NotRunning)?;
-        self.spec.action.check("action", action).map_err(EnvError::Action)?;
+        if action.len() != 12 {
+            return Err(EnvError::Action(coadapt_core::SpaceError::Dim { what: "action", expected: 12, got: action.len() }));
+        }
+        if let Some(index) = action.iter().position(|a| !a.is_finite()) {
+            return Err(EnvError::Action(coadapt_core::SpaceError::NonFinite { what: "action", index, value: action[index] }));
+        }
+        let mut a = [0.0f32; 12];
+        a.iter_mut().zip(action).for_each(|(c, v)| *c = v.clamp(-MAX_ANGLE, MAX_ANGLE));
+        let action = &a;
         let steps = self.task.steps();
         let (gl, gr) = self.task.goals(t);
         let (l, r) = (self.task.end_effector(&action[..6]), self.task.end_effector(&action[6..12]));
@@ -100,11 +113,18 @@ impl Env for PlanarEnv {
 }
 
 /// Runs the rollouts the learner hands out on `env` until the assignment queue closes or
-/// `shutdown` is set; returns how many it ran. A rollout whose weights are not the
+/// `shutdown` is set; returns how many it ran. Each rollout is `steps` steps (the task's: a
+/// remote robot may not say its episode length). A rollout whose weights are not the
 /// iteration's any more (the learner moved on) is skipped.
-pub fn run_actor(env: &mut dyn Env, actor_id: u64, links: &mut ActorLinks, shutdown: &AtomicBool) -> Result<u64, RolloutError> {
+pub fn run_actor(
+    env: &mut dyn Env,
+    steps: usize,
+    actor_id: u64,
+    links: &mut ActorLinks,
+    shutdown: &AtomicBool,
+) -> Result<u64, RolloutError> {
     let err = |e: TransportError| RolloutError(format!("actor {actor_id}: {e}"));
-    let (steps, d, s) = (env.spec().max_episode_steps, env.spec().act_dim(), env.spec().obs_dim());
+    let (d, s) = (env.spec().act_dim(), env.spec().obs_dim());
     let mut done = 0u64;
     while let Some(a) = next_or_stop(links.assignments.as_mut(), shutdown).map_err(err)? {
         let Some(w) = newest_or_stop(links.weights.as_mut(), a.min_weights_version, shutdown).map_err(err)? else { break };
@@ -169,6 +189,8 @@ pub struct FleetRunner {
     /// An iteration whose rollouts have not all come back by then fails.
     pub deadline: Duration,
     step_cost: fn(&[f32]) -> f64,
+    /// Asked while waiting: `Some(why)` gives up on the iteration (every actor process gone).
+    pub abort: Option<Box<dyn Fn() -> Option<String> + Send + Sync>>,
 }
 
 impl std::fmt::Debug for FleetRunner {
@@ -190,6 +212,7 @@ impl FleetRunner {
             lease: Duration::from_secs(60),
             deadline: Duration::from_secs(3600),
             step_cost,
+            abort: None,
         }
     }
 
@@ -251,6 +274,9 @@ impl RolloutRunner for FleetRunner {
         let started = Instant::now();
         let mut reissued = 0u64;
         while results.iter().any(Option::is_none) {
+            if let Some(why) = self.abort.as_ref().and_then(|f| f()) {
+                return Err(RolloutError(why));
+            }
             if started.elapsed() > self.deadline {
                 let left = results.iter().filter(|r| r.is_none()).count();
                 return Err(RolloutError(format!("{left} of {n} rollouts not back after {:?}: are the actors running?", self.deadline)));

@@ -50,7 +50,7 @@ fn groups_through_a_fleet_of_actor_threads_sees_what_it_sees_in_process() {
         .enumerate()
         .map(|(i, mut links)| {
             let stop = stop.clone();
-            std::thread::spawn(move || run_actor(&mut PlanarEnv::default(), i as u64, &mut links, &stop))
+            std::thread::spawn(move || run_actor(&mut PlanarEnv::default(), 25, i as u64, &mut links, &stop))
         })
         .collect();
     let runner = FleetRunner::new(learner, 25, 12, 3, PlanarEnv::step_cost);
@@ -98,7 +98,7 @@ fn a_rollout_whose_actor_went_silent_goes_to_another_after_the_lease() {
     };
     let mut good = actors.remove(0);
     let stop2 = stop.clone();
-    let worker = std::thread::spawn(move || run_actor(&mut PlanarEnv::default(), 1, &mut good, &stop2));
+    let worker = std::thread::spawn(move || run_actor(&mut PlanarEnv::default(), 25, 1, &mut good, &stop2));
     let mut runner = FleetRunner::new(learner, 25, 12, 3, PlanarEnv::step_cost);
     runner.lease = Duration::from_millis(300);
     let rollouts: Vec<Vec<f32>> = (0..6).map(|k| vec![k as f32; 25 * 12]).collect();

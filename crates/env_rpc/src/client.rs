@@ -208,6 +208,11 @@ impl RemoteEnv {
         })
     }
 
+    /// The server's own action box: the spec's `[-1, 1]` maps linearly onto it.
+    pub fn server_action(&self) -> &BoxSpace {
+        &self.server_action
+    }
+
     pub fn stats(&self) -> RemoteStats {
         self.stats
     }
