@@ -84,6 +84,9 @@ fn a_rollout_whose_actor_went_silent_goes_to_another_after_the_lease() {
     // Actor 0 takes assignments and never answers (a robot that hung); actor 1 works.
     let mut hung = actors.remove(0);
     let stop = Arc::new(AtomicBool::new(false));
+    // The working actor starts only once the hung one holds a rollout (else it may take them
+    // all first: CI saw that).
+    let (took, first_taken) = std::sync::mpsc::channel::<()>();
     let hung_thread = {
         let stop = stop.clone();
         std::thread::spawn(move || {
@@ -91,6 +94,7 @@ fn a_rollout_whose_actor_went_silent_goes_to_another_after_the_lease() {
             while !stop.load(Ordering::Relaxed) {
                 if let Ok(Some(_)) = hung.assignments.recv_timeout(Duration::from_millis(20)) {
                     taken += 1;
+                    let _ = took.send(());
                 }
             }
             taken
@@ -98,7 +102,10 @@ fn a_rollout_whose_actor_went_silent_goes_to_another_after_the_lease() {
     };
     let mut good = actors.remove(0);
     let stop2 = stop.clone();
-    let worker = std::thread::spawn(move || run_actor(&mut PlanarEnv::default(), 25, 1, &mut good, &stop2));
+    let worker = std::thread::spawn(move || {
+        first_taken.recv_timeout(Duration::from_secs(30)).expect("the hung actor took a rollout");
+        run_actor(&mut PlanarEnv::default(), 25, 1, &mut good, &stop2)
+    });
     let mut runner = FleetRunner::new(learner, 25, 12, 3, PlanarEnv::step_cost);
     runner.lease = Duration::from_millis(300);
     let rollouts: Vec<Vec<f32>> = (0..6).map(|k| vec![k as f32; 25 * 12]).collect();
