@@ -3,10 +3,15 @@
 //! # Layout
 //! - `embedding`: the time-contrastive autoencoder (Eq. 4.1, 4.2), [`Embedding`]: convolutional
 //!   encoder to a 20-D code on the unit sphere, mirrored decoder, the loss and its gradients.
+//! - `dynamics`: the latent dynamics (Eq. 4.3-4.5), [`LatentDynamics`], and the planning
+//!   objective f_Q of Alg. 3 (Eq. 4.11) with its gradient through the frozen model and critic,
+//!   [`Planner`].
 //!
-//! Next (issue 15): latent dynamics (Eq. 4.3-4.5), DDPG with the Q and V critics, exploration by
-//! trajectory optimisation (Alg. 3).
+//! Next (issue 15): DDPG with the Q and V critics on the latent state, the box-bounded L-BFGS
+//! planner, the pixel runs.
 
+mod dynamics;
 mod embedding;
 
+pub use dynamics::{LatentDynamics, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
