@@ -80,6 +80,11 @@ pub struct Planner<'a> {
     dz: Vec<f32>,
     dz_prev: Vec<f32>,
     din: Vec<f32>,
+    x32: Vec<f32>,
+    g32: Vec<f32>,
+    x64: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
 }
 
 impl<'a> Planner<'a> {
@@ -98,7 +103,40 @@ impl<'a> Planner<'a> {
             dz: Vec::new(),
             dz_prev: Vec::new(),
             din: Vec::new(),
+            x32: Vec::new(),
+            g32: Vec::new(),
+            x64: Vec::new(),
+            lo: Vec::new(),
+            hi: Vec::new(),
         }
+    }
+
+    /// Alg. 3's optimisation: maximises f_Q over the actions (`(H + 1) x act`, warm-started
+    /// with the actor's rollout by the caller) within `[low, high]` per action, for
+    /// `iterations` of L-BFGS; `actions` holds the result, the return is its f_Q.
+    pub fn plan(&mut self, z0: &[f32], actions: &mut [f32], low: f32, high: f32, iterations: usize, opt: &mut crate::Lbfgsb) -> f32 {
+        let n = actions.len();
+        self.x64.clear();
+        self.x64.extend(actions.iter().map(|&a| f64::from(a)));
+        self.lo.clear();
+        self.lo.resize(n, f64::from(low));
+        self.hi.clear();
+        self.hi.resize(n, f64::from(high));
+        let (mut x, lo, hi) = (std::mem::take(&mut self.x64), std::mem::take(&mut self.lo), std::mem::take(&mut self.hi));
+        let mut x32 = std::mem::take(&mut self.x32);
+        let mut g32 = std::mem::take(&mut self.g32);
+        g32.resize(n, 0.0);
+        let r = opt.minimize(&mut x, &lo, &hi, iterations, |x, g| {
+            x32.clear();
+            x32.extend(x.iter().map(|&v| v as f32));
+            let f = self.value_and_grad(z0, &x32, &mut g32);
+            // Minimise -f_Q.
+            g.iter_mut().zip(&g32).for_each(|(a, b)| *a = -f64::from(*b));
+            -f64::from(f)
+        });
+        actions.iter_mut().zip(&x).for_each(|(a, v)| *a = *v as f32);
+        (self.x64, self.lo, self.hi, self.x32, self.g32) = (x, lo, hi, x32, g32);
+        -r.value as f32
     }
 
     /// `f_Q` of `actions` (`(H + 1) x act`, row j the action at t + j) from `z0`, and its

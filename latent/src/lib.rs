@@ -6,12 +6,15 @@
 //! - `dynamics`: the latent dynamics (Eq. 4.3-4.5), [`LatentDynamics`], and the planning
 //!   objective f_Q of Alg. 3 (Eq. 4.11) with its gradient through the frozen model and critic,
 //!   [`Planner`].
+//! - `lbfgsb`: [`Lbfgsb`], L-BFGS within box bounds (projected), the planner's optimiser.
 //!
-//! Next (issue 15): DDPG with the Q and V critics on the latent state, the box-bounded L-BFGS
-//! planner, the pixel runs.
+//! Next (issue 15): the planner's loop (Alg. 3), DDPG with the Q and V critics on the latent
+//! state, the pixel runs.
 
 mod dynamics;
 mod embedding;
+mod lbfgsb;
 
 pub use dynamics::{LatentDynamics, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
+pub use lbfgsb::{Lbfgsb, LbfgsbResult};

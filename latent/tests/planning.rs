@@ -91,6 +91,36 @@ fn the_dynamics_loss_gradient_matches_finite_differences() {
     }
 }
 
+#[test]
+fn planning_raises_the_objective_and_finds_a_known_optimum_on_the_bounds() {
+    // A critic that ignores the state and rewards a = (+1, -1) linearly: the optimum of f_Q is
+    // every action on those bounds, whatever the model does.
+    let (model, mp, ..) = setup();
+    let critic = Mlp::new(&[FRAMES * LATENT + ACT, 1]).unwrap();
+    let mut cp = vec![0.0; critic.n_params()];
+    cp[FRAMES * LATENT] = 0.7;
+    cp[FRAMES * LATENT + 1] = -0.4;
+    let z0 = vec![0.1; FRAMES * LATENT];
+    let mut p = Planner::new(&model, &mp, &critic, &cp, H);
+    let mut actions = vec![0.0; (H + 1) * ACT];
+    let mut g = vec![0.0; actions.len()];
+    let before = p.value_and_grad(&z0, &actions, &mut g);
+    let mut opt = coadapt_latent::Lbfgsb::default();
+    let after = p.plan(&z0, &mut actions, -1.0, 1.0, 20, &mut opt);
+    assert!(after > before, "{before} -> {after}");
+    for a in actions.chunks_exact(ACT) {
+        assert_eq!(a, [1.0, -1.0], "{actions:?}");
+    }
+    // The real critic and model: 20 iterations raise f_Q and keep the actions in the box.
+    let (model, mp, critic, cp, z0, mut actions) = setup();
+    let mut p = Planner::new(&model, &mp, &critic, &cp, H);
+    let before = direct(&model, &mp, &critic, &cp, &z0, &actions.iter().map(|a| a.clamp(-1.0, 1.0)).collect::<Vec<_>>());
+    let after = p.plan(&z0, &mut actions, -1.0, 1.0, 20, &mut opt);
+    assert!(f64::from(after) > before, "{before} -> {after}");
+    assert!(actions.iter().all(|a| (-1.0..=1.0).contains(a)));
+    assert!((f64::from(after) - direct(&model, &mp, &critic, &cp, &z0, &actions)).abs() < 1e-5);
+}
+
 /// Printed by latent/tests/reference/planning.py.
 fn reference() -> (f64, Vec<f64>) {
     (REFERENCE.0, REFERENCE.1.to_vec())
