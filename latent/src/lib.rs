@@ -7,14 +7,17 @@
 //!   objective f_Q of Alg. 3 (Eq. 4.11) with its gradient through the frozen model and critic,
 //!   [`Planner`].
 //! - `lbfgsb`: [`Lbfgsb`], L-BFGS within box bounds (projected), the planner's optimiser.
+//! - `value`: the value critic through the learned model (Eq. 4.9, 4.10), [`ValueLosses`].
 //!
-//! Next (issue 15): the planner's loop (Alg. 3), DDPG with the Q and V critics on the latent
-//! state, the pixel runs.
+//! Next (issue 15): the episode loop of Alg. 3 with DDPG (Q and V critics) on the latent state,
+//! the OU baseline, the pixel runs.
 
 mod dynamics;
 mod embedding;
 mod lbfgsb;
+mod value;
 
 pub use dynamics::{LatentDynamics, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};
+pub use value::ValueLosses;
