@@ -8,6 +8,8 @@
 //!   [`Planner`].
 //! - `lbfgsb`: [`Lbfgsb`], L-BFGS within box bounds (projected), the planner's optimiser.
 //! - `value`: the value critic through the learned model (Eq. 4.9, 4.10), [`ValueLosses`].
+//! - `train_embedding`: [`FrameSet`] (episodes' frames, sampled as triples) and
+//!   [`EmbeddingTrainer`] (Adam on both networks), to train the embedding once.
 //!
 //! Next (issue 15): the episode loop of Alg. 3 with DDPG (Q and V critics) on the latent state,
 //! the OU baseline, the pixel runs.
@@ -15,9 +17,11 @@
 mod dynamics;
 mod embedding;
 mod lbfgsb;
+mod train_embedding;
 mod value;
 
 pub use dynamics::{LatentDynamics, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};
+pub use train_embedding::{EmbeddingTrainer, FrameSet};
 pub use value::ValueLosses;
