@@ -10,16 +10,19 @@
 //! - `value`: the value critic through the learned model (Eq. 4.9, 4.10), [`ValueLosses`].
 //! - `train_embedding`: [`FrameSet`] (episodes' frames, sampled as triples) and
 //!   [`EmbeddingTrainer`] (Adam on both networks), to train the embedding once.
+//! - `agent`: Alg. 3 with the Q critic, [`LatentAgent`]: the learner's DDPG on the stacked
+//!   latent state, OU or planned exploration, the model and DDPG trained at each episode's end.
 //!
-//! Next (issue 15): the episode loop of Alg. 3 with DDPG (Q and V critics) on the latent state,
-//! the OU baseline, the pixel runs.
+//! Next (issue 15): the V-critic agent, the run command and directory, the pixel runs.
 
+mod agent;
 mod dynamics;
 mod embedding;
 mod lbfgsb;
 mod train_embedding;
 mod value;
 
+pub use agent::{AgentConfig, Explore, LatentAgent};
 pub use dynamics::{LatentDynamics, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};

@@ -107,6 +107,11 @@ impl Ddpg {
         &self.phi
     }
 
+    /// The critic's parameters (a planner differentiates through them).
+    pub fn critic_params(&self) -> &[f32] {
+        &self.theta
+    }
+
     /// Overwrites actor, critic and both targets.
     pub fn set_params(&mut self, phi: &[f32], theta: &[f32], phi_bar: &[f32], theta_bar: &[f32]) {
         self.phi.copy_from_slice(phi);
