@@ -42,6 +42,22 @@ def transport_pairs(figures):
     return sorted(pairs, key=lambda p: not p[1].startswith("grpc-"))  # grpc rows first, then shm
 
 
+# `coadapt bench conv` (cli/src/bench_conv.rs) is paired with bench/peers/conv_bench.py by config:
+# ours against the same config (PyTorch with one thread, the matched figure) and, for context,
+# against `<config>-threadsN` (PyTorch's default threads) when the file has it. ms: lower is better.
+CONV_BENCHES = ("conv_forward", "conv_forward_backward")
+
+
+def conv_pairs(figures):
+    pairs = []
+    for impl, bench, cfg, unit in figures:
+        if impl == "coadapt" and bench in CONV_BENCHES:
+            pairs.append((bench, cfg, cfg, unit, False))
+            pairs += [(bench, cfg, pc, unit, False) for pi, pb, pc, pu in figures
+                      if pi == "pytorch" and pb == bench and pu == unit and pc.startswith(cfg + "-threads")]
+    return pairs
+
+
 def main(path):
     # A figure measured twice (before and after the peer) counts as the mean of both runs.
     runs = {}
@@ -52,7 +68,7 @@ def main(path):
                 r = json.loads(line)
                 runs.setdefault((r.get("impl"), r["bench"], r["config"], r["unit"]), []).append(r["value"])
     figures = {k: sum(v) / len(v) for k, v in runs.items()}
-    for bench, ours_cfg, peer_cfg, unit, higher in PAIRS + transport_pairs(figures):
+    for bench, ours_cfg, peer_cfg, unit, higher in PAIRS + transport_pairs(figures) + conv_pairs(figures):
         ours = figures.get(("coadapt", bench, ours_cfg, unit))
         peer = next((figures[k] for k in ((p, bench, peer_cfg, unit) for p in PEERS) if k in figures), None)
         if ours is None or peer is None or ours == 0 or peer == 0:

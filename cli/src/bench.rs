@@ -37,6 +37,13 @@ pub enum BenchCommand {
     /// features, 6 latent dimensions, 20 inner iterations), median and p10/p90 over
     /// repetitions from the same state.
     Groups(crate::bench_groups::GroupsBenchArgs),
+    /// Convolutions: the image embedding's convolutions and transposed convolutions on 64x64
+    /// RGB frames, per layer and as the encoder and decoder, forward and forward + backward,
+    /// batch 32 and 1, one thread: median and p10/p90 ms, model GFLOP/s.
+    Conv(crate::bench_conv::ConvBenchArgs),
+    /// Planning latency: one control step of Alg. 3 (L-BFGS, 20 iterations, over f_Q through
+    /// the latent dynamics and critic) for horizons 1, 10 and 20, median and p10/p90 ms.
+    Plan(crate::bench_plan::PlanBenchArgs),
 }
 
 #[derive(Debug, Args)]
@@ -89,6 +96,8 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Env(a) => crate::bench_env::run(&a),
         BenchCommand::Design(a) => crate::bench_design::run(&a),
         BenchCommand::Groups(a) => crate::bench_groups::run(&a),
+        BenchCommand::Conv(a) => crate::bench_conv::run(&a),
+        BenchCommand::Plan(a) => crate::bench_plan::run(&a),
     }
 }
 

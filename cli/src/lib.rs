@@ -14,7 +14,8 @@
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
 //! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure
 //!   ([`bench_transport`]: the fleet's transports between processes; [`bench_env`]:
-//!   environments over dm_env_rpc; [`bench_groups`]: one GrouPS update).
+//!   environments over dm_env_rpc; [`bench_groups`]: one GrouPS update; [`bench_conv`]: the
+//!   image embedding's convolutions; [`bench_plan`]: one planning step of Alg. 3).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
 //! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
@@ -26,9 +27,11 @@
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
+pub mod bench_conv;
 pub mod bench_design;
 pub mod bench_env;
 pub mod bench_groups;
+pub mod bench_plan;
 pub mod bench_snapshot;
 pub mod bench_transport;
 pub mod confirm;
