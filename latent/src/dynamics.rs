@@ -10,6 +10,9 @@
 //! the model forward, `z_t+j = Psi(z_t+j-1, a_t+j-1)`, and weighing the critic along the way:
 //! `f = sum_{j=0..H} w_j Q(z_t+j, a_t+j)` with `w_j = 1 / H`. Its gradient with respect to every
 //! action flows back through the frozen critic and model ([`Planner::value_and_grad`]).
+//! [`Objective`] also gives Eq. 4.12's `f_{r+Q}` (a learned latent reward along the way, the
+//! critic at the end) and Fig. 4.8's last-Q only; [`CriticKind::V`] scores a step by the value
+//! critic of where the model says it leads, `V(Psi(z, a))`.
 
 use coadapt_nn::{Activations, Mlp, NnError};
 
@@ -63,23 +66,53 @@ impl LatentDynamics {
     }
 }
 
-/// Plans `H + 1` actions from a latent state through a frozen model and critic (Eq. 4.11).
+/// What the planner maximises over `a_t .. a_t+H` (thesis Eq. 4.11, 4.12 and Fig. 4.8's third).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Objective {
+    /// f_Q (Eq. 4.11): `sum_{j=0..H} Q(z_t+j, a_t+j) / H`.
+    SumQ,
+    /// f_{r+Q} (Eq. 4.12): `sum_{j=1..H-1} r(z_t+j) / H + Q(z_t+H, a_t+H) / H`, with a learned
+    /// latent reward model `r(z)`.
+    RewardPlusQ,
+    /// The last step's critic only: `Q(z_t+H, a_t+H) / H`.
+    LastQ,
+}
+
+/// Which critic scores a step of the plan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CriticKind {
+    /// `Q(z, a)` on `[z; a]` (Eq. 4.6, 4.7).
+    Q,
+    /// The value critic (Eq. 4.9, 4.10): a step `(z, a)` is worth `V(Psi(z, a))`, the value of
+    /// where the model says it leads (as the actor's loss, Eq. 4.10, scores it).
+    V,
+}
+
+/// Plans `H + 1` actions from a latent state through a frozen model and critic (Eq. 4.11, 4.12).
 #[derive(Debug)]
 pub struct Planner<'a> {
     pub model: &'a LatentDynamics,
     pub model_params: &'a [f32],
-    /// `Q([z; a])`: `[frames * latent + act] -> ... -> 1`.
+    /// `Q([z; a])` (`[frames * latent + act] -> ... -> 1`) or `V(z)` (`[frames * latent] -> 1`).
     pub critic: &'a Mlp,
     pub critic_params: &'a [f32],
     pub horizon: usize,
+    pub objective: Objective,
+    pub kind: CriticKind,
+    /// The latent reward model `r(z)` (`[frames * latent] -> ... -> 1`), for f_{r+Q}.
+    pub reward: Option<(&'a Mlp, &'a [f32])>,
     /// Scratch: the rolled-out states and the networks' activations, one per step.
     states: Vec<Vec<f32>>,
     inputs: Vec<Vec<f32>>,
     model_act: Vec<Activations>,
     critic_act: Vec<Activations>,
+    reward_act: Vec<Activations>,
     dz: Vec<f32>,
     dz_prev: Vec<f32>,
     din: Vec<f32>,
+    ds: Vec<f32>,
     x32: Vec<f32>,
     g32: Vec<f32>,
     x64: Vec<f64>,
@@ -88,21 +121,27 @@ pub struct Planner<'a> {
 }
 
 impl<'a> Planner<'a> {
+    /// f_Q with the Q critic; see [`Planner::with`] for the other objectives and critics.
     pub fn new(model: &'a LatentDynamics, model_params: &'a [f32], critic: &'a Mlp, critic_params: &'a [f32], horizon: usize) -> Self {
-        let h = horizon + 1;
+        let n = horizon + 2;
         Self {
             model,
             model_params,
             critic,
             critic_params,
             horizon,
-            states: vec![Vec::new(); h],
-            inputs: vec![Vec::new(); h],
-            model_act: vec![Activations::default(); h],
-            critic_act: vec![Activations::default(); h],
+            objective: Objective::SumQ,
+            kind: CriticKind::Q,
+            reward: None,
+            states: vec![Vec::new(); n],
+            inputs: vec![Vec::new(); n],
+            model_act: vec![Activations::default(); n],
+            critic_act: vec![Activations::default(); n],
+            reward_act: vec![Activations::default(); n],
             dz: Vec::new(),
             dz_prev: Vec::new(),
             din: Vec::new(),
+            ds: Vec::new(),
             x32: Vec::new(),
             g32: Vec::new(),
             x64: Vec::new(),
@@ -111,9 +150,45 @@ impl<'a> Planner<'a> {
         }
     }
 
-    /// Alg. 3's optimisation: maximises f_Q over the actions (`(H + 1) x act`, warm-started
-    /// with the actor's rollout by the caller) within `[low, high]` per action, for
-    /// `iterations` of L-BFGS; `actions` holds the result, the return is its f_Q.
+    /// The same planner with another objective, critic kind and (for f_{r+Q}) reward model.
+    /// Fails when f_{r+Q} has no reward model.
+    pub fn with(mut self, objective: Objective, kind: CriticKind, reward: Option<(&'a Mlp, &'a [f32])>) -> Result<Self, String> {
+        if objective == Objective::RewardPlusQ && reward.is_none() {
+            return Err("planner: the reward-plus-q objective needs a reward model".into());
+        }
+        self.objective = objective;
+        self.kind = kind;
+        self.reward = reward;
+        Ok(self)
+    }
+
+    /// The weight of the critic's term of step `j` (Q(z_j, a_j), or V(z_j+1)).
+    fn q_weight(&self, j: usize) -> f32 {
+        let (h, w) = (self.horizon, 1.0 / self.horizon.max(1) as f32);
+        match self.objective {
+            Objective::SumQ => w,
+            Objective::RewardPlusQ | Objective::LastQ => {
+                if j == h {
+                    w
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// The weight of the reward model's term `r(z_j)`.
+    fn r_weight(&self, j: usize) -> f32 {
+        let (h, w) = (self.horizon, 1.0 / self.horizon.max(1) as f32);
+        match self.objective {
+            Objective::RewardPlusQ if j >= 1 && j < h => w,
+            _ => 0.0,
+        }
+    }
+
+    /// Alg. 3's optimisation: maximises the objective over the actions (`(H + 1) x act`,
+    /// warm-started with the actor's rollout by the caller) within `[low, high]` per action, for
+    /// `iterations` of L-BFGS; `actions` holds the result, the return is its objective.
     pub fn plan(&mut self, z0: &[f32], actions: &mut [f32], low: f32, high: f32, iterations: usize, opt: &mut crate::Lbfgsb) -> f32 {
         let n = actions.len();
         self.x64.clear();
@@ -130,7 +205,7 @@ impl<'a> Planner<'a> {
             x32.clear();
             x32.extend(x.iter().map(|&v| v as f32));
             let f = self.value_and_grad(z0, &x32, &mut g32);
-            // Minimise -f_Q.
+            // Minimise -f.
             g.iter_mut().zip(&g32).for_each(|(a, b)| *a = -f64::from(*b));
             -f64::from(f)
         });
@@ -139,46 +214,100 @@ impl<'a> Planner<'a> {
         -r.value as f32
     }
 
-    /// `f_Q` of `actions` (`(H + 1) x act`, row j the action at t + j) from `z0`, and its
-    /// gradient with respect to every action, written into `grad` (same shape).
+    /// The objective of `actions` (`(H + 1) x act`, row j the action at t + j) from `z0`, and
+    /// its gradient with respect to every action, written into `grad` (same shape).
     pub fn value_and_grad(&mut self, z0: &[f32], actions: &[f32], grad: &mut [f32]) -> f32 {
         let (m, a_dim, s) = (self.model, self.model.act, self.model.state_len());
         let (l, h) = (m.latent, self.horizon);
-        let w = 1.0 / h.max(1) as f32;
         assert_eq!(actions.len(), (h + 1) * a_dim, "actions: (H + 1) x act");
-        // Forward: states z_0..z_H, and Q at each.
+        // States z_0 .. z_H (z_H+1 too for V: the last step is worth V(Psi(z_H, a_H))).
+        let n_states = match self.kind {
+            CriticKind::Q => h + 1,
+            CriticKind::V => h + 2,
+        };
         let mut f = 0.0;
-        for j in 0..=h {
+        for j in 0..n_states {
             let (done, rest) = self.states.split_at_mut(j);
             let z = &mut rest[0];
             z.clear();
             if j == 0 {
                 z.extend_from_slice(z0);
             } else {
-                let prev_in = &self.inputs[j - 1];
-                let next = m.net.forward(self.model_params, prev_in, 1, &mut self.model_act[j - 1]);
+                let next = m.net.forward(self.model_params, &self.inputs[j - 1], 1, &mut self.model_act[j - 1]);
                 z.extend_from_slice(&done[j - 1][l..]);
                 z.extend_from_slice(next);
             }
-            let input = &mut self.inputs[j];
-            input.clear();
-            input.extend_from_slice(z);
-            input.extend_from_slice(&actions[j * a_dim..(j + 1) * a_dim]);
-            f += w * self.critic.forward(self.critic_params, input, 1, &mut self.critic_act[j])[0];
+            if j <= h {
+                let input = &mut self.inputs[j];
+                input.clear();
+                input.extend_from_slice(z);
+                input.extend_from_slice(&actions[j * a_dim..(j + 1) * a_dim]);
+            }
+            match self.kind {
+                CriticKind::Q if j <= h && self.q_weight(j) != 0.0 => {
+                    f += self.q_weight(j) * self.critic.forward(self.critic_params, &self.inputs[j], 1, &mut self.critic_act[j])[0];
+                }
+                CriticKind::V if j >= 1 && self.q_weight(j - 1) != 0.0 => {
+                    f += self.q_weight(j - 1) * self.critic.forward(self.critic_params, &self.states[j], 1, &mut self.critic_act[j])[0];
+                }
+                _ => {}
+            }
+            if let (Some((net, p)), w) = (self.reward, self.r_weight(j))
+                && w != 0.0
+            {
+                f += w * net.forward(p, &self.states[j], 1, &mut self.reward_act[j])[0];
+            }
         }
-        // Backward from the last step: dz carries df/dz_j (from later steps).
+        // Backward from the last state: dz carries df/dz_j (from z_j's own terms and later steps).
         grad.fill(0.0);
         self.dz.clear();
         self.dz.resize(s, 0.0);
         self.din.resize(s + a_dim, 0.0);
-        for j in (0..=h).rev() {
-            // Q's own term: df/d[z_j; a_j] = w dQ/d[z_j; a_j].
-            self.critic.backward(self.critic_params, &self.inputs[j], &mut self.critic_act[j], 0..1, &[w], None, Some(&mut self.din));
-            for (g, v) in grad[j * a_dim..(j + 1) * a_dim].iter_mut().zip(&self.din[s..]) {
-                *g += v;
+        self.ds.resize(s, 0.0);
+        for j in (0..n_states).rev() {
+            match self.kind {
+                CriticKind::Q if j <= h && self.q_weight(j) != 0.0 => {
+                    let w = self.q_weight(j);
+                    self.critic.backward(
+                        self.critic_params,
+                        &self.inputs[j],
+                        &mut self.critic_act[j],
+                        0..1,
+                        &[w],
+                        None,
+                        Some(&mut self.din),
+                    );
+                    for (g, v) in grad[j * a_dim..(j + 1) * a_dim].iter_mut().zip(&self.din[s..]) {
+                        *g += v;
+                    }
+                    for (d, v) in self.dz.iter_mut().zip(&self.din[..s]) {
+                        *d += v;
+                    }
+                }
+                CriticKind::V if j >= 1 && self.q_weight(j - 1) != 0.0 => {
+                    let w = self.q_weight(j - 1);
+                    self.critic.backward(
+                        self.critic_params,
+                        &self.states[j],
+                        &mut self.critic_act[j],
+                        0..1,
+                        &[w],
+                        None,
+                        Some(&mut self.ds),
+                    );
+                    for (d, v) in self.dz.iter_mut().zip(&self.ds) {
+                        *d += v;
+                    }
+                }
+                _ => {}
             }
-            for (d, v) in self.dz.iter_mut().zip(&self.din[..s]) {
-                *d += v;
+            if let (Some((net, p)), w) = (self.reward, self.r_weight(j))
+                && w != 0.0
+            {
+                net.backward(p, &self.states[j], &mut self.reward_act[j], 0..1, &[w], None, Some(&mut self.ds));
+                for (d, v) in self.dz.iter_mut().zip(&self.ds) {
+                    *d += v;
+                }
             }
             if j == 0 {
                 break;
@@ -201,7 +330,7 @@ impl<'a> Planner<'a> {
             for (d, v) in self.dz_prev.iter_mut().zip(&self.din[..s]) {
                 *d += v;
             }
-            // The model's action gradient joins a_j-1's (its Q term is added at step j-1).
+            // The model's action gradient joins a_j-1's (its own terms are added at step j-1).
             for (g, v) in grad[(j - 1) * a_dim..j * a_dim].iter_mut().zip(&self.din[s..]) {
                 *g += v;
             }

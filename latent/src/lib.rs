@@ -23,7 +23,7 @@ mod train_embedding;
 mod value;
 
 pub use agent::{AgentConfig, Explore, LatentAgent};
-pub use dynamics::{LatentDynamics, Planner};
+pub use dynamics::{CriticKind, LatentDynamics, Objective, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};
 pub use train_embedding::{EmbeddingTrainer, FrameSet};
