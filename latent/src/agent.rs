@@ -1,19 +1,25 @@
-//! Alg. 3 with the Q critic: DDPG on the latent state of a frozen embedding, exploring either
-//! with Ornstein-Uhlenbeck noise (the baseline) or by planning through the learned model.
+//! Alg. 3: DDPG on the latent state of a frozen embedding, with the Q critic (Eq. 4.6, 4.7) or
+//! the value critic (Eq. 4.9, 4.10), exploring either with Ornstein-Uhlenbeck noise (the
+//! baseline) or by planning through the learned model.
 //!
 //! Per step: the newest frame is encoded and joins the stacked state `z_t`; the action is the
 //! actor's (evaluation), the actor's plus OU noise, or the first of `H + 1` actions optimised
-//! for f_Q (Eq. 4.11) from the actor's own rollout through the model (the printed loop omits
-//! the first prediction `z_t+1 = Psi(z_t, a_t)`; it is made here). At the end of an episode the
-//! model is trained, then DDPG (actor, critic, targets) for `updates-per-episode` steps.
+//! for the objective (f_Q Eq. 4.11, f_{r+Q} Eq. 4.12 or last-Q) from the actor's own rollout
+//! through the model (the printed loop omits the first prediction `z_t+1 = Psi(z_t, a_t)`; it is
+//! made here). At the end of an episode, `updates-per-episode` times on a fresh batch: the
+//! model, the reward model (f_{r+Q} only), then DDPG (actor, critic, targets).
+//!
+//! The latent reward model `r(z)` (the thesis does not say how it is learned): an MLP of the
+//! model's hidden sizes regressing each stored reward on the state it led to,
+//! `|r(z_t+1) - r_t|^2`, Adam at the model's rate, as Eq. 4.12 credits `r(z_t+j)` for arriving.
 
 use coadapt_core::{Batch, ReplayBuffer, Transition};
 use coadapt_learner::config::DdpgConfig;
 use coadapt_learner::ddpg::Ddpg;
-use coadapt_nn::{Activations, Adam, AdamConfig, NnError};
+use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NnError};
 use rand::Rng;
 
-use crate::{Embedding, EmbeddingWork, LatentDynamics, Lbfgsb, Planner};
+use crate::{CriticKind, Embedding, EmbeddingWork, LatentDynamics, Lbfgsb, Objective, Planner, ValueDdpg, ValueLosses};
 
 /// How an agent explores while it trains.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -28,6 +34,10 @@ pub enum Explore {
 #[derive(Clone, Debug, PartialEq)]
 pub struct AgentConfig {
     pub explore: Explore,
+    /// The Q critic or the value critic.
+    pub critic: CriticKind,
+    /// What planning maximises.
+    pub objective: Objective,
     pub horizon: usize,
     /// L-BFGS iterations per step (20 in the thesis).
     pub plan_iterations: usize,
@@ -44,6 +54,8 @@ impl Default for AgentConfig {
         let ddpg = DdpgConfig { sigma: 0.5, theta: 0.15, ..DdpgConfig::default() };
         Self {
             explore: Explore::Plan,
+            critic: CriticKind::Q,
+            objective: Objective::SumQ,
             horizon: 10,
             plan_iterations: 20,
             model_hidden: vec![400, 400],
@@ -55,6 +67,24 @@ impl Default for AgentConfig {
     }
 }
 
+/// The critic and its DDPG.
+#[derive(Debug)]
+pub enum Critic {
+    Q(Ddpg),
+    V(ValueDdpg),
+}
+
+/// The latent reward model `r(z)` for f_{r+Q}, and its optimiser.
+#[derive(Debug)]
+pub struct RewardModel {
+    pub net: Mlp,
+    pub params: Vec<f32>,
+    adam: Adam,
+    grad: Vec<f32>,
+    act: Activations,
+    dy: Vec<f32>,
+}
+
 /// A DDPG agent on the latent state, with its model and its replays.
 #[derive(Debug)]
 pub struct LatentAgent {
@@ -62,7 +92,8 @@ pub struct LatentAgent {
     emb: Embedding,
     enc: Vec<f32>,
     work: EmbeddingWork,
-    pub ddpg: Ddpg,
+    pub critic: Critic,
+    pub reward: Option<RewardModel>,
     pub model: LatentDynamics,
     pub model_params: Vec<f32>,
     model_adam: Adam,
@@ -97,7 +128,28 @@ impl LatentAgent {
         let model = LatentDynamics::new(l, frames, act, &cfg.model_hidden)?;
         let mut model_params = model.net.zeros();
         model.net.init(&mut model_params, 3e-3, rng);
-        let ddpg = Ddpg::new(frames * l, act, cfg.ddpg.clone(), seed)?;
+        let critic = match cfg.critic {
+            CriticKind::Q => Critic::Q(Ddpg::new(frames * l, act, cfg.ddpg.clone(), seed)?),
+            CriticKind::V => Critic::V(ValueDdpg::new(frames * l, act, cfg.ddpg.clone(), seed)?),
+        };
+        let reward = if cfg.objective == Objective::RewardPlusQ {
+            let mut sizes = vec![frames * l];
+            sizes.extend_from_slice(&cfg.model_hidden);
+            sizes.push(1);
+            let net = Mlp::new(&sizes)?;
+            let mut params = net.zeros();
+            net.init(&mut params, 3e-3, rng);
+            Some(RewardModel {
+                adam: Adam::new(params.len(), AdamConfig { lr: cfg.model_lr, ..AdamConfig::default() }),
+                grad: vec![0.0; params.len()],
+                net,
+                params,
+                act: Activations::default(),
+                dy: Vec::new(),
+            })
+        } else {
+            None
+        };
         let batch = Batch::new(cfg.ddpg.batch_size, frames * l, act);
         Ok(Self {
             model_adam: Adam::new(model_params.len(), AdamConfig { lr: cfg.model_lr, ..AdamConfig::default() }),
@@ -106,7 +158,8 @@ impl LatentAgent {
             emb,
             enc,
             work: EmbeddingWork::default(),
-            ddpg,
+            critic,
+            reward,
             model,
             model_params,
             model_act: Activations::default(),
@@ -128,7 +181,10 @@ impl LatentAgent {
         for c in self.z.chunks_exact_mut(l) {
             c.copy_from_slice(&self.code);
         }
-        self.ddpg.reset_noise();
+        match &mut self.critic {
+            Critic::Q(d) => d.reset_noise(),
+            Critic::V(d) => d.reset_noise(),
+        }
         &self.z
     }
 
@@ -145,26 +201,35 @@ impl LatentAgent {
     /// The action at the current state: deterministic, OU-noisy, or planned (see [`Explore`]).
     /// For a planned one, returns f_Q of the plan and of the actor's own rollout it started from.
     pub fn act(&mut self, explore: bool, action: &mut [f32]) -> Option<(f32, f32)> {
-        if !explore {
-            self.ddpg.act(&self.z.clone(), true, action);
-            return None;
+        if explore && self.cfg.explore == Explore::Plan {
+            return Some(self.plan(action));
         }
-        match self.cfg.explore {
-            Explore::OrnsteinUhlenbeck => {
-                self.ddpg.act(&self.z.clone(), false, action);
-                None
-            }
-            Explore::Plan => Some(self.plan(action)),
+        match &mut self.critic {
+            Critic::Q(d) => d.act(&self.z, !explore, action),
+            Critic::V(d) => d.act(&self.z, !explore, action),
+        }
+        None
+    }
+
+    /// The actor's network and parameters.
+    pub fn actor(&self) -> (&Mlp, &[f32]) {
+        match &self.critic {
+            Critic::Q(d) => (d.actor(), d.actor_params()),
+            Critic::V(d) => (&d.actor, &d.p.phi),
         }
     }
 
-    /// Warm start from the actor's rollout through the model, then L-BFGS on f_Q.
+    /// Warm start from the actor's rollout through the model, then L-BFGS on the objective.
     fn plan(&mut self, action: &mut [f32]) -> (f32, f32) {
         let (a, h, l) = (self.model.act, self.cfg.horizon, self.model.latent);
         self.plan_actions.clear();
         let mut z = self.z.clone();
+        let (actor, actor_params) = match &self.critic {
+            Critic::Q(d) => (d.actor(), d.actor_params()),
+            Critic::V(d) => (&d.actor, &d.p.phi[..]),
+        };
         for j in 0..=h {
-            let out = self.ddpg.actor().forward(self.ddpg.actor_params(), &z, 1, &mut self.rollout_act);
+            let out = actor.forward(actor_params, &z, 1, &mut self.rollout_act);
             let start = self.plan_actions.len();
             self.plan_actions.extend(out.iter().map(|v| v.tanh()));
             if j < h {
@@ -176,7 +241,14 @@ impl LatentAgent {
                 z[s - l..].copy_from_slice(next);
             }
         }
-        let mut planner = Planner::new(&self.model, &self.model_params, self.ddpg.critic(), self.ddpg.critic_params(), h);
+        let (critic, critic_params) = match &self.critic {
+            Critic::Q(d) => (d.critic(), d.critic_params()),
+            Critic::V(d) => (&d.v, &d.p.v[..]),
+        };
+        let reward = self.reward.as_ref().map(|r| (&r.net, &r.params[..]));
+        let mut planner = Planner::new(&self.model, &self.model_params, critic, critic_params, h)
+            .with(self.cfg.objective, self.cfg.critic, reward)
+            .expect("the agent builds a reward model exactly when its objective needs one");
         let mut g = vec![0.0; self.plan_actions.len()];
         let before = planner.value_and_grad(&self.z, &self.plan_actions, &mut g);
         let after = planner.plan(&self.z, &mut self.plan_actions, -1.0, 1.0, self.cfg.plan_iterations, &mut self.opt);
@@ -196,8 +268,8 @@ impl LatentAgent {
         self.replay.push(&Transition { obs: z, action, reward, next_obs: next, terminated })
     }
 
-    /// The end of an episode: the model, then DDPG, `updates-per-episode` steps each. Returns
-    /// the last model loss.
+    /// The end of an episode: the model (and reward model), then DDPG, `updates-per-episode`
+    /// steps each. Returns the last model loss.
     pub fn train<R: Rng + ?Sized>(&mut self, rng: &mut R) -> f32 {
         if self.replay.len() < self.cfg.ddpg.batch_size {
             return f32::NAN;
@@ -206,27 +278,50 @@ impl LatentAgent {
         let n = self.batch.rows;
         let (mut input, mut target) = (vec![0.0; n * (s + a)], vec![0.0; n * l]);
         let mut loss = f32::NAN;
-        for _ in 0..self.cfg.updates_per_episode {
-            if self.replay.sample(rng, &mut self.batch).is_err() {
+        let Self { cfg, critic, reward, model, model_params, model_adam, model_act, model_dy, model_grad, replay, batch, .. } = self;
+        // The value critic's losses borrow its networks while its parameters step.
+        let (mut q, mut value) = match critic {
+            Critic::V(d) => (None, Some((ValueLosses::new(&d.v, &d.actor, model, d.cfg.gamma), &mut d.p, &d.cfg))),
+            Critic::Q(d) => (Some(d), None),
+        };
+        for _ in 0..cfg.updates_per_episode {
+            if replay.sample(rng, batch).is_err() {
                 break;
             }
             for i in 0..n {
-                input[i * (s + a)..i * (s + a) + s].copy_from_slice(&self.batch.obs[i * s..(i + 1) * s]);
-                input[i * (s + a) + s..(i + 1) * (s + a)].copy_from_slice(&self.batch.act[i * a..(i + 1) * a]);
-                target[i * l..(i + 1) * l].copy_from_slice(&self.batch.next_obs[(i + 1) * s - l..(i + 1) * s]);
+                input[i * (s + a)..i * (s + a) + s].copy_from_slice(&batch.obs[i * s..(i + 1) * s]);
+                input[i * (s + a) + s..(i + 1) * (s + a)].copy_from_slice(&batch.act[i * a..(i + 1) * a]);
+                target[i * l..(i + 1) * l].copy_from_slice(&batch.next_obs[(i + 1) * s - l..(i + 1) * s]);
             }
-            loss = self.model.loss_and_grad(
-                &self.model_params,
-                &input,
-                &target,
-                n,
-                &mut self.model_grad,
-                &mut self.model_act,
-                &mut self.model_dy,
-            );
-            self.model_adam.step(&mut self.model_params, &self.model_grad);
-            self.ddpg.update(&self.batch);
+            loss = model.loss_and_grad(model_params, &input, &target, n, model_grad, model_act, model_dy);
+            model_adam.step(model_params, model_grad);
+            if let Some(r) = reward.as_mut() {
+                // |r(z_t+1) - r_t|^2 over the batch.
+                let out = r.net.forward(&r.params, &batch.next_obs, n, &mut r.act);
+                r.dy.clear();
+                r.dy.extend(out.iter().zip(&batch.rew).map(|(p, t)| 2.0 * (p - t) / n as f32));
+                r.net.backward(&r.params, &batch.next_obs, &mut r.act, 0..n, &r.dy, Some(&mut r.grad), None);
+                r.adam.step(&mut r.params, &r.grad);
+            }
+            if let Some(d) = q.as_mut() {
+                d.update(batch);
+            }
+            if let Some((losses, p, dcfg)) = value.as_mut() {
+                p.update(dcfg, losses, model, model_params, batch);
+            }
         }
         loss
+    }
+
+    /// The reward model's mean squared error on `n` rows sampled from the replay (NaN without
+    /// one or before a batch fits).
+    pub fn reward_loss<R: Rng + ?Sized>(&mut self, rng: &mut R) -> f32 {
+        let Some(r) = self.reward.as_mut() else { return f32::NAN };
+        if self.replay.sample(rng, &mut self.batch).is_err() {
+            return f32::NAN;
+        }
+        let n = self.batch.rows;
+        let out = r.net.forward(&r.params, &self.batch.next_obs, n, &mut r.act);
+        out.iter().zip(&self.batch.rew).map(|(p, t)| (p - t) * (p - t)).sum::<f32>() / n as f32
     }
 }

@@ -10,10 +10,10 @@
 //! - `value`: the value critic through the learned model (Eq. 4.9, 4.10), [`ValueLosses`].
 //! - `train_embedding`: [`FrameSet`] (episodes' frames, sampled as triples) and
 //!   [`EmbeddingTrainer`] (Adam on both networks), to train the embedding once.
-//! - `agent`: Alg. 3 with the Q critic, [`LatentAgent`]: the learner's DDPG on the stacked
-//!   latent state, OU or planned exploration, the model and DDPG trained at each episode's end.
-//!
-//! Next (issue 15): the V-critic agent, the run command and directory, the pixel runs.
+//! - `value_ddpg`: [`ValueDdpg`], DDPG with the value critic (actor, V, targets, Adam, OU).
+//! - `agent`: Alg. 3, [`LatentAgent`]: DDPG (Q or V critic) on the stacked latent state, OU or
+//!   planned exploration (three objectives), the model, the reward model and DDPG trained at
+//!   each episode's end.
 
 mod agent;
 mod dynamics;
@@ -21,10 +21,12 @@ mod embedding;
 mod lbfgsb;
 mod train_embedding;
 mod value;
+mod value_ddpg;
 
-pub use agent::{AgentConfig, Explore, LatentAgent};
+pub use agent::{AgentConfig, Critic, Explore, LatentAgent, RewardModel};
 pub use dynamics::{CriticKind, LatentDynamics, Objective, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};
 pub use train_embedding::{EmbeddingTrainer, FrameSet};
 pub use value::ValueLosses;
+pub use value_ddpg::{ValueDdpg, ValueParams};

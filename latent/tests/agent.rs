@@ -5,11 +5,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
 use coadapt_core::{Env, Pixels, PixelsConfig};
-use coadapt_latent::{AgentConfig, Embedding, EmbeddingConfig, Explore, LatentAgent};
+use coadapt_latent::{AgentConfig, Critic, CriticKind, Embedding, EmbeddingConfig, Explore, LatentAgent, Objective};
 use coadapt_learner::config::DdpgConfig;
 use rand::SeedableRng;
 
-fn run(explore: Explore) -> (LatentAgent, Vec<f32>, usize) {
+fn run(explore: Explore, critic: CriticKind, objective: Objective) -> (LatentAgent, Vec<f32>, usize) {
     let side = 32;
     let px = PixelsConfig { width: side, height: side, frames: 1, action_repeat: 2 };
     let mut env = Pixels::new(coadapt_robots::make("pendulum").unwrap(), px).unwrap();
@@ -20,6 +20,8 @@ fn run(explore: Explore) -> (LatentAgent, Vec<f32>, usize) {
     emb.init(&mut enc, &mut dec, &mut rng);
     let cfg = AgentConfig {
         explore,
+        critic,
+        objective,
         horizon: 3,
         plan_iterations: 5,
         model_hidden: vec![32, 32],
@@ -56,7 +58,7 @@ fn run(explore: Explore) -> (LatentAgent, Vec<f32>, usize) {
 
 #[test]
 fn planned_exploration_runs_alg_3() {
-    let (agent, losses, planned) = run(Explore::Plan);
+    let (agent, losses, planned) = run(Explore::Plan, CriticKind::Q, Objective::SumQ);
     assert_eq!(agent.replay.len(), 120);
     assert_eq!(planned, 120, "every training step planned");
     assert!(losses.iter().all(|l| l.is_finite()), "{losses:?}");
@@ -65,7 +67,40 @@ fn planned_exploration_runs_alg_3() {
 
 #[test]
 fn ou_exploration_is_the_baseline() {
-    let (agent, losses, planned) = run(Explore::OrnsteinUhlenbeck);
+    let (agent, losses, planned) = run(Explore::OrnsteinUhlenbeck, CriticKind::Q, Objective::SumQ);
     assert_eq!((agent.replay.len(), planned), (120, 0));
     assert!(losses.iter().all(|l| l.is_finite()), "{losses:?}");
+}
+
+#[test]
+fn the_value_critic_plans_and_learns_through_the_model() {
+    for explore in [Explore::Plan, Explore::OrnsteinUhlenbeck] {
+        let (agent, losses, planned) = run(explore, CriticKind::V, Objective::SumQ);
+        assert_eq!(agent.replay.len(), 120);
+        assert_eq!(planned, if explore == Explore::Plan { 120 } else { 0 });
+        assert!(losses[3] < losses[0], "the model did not learn: {losses:?}");
+        let Critic::V(d) = &agent.critic else { panic!("a Q critic for CriticKind::V") };
+        // Trained: the targets trail the parameters, everything finite.
+        assert!(d.p.v.iter().chain(&d.p.phi).all(|v| v.is_finite()));
+        assert!(d.p.v.iter().zip(&d.p.v_bar).any(|(a, b)| a != b), "V never stepped");
+        assert!(d.p.phi.iter().zip(&d.p.phi_bar).any(|(a, b)| a != b), "the actor never stepped");
+    }
+}
+
+#[test]
+fn the_reward_plus_q_objective_learns_its_reward_model() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+    let (mut agent, _, planned) = run(Explore::Plan, CriticKind::Q, Objective::RewardPlusQ);
+    assert_eq!(planned, 120);
+    let trained = agent.reward_loss(&mut rng);
+    // The same replay scored by an untrained reward model.
+    let r = agent.reward.as_mut().expect("f_{r+Q} builds a reward model");
+    let kept = r.params.clone();
+    r.params.iter_mut().for_each(|p| *p *= 0.0);
+    let untrained = agent.reward_loss(&mut rng);
+    agent.reward.as_mut().unwrap().params = kept;
+    assert!(trained.is_finite() && trained < untrained, "reward model: {trained} trained vs {untrained} at zero");
+    // Other objectives need none.
+    let (agent, ..) = run(Explore::Plan, CriticKind::Q, Objective::LastQ);
+    assert!(agent.reward.is_none());
 }
