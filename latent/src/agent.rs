@@ -69,6 +69,7 @@ impl Default for AgentConfig {
 
 /// The critic and its DDPG.
 #[derive(Debug)]
+#[allow(clippy::large_enum_variant)] // one per agent, never moved in a loop
 pub enum Critic {
     Q(Ddpg),
     V(ValueDdpg),
