@@ -22,30 +22,38 @@ use rand::Rng;
 use crate::{CriticKind, Embedding, EmbeddingWork, LatentDynamics, Lbfgsb, Objective, Planner, ValueDdpg, ValueLosses};
 
 /// How an agent explores while it trains.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Explore {
     /// The baseline: the actor's action plus OU noise (sigma 0.5, theta 0.15 in the thesis).
+    #[serde(rename = "ou")]
     OrnsteinUhlenbeck,
     /// Trajectory optimisation through the model: the first of `H + 1` planned actions.
     Plan,
 }
 
-/// Alg. 3's settings.
-#[derive(Clone, Debug, PartialEq)]
+/// Alg. 3's settings (TOML, kebab-case; every key has a default).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct AgentConfig {
+    /// `plan` (trajectory optimisation through the model) or `ou` (the actor plus OU noise).
     pub explore: Explore,
     /// The Q critic or the value critic.
     pub critic: CriticKind,
     /// What planning maximises.
     pub objective: Objective,
+    /// H: the plan covers actions a_t .. a_t+H.
     pub horizon: usize,
     /// L-BFGS iterations per step (20 in the thesis).
     pub plan_iterations: usize,
+    /// Hidden widths of the latent dynamics psi_bar (and of the reward model).
     pub model_hidden: Vec<usize>,
+    /// Adam's rate for the dynamics and reward models.
     pub model_lr: f32,
     /// Model and DDPG updates at each episode's end (1000 in Fig. 4.5).
     pub updates_per_episode: usize,
     pub replay_capacity: usize,
+    /// DDPG's networks and optimisers (`sigma`, `theta`: the OU noise).
     pub ddpg: DdpgConfig,
 }
 

@@ -20,7 +20,8 @@
 use coadapt_nn::{Activations, Conv2d, ConvScratch, ConvTranspose2d, Mlp, NnError};
 
 /// The embedding's shape and loss settings.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct EmbeddingConfig {
     /// Side of the square input images.
     pub image: usize,

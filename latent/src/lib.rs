@@ -6,6 +6,8 @@
 //! - `dynamics`: the latent dynamics (Eq. 4.3-4.5), [`LatentDynamics`], and the planning
 //!   objective f_Q of Alg. 3 (Eq. 4.11) with its gradient through the frozen model and critic,
 //!   [`Planner`].
+//! - `embedding_io`: [`save_embedding`] / [`load_embedding`], a trained embedding as one
+//!   safetensors file (validated on load).
 //! - `lbfgsb`: [`Lbfgsb`], L-BFGS within box bounds (projected), the planner's optimiser.
 //! - `value`: the value critic through the learned model (Eq. 4.9, 4.10), [`ValueLosses`].
 //! - `train_embedding`: [`FrameSet`] (episodes' frames, sampled as triples) and
@@ -18,6 +20,7 @@
 mod agent;
 mod dynamics;
 mod embedding;
+mod embedding_io;
 mod lbfgsb;
 mod train_embedding;
 mod value;
@@ -26,6 +29,7 @@ mod value_ddpg;
 pub use agent::{AgentConfig, Critic, Explore, LatentAgent, RewardModel};
 pub use dynamics::{CriticKind, LatentDynamics, Objective, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
+pub use embedding_io::{EmbeddingFileError, load_embedding, save_embedding};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};
 pub use train_embedding::{EmbeddingTrainer, FrameSet};
 pub use value::ValueLosses;

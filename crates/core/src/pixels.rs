@@ -38,6 +38,8 @@ pub struct Pixels<E: Env> {
     shapes: Vec<Shape>,
     frame: Vec<u8>,
     obs: Vec<f32>,
+    /// The robot's own observation after the last reset or step (state and design).
+    state: Vec<f32>,
     running: bool,
 }
 
@@ -76,12 +78,18 @@ impl<E: Env> Pixels<E> {
             max_episode_steps: inner.max_episode_steps.div_ceil(cfg.action_repeat),
         };
         let obs = vec![0.0; state_dim + inner.design.dim()];
-        Ok(Self { env, cfg, spec, cam, shapes, frame: vec![0; cfg.width * cfg.height], obs, running: false })
+        Ok(Self { env, cfg, spec, cam, shapes, frame: vec![0; cfg.width * cfg.height], obs, state: Vec::new(), running: false })
     }
 
     /// The robot inside.
     pub fn inner(&self) -> &E {
         &self.env
+    }
+
+    /// The robot's own observation (its state, then the design) behind the latest frame: what
+    /// a state-based learner sees, e.g. to collect an embedding's training frames.
+    pub fn state(&self) -> &[f32] {
+        &self.state
     }
 
     /// The newest frame as palette indices (`width x height`), e.g. to write a picture.
@@ -119,7 +127,9 @@ impl<E: Env> Env for Pixels<E> {
     }
 
     fn reset(&mut self, seed: u64, design: &[f32]) -> Result<&[f32], EnvError> {
-        self.env.reset(seed, design)?;
+        let o = self.env.reset(seed, design)?;
+        self.state.clear();
+        self.state.extend_from_slice(o);
         self.capture();
         // Before the first step every frame of the stack is the first picture.
         let fl = self.frame_len();
@@ -140,6 +150,8 @@ impl<E: Env> Env for Pixels<E> {
         let (mut reward, mut terminated, mut truncated) = (0.0, false, false);
         for _ in 0..self.cfg.action_repeat {
             let s = self.env.step(action)?;
+            self.state.clear();
+            self.state.extend_from_slice(s.observation);
             reward += s.reward;
             (terminated, truncated) = (s.terminated, s.truncated);
             if terminated || truncated {

@@ -38,8 +38,12 @@ fn frames_stack_oldest_first_and_actions_repeat() {
         let s = env.step(&action).unwrap();
         let (obs, reward) = (s.observation.to_vec(), s.reward);
         // Action repeat 2: the reward of two robot steps with the same action.
-        let want = plain.step(&action).unwrap().reward + plain.step(&action).unwrap().reward;
+        let want = plain.step(&action).unwrap().reward;
+        let s2 = plain.step(&action).unwrap();
+        let want = want + s2.reward;
         assert!((reward - want).abs() < 1e-5, "{reward} vs {want}");
+        // The robot's own observation behind the frame (what a state-based learner sees).
+        assert_eq!(env.state(), s2.observation, "Pixels::state is the robot's observation");
         // The stack shifts by one frame.
         assert_eq!(obs[..2 * fl], prev[fl..3 * fl], "frames shift oldest first");
         moved |= obs[2 * fl..3 * fl] != prev[2 * fl..3 * fl];
