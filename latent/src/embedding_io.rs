@@ -74,7 +74,7 @@ pub fn load_embedding(path: &Path) -> Result<(Embedding, Vec<f32>, Vec<f32>), Em
     let cfg = EmbeddingConfig { image: int("image")?, in_channels: int("in-channels")?, channels, latent: int("latent")?, margin };
     let emb = Embedding::new(cfg).map_err(|e| corrupt(format!("shape {cfg:?}: {e}")))?;
     let st = SafeTensors::deserialize(&buf).map_err(|e| corrupt(e.to_string()))?;
-    let mut read = |name: &str, n: usize| -> Result<Vec<f32>, EmbeddingFileError> {
+    let read = |name: &str, n: usize| -> Result<Vec<f32>, EmbeddingFileError> {
         let t = st.tensor(name).map_err(|e| corrupt(format!("tensor `{name}`: {e}")))?;
         if t.dtype() != Dtype::F32 || t.shape() != [n] {
             return Err(corrupt(format!("tensor `{name}` is {:?} {:?}, expected F32 [{n}]", t.dtype(), t.shape())));
