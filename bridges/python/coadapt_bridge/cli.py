@@ -35,6 +35,16 @@ What is served (exactly one of):
                            robot, instantiated once with no arguments; one
                            world at a time. The bridge enforces the safety
                            rules (see below).
+  --dmc DOMAIN-TASK        a DeepMind Control Suite task from pixels, e.g.
+                           cheetah-run (the optional dm_control dependency:
+                           setup_venv.sh --dmc). Each step repeats the action
+                           --action-repeat times (reward: their sum), renders
+                           320x240 RGB from camera --camera and resizes it to
+                           --pixels x --pixels by area averaging: observation
+                           FLOAT [3*P*P] in [0, 1], channel-major (all R rows,
+                           then G, then B). Episodes are truncated (discount 1)
+                           after --episode-steps steps; no design. Headless
+                           rendering: MUJOCO_GL defaults to egl.
 
 The profile (uids):
   action       1  FLOAT [A] with min/max (the action box). Required on every
@@ -72,6 +82,7 @@ examples:
   coadapt-gym-serve --env Pendulum-v1 --port 50051
   coadapt-gym-serve --factory coadapt_bridge.mujoco_half_cheetah:make --port 0
   coadapt-gym-serve --driver my_robot:MyArm --step-timeout 0.5
+  coadapt-gym-serve --dmc cheetah-run --port 50051
 """
 
 
@@ -91,6 +102,20 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         "@coadapt_bridge.design_space",
     )
     what.add_argument("--driver", metavar="MODULE:CLASS", help="a coadapt_bridge.RobotDriver subclass (a real robot)")
+    what.add_argument(
+        "--dmc",
+        metavar="DOMAIN-TASK",
+        help="a DeepMind Control Suite task from pixels, e.g. cheetah-run (needs dm_control: setup_venv.sh --dmc)",
+    )
+    dmc = p.add_argument_group("--dmc options")
+    dmc.add_argument("--pixels", type=int, metavar="P", help="observation frames are P x P RGB (default: 64)")
+    dmc.add_argument(
+        "--action-repeat", type=int, metavar="K", help="control steps per agent step; the reward is their sum (default: 2)"
+    )
+    dmc.add_argument(
+        "--episode-steps", type=int, metavar="N", help="agent steps per episode, then truncation (discount 1) (default: 420)"
+    )
+    dmc.add_argument("--camera", type=int, metavar="ID", help="the camera rendered (default: 0, cheetah's tracking camera)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: %(default)s; 0.0.0.0 for all)")
     p.add_argument("--port", type=int, default=0, help="port to listen on; 0 picks a free one (default: %(default)s)")
     p.add_argument(
@@ -148,6 +173,14 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error("--seed must be non-negative")
     if not (args.step_timeout > 0 and math.isfinite(args.step_timeout)):
         p.error("--step-timeout must be a positive number of seconds")
+    dmc_options = {"pixels": args.pixels, "action_repeat": args.action_repeat, "episode_steps": args.episode_steps}
+    for name, value in dmc_options.items():
+        if value is not None and args.dmc is None:
+            p.error(f"--{name.replace('_', '-')} goes with --dmc")
+        if value is not None and value < 1:
+            p.error(f"--{name.replace('_', '-')} must be at least 1")
+    if args.camera is not None and args.dmc is None:
+        p.error("--camera goes with --dmc")
     if args.max_connections < 1:
         p.error("--max-connections must be at least 1")
     if (args.tls_cert is None) != (args.tls_key is None):
@@ -167,6 +200,15 @@ def make_backend(args: argparse.Namespace) -> Backend:
         return GymBackend.from_env_id(args.env, args.max_episode_steps)
     if args.factory is not None:
         return GymBackend.from_factory(args.factory)
+    if args.dmc is not None:
+        from .dmc import DmcBackend
+
+        options = {
+            name: getattr(args, name)
+            for name in ("pixels", "action_repeat", "episode_steps", "camera")
+            if getattr(args, name) is not None
+        }
+        return DmcBackend(args.dmc, **options)
     return DriverBackend.from_spec(args.driver)
 
 
