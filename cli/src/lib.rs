@@ -24,6 +24,8 @@
 //! - [`search`]: `coadapt search`, episodic policy search (GrouPS, PePPER, PoWER, NAC) on the
 //!   planar benchmark; [`search_fleet`]: its rollouts on actors and `coadapt search-actor`;
 //!   `search_plot`: its learning-curve and synergy plots.
+//! - [`latent`]: `coadapt latent`, DDPG from pixels exploring by latent trajectory optimisation
+//!   (thesis ch. 4); [`latent_embed`]: its frozen embedding, built from state-based DDPG's frames.
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
 pub mod bench;
@@ -41,6 +43,8 @@ pub mod design_live;
 pub mod env_serve;
 pub mod fleet;
 pub mod health;
+pub mod latent;
+pub mod latent_embed;
 pub mod launch;
 pub mod metrics;
 pub mod plot;
@@ -83,6 +87,9 @@ pub enum Command {
     /// Policy search from few rollouts (thesis ch. 2-3): GrouPS, PePPER, PoWER or NAC on the
     /// bimanual planar reaching benchmark, in process or on a fleet of actors.
     Search(search::SearchArgs),
+    /// DDPG from pixels exploring by planning in a learned latent space (thesis ch. 4, Alg. 3):
+    /// Q or V critic, trajectory optimisation (three objectives) or OU noise, several runs.
+    Latent(latent::LatentArgs),
     /// Runs the rollouts a `coadapt search` hands out (shm or gRPC), on this machine's robot.
     SearchActor(search_fleet::SearchActorArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
@@ -114,6 +121,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Score(args) => design_client::score(args),
         Command::Search(args) => search::run(args),
         Command::SearchActor(args) => search_fleet::actor(args),
+        Command::Latent(args) => latent::run(args),
         Command::Token(cmd) => credentials::token(cmd),
         Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),

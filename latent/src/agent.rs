@@ -322,6 +322,23 @@ impl LatentAgent {
         loss
     }
 
+    /// Saves the agent's networks to one safetensors file (PyTorch `nn.Sequential` naming):
+    /// `actor`, the critic (`critic` for Q, `value` for V), `model` (psi_bar) and, for
+    /// f_{r+Q}, `reward`: a checkpoint to act, plan and evaluate with (the targets and optimiser
+    /// states, needed only to resume training, are not saved).
+    pub fn save(&self, path: &std::path::Path) -> Result<(), NnError> {
+        let (actor, phi) = self.actor();
+        let mut nets: Vec<(&str, &Mlp, &[f32])> = vec![("actor", actor, phi), ("model", &self.model.net, &self.model_params)];
+        match &self.critic {
+            Critic::Q(d) => nets.push(("critic", d.critic(), d.critic_params())),
+            Critic::V(d) => nets.push(("value", &d.v, &d.p.v)),
+        }
+        if let Some(r) = &self.reward {
+            nets.push(("reward", &r.net, &r.params));
+        }
+        coadapt_nn::save_networks(path, &nets)
+    }
+
     /// The reward model's mean squared error on `n` rows sampled from the replay (NaN without
     /// one or before a batch fits).
     pub fn reward_loss<R: Rng + ?Sized>(&mut self, rng: &mut R) -> f32 {
