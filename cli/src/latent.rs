@@ -93,6 +93,9 @@ pub struct LatentArgs {
     /// Override `agent.horizon`.
     #[arg(long)]
     pub horizon: Option<usize>,
+    /// Override `agent.updates-per-episode` (1000 in Fig. 4.5, 3000 in Fig. 4.6).
+    #[arg(long)]
+    pub updates_per_episode: Option<usize>,
     /// Override `runs`.
     #[arg(long)]
     pub runs: Option<usize>,
@@ -137,6 +140,9 @@ pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
     }
     if let Some(h) = a.horizon {
         cfg.agent.horizon = h;
+    }
+    if let Some(u) = a.updates_per_episode {
+        cfg.agent.updates_per_episode = u;
     }
     if let Some(r) = a.runs {
         cfg.runs = r;
@@ -406,6 +412,7 @@ mod tests {
                 critic: None,
                 objective: None,
                 horizon: None,
+                updates_per_episode: None,
                 runs: None,
                 episodes: None,
                 seed: None,

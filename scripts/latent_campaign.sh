@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Runs `coadapt latent` experiments one after the other (issue 15's figures), single-threaded.
+#
+#   usage: scripts/latent_campaign.sh NAME "FLAGS" [NAME "FLAGS" ...]
+#
+# Each NAME runs `coadapt latent --config configs/latent/half-cheetah.toml FLAGS --out
+# runs/latent/NAME` (stdout: its JSON summary to runs/latent/NAME.json, stderr to
+# runs/latent/NAME.log) unless runs/latent/NAME.json exists; a finished run's small files
+# (config.toml, episodes.csv, plots/returns.svg, the summary) are copied to
+# docs/latent/results/NAME/ to be committed. Set CONFIG to use another base config.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+config=${CONFIG:-configs/latent/half-cheetah.toml}
+bin=runs/latent/coadapt
+mkdir -p runs/latent
+[ -x "$bin" ] || { cargo build --release -q -p coadapt && cp target/release/coadapt "$bin"; }
+while [ $# -ge 2 ]; do
+  name=$1 flags=$2; shift 2
+  out=runs/latent/$name
+  if [ -s "$out.json" ] || [ -s "docs/latent/results/$name/summary.json" ]; then echo "latent: $name done already"; continue; fi
+  [ -e "$out" ] && mv "$out" "$out.partial-$(date +%s)"
+  echo "latent: start $name ($(date -u +%H:%M:%S))"
+  # shellcheck disable=SC2086 # FLAGS split into words
+  if RAYON_NUM_THREADS=1 "$bin" latent --config "$config" $flags --out "$out" > "$out.json.tmp" 2> "$out.log"; then
+    mv "$out.json.tmp" "$out.json"
+    mkdir -p "docs/latent/results/$name"
+    cp "$out/config.toml" "$out/episodes.csv" "$out/plots/returns.svg" "docs/latent/results/$name/"
+    cp "$out.json" "docs/latent/results/$name/summary.json"
+    echo "latent: done $name ($(date -u +%H:%M:%S)): $(cat "$out.json")"
+  else
+    echo "latent: FAILED $name (see $out.log)" >&2
+  fi
+done
