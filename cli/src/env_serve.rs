@@ -15,6 +15,14 @@ pub struct EnvServeArgs {
     /// benchmark's two arms, for `coadapt search` with `robot = URL`).
     #[arg(long)]
     pub env: String,
+    /// Serve the robot seen through the camera instead of its state: each observation is one
+    /// SIDE x SIDE RGB frame, channel-major, in [0, 1] (for `coadapt latent` with
+    /// `robot = URL`, or any client learning from pixels). 0: the state.
+    #[arg(long, default_value_t = 0)]
+    pub pixels: usize,
+    /// With --pixels: robot steps per served step, with the same action (rewards summed).
+    #[arg(long, default_value_t = 2)]
+    pub action_repeat: usize,
     /// Address to listen on (port 0 picks a free port; the address is printed on stdout).
     /// Loopback only unless TLS is configured (--tls-cert, --tls-key) or --insecure is given.
     #[arg(long, default_value = "127.0.0.1:0")]
@@ -43,7 +51,19 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
     }
     let security = crate::security::from_args(&args.security);
     let auth = security.server_auth()?;
-    let factory: coadapt_env_rpc::EnvFactory = if name == "planar" {
+    if args.pixels > 0 {
+        let px = coadapt_core::PixelsConfig { width: args.pixels, height: args.pixels, frames: 1, action_repeat: args.action_repeat };
+        // Fail now on a robot that cannot be drawn or a bad camera.
+        coadapt_core::Pixels::new(coadapt_robots::make(&name)?, px).context("--pixels")?;
+    }
+    let (pixels, repeat) = (args.pixels, args.action_repeat);
+    let factory: coadapt_env_rpc::EnvFactory = if pixels > 0 {
+        std::sync::Arc::new(move || {
+            let px = coadapt_core::PixelsConfig { width: pixels, height: pixels, frames: 1, action_repeat: repeat };
+            let robot = coadapt_robots::make(&name).map_err(|e| e.to_string())?;
+            Ok(Box::new(coadapt_core::Pixels::new(robot, px).map_err(|e| e.to_string())?) as Box<dyn coadapt_core::Env>)
+        })
+    } else if name == "planar" {
         // The policy-search benchmark as a robot (`coadapt search` with `robot = URL`).
         std::sync::Arc::new(|| Ok(Box::new(coadapt_policy_search::PlanarEnv::default()) as Box<dyn coadapt_core::Env>))
     } else {

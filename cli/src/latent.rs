@@ -20,7 +20,7 @@ use coadapt_core::{Env, Pixels, PixelsConfig};
 use coadapt_latent::{AgentConfig, CriticKind, Explore, LatentAgent, Objective};
 use serde::{Deserialize, Serialize};
 
-use crate::latent_embed::{EmbeddingSettings, load_or_build};
+use crate::latent_embed::{EmbeddingSettings, FrameSource, load_or_build};
 
 /// The camera (the `[camera]` table).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -44,7 +44,11 @@ impl Default for CameraSettings {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct LatentConfig {
-    /// A built-in robot that can be drawn (half-cheetah, walker, hopper, pendulum, ...).
+    /// A built-in robot that can be drawn (half-cheetah, walker, hopper, pendulum, ...), seen
+    /// through our camera; or `dm-env-rpc://HOST:PORT`, a server whose observation is one
+    /// `side x side` RGB frame, channel-major, in [0, 1] (e.g. DeepMind Control's cheetah:
+    /// `coadapt-gym-serve --dmc cheetah-run`; it repeats actions itself, `camera.action-repeat`
+    /// is not applied again).
     pub robot: String,
     pub camera: CameraSettings,
     /// Agent steps per episode (420 in the thesis's cheetah); fewer if the robot ends it.
@@ -58,6 +62,10 @@ pub struct LatentConfig {
     pub agent: AgentConfig,
     /// The frozen embedding: where it is, how it is built when it is not there yet.
     pub embedding: EmbeddingSettings,
+    /// Deadlines and retries of a dm_env_rpc robot.
+    pub remote: crate::roles::RemoteEnvConfig,
+    /// TLS and token of a dm_env_rpc robot's server.
+    pub security: crate::security::SecurityConfig,
 }
 
 impl Default for LatentConfig {
@@ -71,6 +79,8 @@ impl Default for LatentConfig {
             seed: 1,
             agent: AgentConfig::default(),
             embedding: EmbeddingSettings::default(),
+            remote: crate::roles::RemoteEnvConfig::default(),
+            security: crate::security::SecurityConfig::default(),
         }
     }
 }
@@ -157,7 +167,8 @@ pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
         cfg.embedding.path = p.display().to_string();
     }
     if cfg.embedding.path.trim().is_empty() {
-        cfg.embedding.path = format!("runs/latent/embedding-{}-{}px.safetensors", cfg.robot, cfg.camera.side);
+        let name: String = cfg.robot.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+        cfg.embedding.path = format!("runs/latent/embedding-{name}-{}px.safetensors", cfg.camera.side);
     }
     let c = &cfg.camera;
     if c.side < 8 || c.frames == 0 || c.action_repeat == 0 {
@@ -194,10 +205,25 @@ pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
     Ok(cfg)
 }
 
-fn camera_env(cfg: &LatentConfig) -> anyhow::Result<Pixels<Box<dyn Env>>> {
-    let robot = coadapt_robots::make(&cfg.robot).map_err(|e| anyhow::anyhow!("robot = {:?}: {e}", cfg.robot))?;
+/// The robot seen through the camera: a built-in robot drawn by [`Pixels`] (one frame per
+/// observation; the agent stacks codes), or a served one whose observation is the frame.
+pub(crate) fn camera_env(cfg: &LatentConfig) -> anyhow::Result<FrameSource> {
+    let image = 3 * cfg.camera.side * cfg.camera.side;
+    if coadapt_env_rpc::is_remote(&cfg.robot) {
+        let env = crate::roles::make_env_with(&cfg.robot, &cfg.remote, &cfg.security).with_context(|| format!("robot = {}", cfg.robot))?;
+        let got = env.spec().state_dim;
+        if got != image {
+            anyhow::bail!(
+                "robot = {}: its observation has {got} values; camera.side = {} needs one RGB frame of {image}",
+                cfg.robot,
+                cfg.camera.side
+            );
+        }
+        return Ok(FrameSource::Served(env));
+    }
+    let robot = coadapt_robots::make(&cfg.robot).map_err(|e| anyhow::anyhow!("robot = {:?}: {e}; or dm-env-rpc://HOST:PORT", cfg.robot))?;
     let px = PixelsConfig { width: cfg.camera.side, height: cfg.camera.side, frames: 1, action_repeat: cfg.camera.action_repeat };
-    Ok(Pixels::new(robot, px)?)
+    Ok(FrameSource::Drawn(Pixels::new(robot, px).with_context(|| format!("robot = {}", cfg.robot))?))
 }
 
 fn label(cfg: &LatentConfig) -> String {
@@ -225,8 +251,8 @@ struct Episode {
 }
 
 /// One episode of `agent` on `env`: exploring and stored (training), or deterministic.
-fn episode(agent: &mut LatentAgent, env: &mut Pixels<Box<dyn Env>>, seed: u64, steps: usize, train: bool) -> anyhow::Result<Episode> {
-    let px = env.spec().state_dim;
+fn episode(agent: &mut LatentAgent, env: &mut dyn Env, seed: u64, steps: usize, train: bool) -> anyhow::Result<Episode> {
+    let px = agent.image_len();
     let design = env.spec().default_design.clone();
     let first = env.reset(seed, &design)?[..px].to_vec();
     let mut z = agent.reset(&first).to_vec();
@@ -278,7 +304,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         let seed = cfg.seed + r as u64;
         let mut env = camera_env(&cfg)?;
         let mut rng = coadapt_core::rng(seed, 11);
-        let act = env.spec().act_dim();
+        let act = env.env().spec().act_dim();
         let mut agent = LatentAgent::new(cfg.agent.clone(), emb.clone(), enc.clone(), cfg.camera.frames, act, seed, &mut rng)?;
         let dir = out.join(format!("run-{r}"));
         std::fs::create_dir_all(&dir)?;
@@ -286,9 +312,9 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         for ep in 0..cfg.episodes {
             let base = seed * 1_000_003 + 2 * ep as u64;
             let tr =
-                episode(&mut agent, &mut env, base, cfg.episode_steps, true).with_context(|| format!("run {r} training episode {ep}"))?;
+                episode(&mut agent, env.env(), base, cfg.episode_steps, true).with_context(|| format!("run {r} training episode {ep}"))?;
             let loss = agent.train(&mut rng);
-            let ev = episode(&mut agent, &mut env, base + 1, cfg.episode_steps, false)
+            let ev = episode(&mut agent, env.env(), base + 1, cfg.episode_steps, false)
                 .with_context(|| format!("run {r} evaluation episode {ep}"))?;
             let (mean, p90) = latency(&tr.plan_ms);
             all_plan_ms.extend_from_slice(&tr.plan_ms);

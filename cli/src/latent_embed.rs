@@ -3,6 +3,10 @@
 //! fits) while every frame the camera sees is kept; the time-contrastive autoencoder then trains
 //! on those episodes' frames and is saved to `path`. Every exploration method then loads the same
 //! file, so only exploration differs between them.
+//!
+//! A served robot (dm_env_rpc) shows frames only, no state: its episodes are driven by the OU
+//! process alone (sigma, theta of `[embedding.ddpg]`, around the middle of the action box), a
+//! deviation from the thesis's state-based DDPG that the log states.
 
 use std::io::Write;
 use std::path::Path;
@@ -52,51 +56,110 @@ impl Default for EmbeddingSettings {
     }
 }
 
+/// Where frames come from: a built-in robot drawn by our camera (its state is known), or a
+/// served robot whose observation is the frame.
+pub enum FrameSource {
+    Drawn(Pixels<Box<dyn Env>>),
+    Served(Box<dyn Env>),
+}
+
+impl std::fmt::Debug for FrameSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FrameSource::Drawn(p) => f.debug_tuple("Drawn").field(p).finish(),
+            FrameSource::Served(e) => f.debug_tuple("Served").field(&e.spec().name).finish(),
+        }
+    }
+}
+
+impl FrameSource {
+    /// The environment the agent steps.
+    pub fn env(&mut self) -> &mut dyn Env {
+        match self {
+            FrameSource::Drawn(p) => p,
+            FrameSource::Served(e) => e.as_mut(),
+        }
+    }
+
+    /// The robot's state behind the latest frame, when known.
+    fn state(&self) -> Option<&[f32]> {
+        match self {
+            FrameSource::Drawn(p) => Some(p.state()),
+            FrameSource::Served(_) => None,
+        }
+    }
+}
+
 /// Collects the frames and trains the embedding; writes it to `path` and its training log
 /// next to it (`<path>.csv`: step, reconstruction, pull, push of each logged step).
 pub fn build(
     settings: &EmbeddingSettings,
-    mut env: Pixels<Box<dyn Env>>,
+    mut source: FrameSource,
     episode_steps: usize,
     path: &Path,
 ) -> anyhow::Result<(Embedding, Vec<f32>)> {
-    let px_len = env.spec().state_dim;
-    let design = env.spec().default_design.clone();
-    let act = env.spec().act_dim();
-    env.reset(0, &design)?;
-    let state_len = env.state().len();
-    let mut ddpg = Ddpg::new(state_len, act, settings.ddpg.clone(), settings.seed)?;
-    let mut replay = ReplayBuffer::new(state_len, act, episode_steps * settings.episodes + 1);
-    let mut batch = coadapt_core::Batch::new(settings.ddpg.batch_size, state_len, act);
+    let px_len = 3 * settings.shape.image * settings.shape.image;
+    let spec = source.env().spec().clone();
+    let (design, act) = (spec.default_design.clone(), spec.act_dim());
+    source.env().reset(0, &design)?;
+    let state_len = source.state().map_or(0, <[f32]>::len);
+    if source.state().is_none() {
+        eprintln!(
+            "embedding: a served robot shows no state: its {} episodes follow OU noise alone (no state-based DDPG)",
+            settings.episodes
+        );
+    }
+    let (mid, half): (Vec<f32>, Vec<f32>) =
+        spec.action.low.iter().zip(&spec.action.high).map(|(l, h)| (0.5 * (l + h), 0.5 * (h - l))).unzip();
+    let mut ou = vec![0.0f32; act];
+    let mut ddpg = Ddpg::new(state_len.max(1), act, settings.ddpg.clone(), settings.seed)?;
+    let mut replay = ReplayBuffer::new(state_len.max(1), act, episode_steps * settings.episodes + 1);
+    let mut batch = coadapt_core::Batch::new(settings.ddpg.batch_size, state_len.max(1), act);
     let mut rng = coadapt_core::rng(settings.seed, 7);
     let mut frames = FrameSet::new(px_len);
     let mut a = vec![0.0; act];
     let t0 = std::time::Instant::now();
     for ep in 0..settings.episodes {
-        let mut episode = env.reset(settings.seed * 1_000_003 + ep as u64, &design)?.to_vec();
+        let mut episode = source.env().reset(settings.seed * 1_000_003 + ep as u64, &design)?.to_vec();
+        if episode.len() < px_len {
+            anyhow::bail!("the robot's observation has {} values, fewer than one {px_len}-value frame", episode.len());
+        }
         episode.truncate(px_len);
-        let mut s = env.state().to_vec();
+        let mut s = source.state().map(<[f32]>::to_vec);
         ddpg.reset_noise();
+        ou.fill(0.0);
         let mut ret = 0.0;
         for _ in 0..episode_steps {
-            ddpg.act(&s, false, &mut a);
-            let st = env.step(&a)?;
+            match &s {
+                Some(s) => ddpg.act(s, false, &mut a),
+                None => {
+                    let (sigma, theta) = (settings.ddpg.sigma, settings.ddpg.theta);
+                    for (k, x) in ou.iter_mut().enumerate() {
+                        let n: f32 = rand_distr::Distribution::sample(&rand_distr::StandardNormal, &mut rng);
+                        *x += -theta * *x + sigma * n;
+                        a[k] = mid[k] + half[k] * x.clamp(-1.0, 1.0);
+                    }
+                }
+            }
+            let st = source.env().step(&a)?;
             let (r, term, trunc) = (st.reward, st.terminated, st.truncated);
             episode.extend_from_slice(&st.observation[..px_len]);
-            let next = env.state().to_vec();
-            replay.push(&Transition { obs: &s, action: &a, reward: r, next_obs: &next, terminated: term })?;
-            ret += r;
-            s = next;
-            if replay.len() >= settings.ddpg.batch_size && replay.sample(&mut rng, &mut batch).is_ok() {
-                ddpg.update(&batch);
+            if let Some(prev) = s.as_mut() {
+                let next = source.state().map(<[f32]>::to_vec).unwrap_or_default();
+                replay.push(&Transition { obs: prev, action: &a, reward: r, next_obs: &next, terminated: term })?;
+                *prev = next;
+                if replay.len() >= settings.ddpg.batch_size && replay.sample(&mut rng, &mut batch).is_ok() {
+                    ddpg.update(&batch);
+                }
             }
+            ret += r;
             if term || trunc {
                 break;
             }
         }
         frames.push_episode(&episode).map_err(|e| anyhow::anyhow!("frames of episode {ep}: {e}"))?;
         eprintln!(
-            "embedding: state-based DDPG episode {}/{} return {ret:.1} ({} frames, {:.0} s)",
+            "embedding: collection episode {}/{} return {ret:.1} ({} frames, {:.0} s)",
             ep + 1,
             settings.episodes,
             frames.len(),
@@ -144,7 +207,7 @@ pub fn build(
 /// The embedding at `path`, or a fresh one built there (see [`build`]).
 pub fn load_or_build(
     settings: &EmbeddingSettings,
-    make_env: impl FnOnce() -> anyhow::Result<Pixels<Box<dyn Env>>>,
+    make_env: impl FnOnce() -> anyhow::Result<FrameSource>,
     episode_steps: usize,
 ) -> anyhow::Result<(Embedding, Vec<f32>)> {
     let path = Path::new(&settings.path);

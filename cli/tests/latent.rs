@@ -113,3 +113,76 @@ fn bad_latent_settings_are_refused_naming_the_key() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("embedding.shape"), "{}", String::from_utf8_lossy(&o.stderr));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `coadapt env-serve --pixels SIDE` in the background; its URL.
+struct Server(std::process::Child, String);
+
+impl Server {
+    fn start(side: &str) -> Self {
+        use std::io::BufRead;
+        let mut child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+            .args(["env-serve", "--env", "pendulum", "--pixels", side])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        assert!(line.starts_with("dm-env-rpc://"), "{line}");
+        Server(child, line.trim().to_string())
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn a_served_camera_robot_learns_over_dm_env_rpc_and_a_wrong_frame_size_is_refused() {
+    let dir = std::env::temp_dir().join(format!("coadapt-latent-served-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let server = Server::start("16");
+    let cfg = dir.join("served.toml");
+    let text = std::fs::read_to_string(TINY).unwrap().replace("robot = \"pendulum\"", &format!("robot = \"{}\"", server.1));
+    std::fs::write(&cfg, text).unwrap();
+    let out = dir.join("run");
+    let emb = dir.join("emb.safetensors");
+    let o = coadapt(&[
+        "latent",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--embedding",
+        emb.to_str().unwrap(),
+        "--runs",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    // No state over the wire: the embedding's episodes follow OU noise alone, and say so.
+    assert!(err.contains("shows no state"), "{err}");
+    let r = rows(&std::fs::read_to_string(out.join("episodes.csv")).unwrap());
+    assert_eq!(r.len(), 3);
+    assert!(r.iter().all(|row| row[4] == 30.0 && row[2].is_finite() && row[3].is_finite()), "{r:?}");
+    // A frame of the wrong size is refused before anything runs.
+    let small = Server::start("8");
+    let text = std::fs::read_to_string(TINY).unwrap().replace("robot = \"pendulum\"", &format!("robot = \"{}\"", small.1));
+    std::fs::write(&cfg, text).unwrap();
+    let o = coadapt(&[
+        "latent",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--embedding",
+        dir.join("other.safetensors").to_str().unwrap(),
+        "--out",
+        dir.join("x").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("camera.side = 16 needs one RGB frame of 768"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -183,6 +183,11 @@ impl LatentAgent {
         })
     }
 
+    /// Values of one frame the agent encodes.
+    pub fn image_len(&self) -> usize {
+        self.emb.image_len()
+    }
+
     /// The stacked state after a reset to `frame` (every slot its code).
     pub fn reset(&mut self, frame: &[f32]) -> &[f32] {
         let l = self.emb.cfg.latent;
