@@ -223,7 +223,7 @@ pub(crate) fn camera_env(cfg: &LatentConfig) -> anyhow::Result<FrameSource> {
     }
     let robot = coadapt_robots::make(&cfg.robot).map_err(|e| anyhow::anyhow!("robot = {:?}: {e}; or dm-env-rpc://HOST:PORT", cfg.robot))?;
     let px = PixelsConfig { width: cfg.camera.side, height: cfg.camera.side, frames: 1, action_repeat: cfg.camera.action_repeat };
-    Ok(FrameSource::Drawn(Pixels::new(robot, px).with_context(|| format!("robot = {}", cfg.robot))?))
+    Ok(FrameSource::Drawn(Box::new(Pixels::new(robot, px).with_context(|| format!("robot = {}", cfg.robot))?)))
 }
 
 fn label(cfg: &LatentConfig) -> String {

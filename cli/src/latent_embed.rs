@@ -59,7 +59,7 @@ impl Default for EmbeddingSettings {
 /// Where frames come from: a built-in robot drawn by our camera (its state is known), or a
 /// served robot whose observation is the frame.
 pub enum FrameSource {
-    Drawn(Pixels<Box<dyn Env>>),
+    Drawn(Box<Pixels<Box<dyn Env>>>),
     Served(Box<dyn Env>),
 }
 
@@ -76,7 +76,7 @@ impl FrameSource {
     /// The environment the agent steps.
     pub fn env(&mut self) -> &mut dyn Env {
         match self {
-            FrameSource::Drawn(p) => p,
+            FrameSource::Drawn(p) => p.as_mut(),
             FrameSource::Served(e) => e.as_mut(),
         }
     }
