@@ -217,7 +217,7 @@ pub fn load_or_build(
         return Ok((emb, enc));
     }
     eprintln!(
-        "embedding: {} does not exist; building it ({} episodes of state-based DDPG, {} training steps)",
+        "embedding: {} does not exist; building it ({} collection episodes, {} training steps)",
         path.display(),
         settings.episodes,
         settings.steps

@@ -1,0 +1,76 @@
+"""Plots and tabulates `coadapt latent` runs against each other (thesis Fig. 4.5-4.8) for
+docs/EXPERIMENTS.md.
+
+usage: .venv-peers/bin/python scripts/plot_latent.py OUT.png "TITLE" LABEL=DIR [LABEL=DIR ...]
+
+Each DIR holds an episodes.csv of `coadapt latent` (runs x episodes). Two panels: the
+deterministic actor's evaluation return after each episode (test time) and the training
+episode's return with exploration (training time), mean over runs with +-1 standard
+deviation shaded. Prints a markdown table: per method, the runs, and the mean (+- sd over
+runs) of each run's average return over episodes 1-10, 11-20 and all, for both returns.
+(Needs matplotlib: `.venv-peers/bin/pip install matplotlib`.)
+"""
+import csv
+import os
+import statistics as st
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def load(d):
+    runs = {}
+    with open(os.path.join(d, "episodes.csv")) as f:
+        for row in csv.DictReader(f):
+            r = runs.setdefault(int(row["run"]), [])
+            r.append((float(row["train_return"]), float(row["eval_return"])))
+    return [runs[k] for k in sorted(runs)]
+
+
+def band(curves):
+    n = min(len(c) for c in curves)
+    mean = [st.mean(c[i] for c in curves) for i in range(n)]
+    sd = [st.pstdev([c[i] for c in curves]) for i in range(n)]
+    return mean, sd
+
+
+def window(runs, k, lo, hi):
+    per_run = [st.mean(x[k] for x in r[lo:hi]) for r in runs if len(r) >= hi]
+    if not per_run:
+        return "-"
+    return f"{st.mean(per_run):.1f} ± {st.pstdev(per_run):.1f}"
+
+
+def main():
+    out, title, pairs = sys.argv[1], sys.argv[2], sys.argv[3:]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    rows = []
+    for pair in pairs:
+        label, d = pair.split("=", 1)
+        runs = load(d)
+        n = min(len(r) for r in runs)
+        for ax, k in zip(axes, (1, 0)):
+            mean, sd = band([[x[k] for x in r] for r in runs])
+            xs = list(range(1, len(mean) + 1))
+            (line,) = ax.plot(xs, mean, label=f"{label} ({len(runs)} runs)")
+            ax.fill_between(xs, [m - s for m, s in zip(mean, sd)], [m + s for m, s in zip(mean, sd)], color=line.get_color(), alpha=0.2)
+        rows.append((label, len(runs), n, [window(runs, k, lo, hi) for k in (1, 0) for lo, hi in ((0, 10), (10, 20), (0, n))]))
+    for ax, name in zip(axes, ("evaluation return (deterministic actor, test time)", "training return (with exploration)")):
+        ax.set_xlabel("episode")
+        ax.set_ylabel(name)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print("| method | runs | episodes | eval 1-10 | eval 11-20 | eval all | train 1-10 | train 11-20 | train all |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for label, nr, n, cells in rows:
+        print(f"| {label} | {nr} | {n} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()
