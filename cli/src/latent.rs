@@ -58,6 +58,11 @@ pub struct LatentConfig {
     /// Independent runs (seeds seed, seed + 1, ...) sharing the embedding.
     pub runs: usize,
     pub seed: u64,
+    /// Scripted demonstrations put in the replay before each run's first episode (and the model
+    /// and DDPG trained on them once, `agent.updates-per-episode` steps): the thesis put 5
+    /// successful ones in for the sparse insertion task. Only for `robot = "reach"`, whose
+    /// demonstrator is built in.
+    pub demonstrations: usize,
     /// Alg. 3: critic, exploration, horizon, objective, model, DDPG.
     pub agent: AgentConfig,
     /// The frozen embedding: where it is, how it is built when it is not there yet.
@@ -77,6 +82,7 @@ impl Default for LatentConfig {
             episodes: 30,
             runs: 5,
             seed: 1,
+            demonstrations: 0,
             agent: AgentConfig::default(),
             embedding: EmbeddingSettings::default(),
             remote: crate::roles::RemoteEnvConfig::default(),
@@ -199,6 +205,13 @@ pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
             cfg.agent.replay_capacity
         );
     }
+    if cfg.demonstrations > 0 && cfg.robot != "reach" {
+        anyhow::bail!(
+            "demonstrations = {}: only robot = \"reach\" has a scripted demonstrator (robot is {:?})",
+            cfg.demonstrations,
+            cfg.robot
+        );
+    }
     if cfg.embedding.episodes == 0 || cfg.embedding.steps == 0 || cfg.embedding.batch == 0 {
         anyhow::bail!("embedding: episodes, steps and batch at least 1 each");
     }
@@ -279,6 +292,35 @@ fn episode(agent: &mut LatentAgent, env: &mut dyn Env, seed: u64, steps: usize, 
     Ok(out)
 }
 
+/// `n` episodes of the reach robot's scripted demonstrator through the camera, stored in the
+/// agent's replay; how many succeeded.
+fn demonstrate(agent: &mut LatentAgent, source: &mut FrameSource, n: usize, seed: u64, steps: usize) -> anyhow::Result<usize> {
+    let FrameSource::Drawn(env) = source else { anyhow::bail!("demonstrations need the built-in reach robot") };
+    let px = agent.image_len();
+    let design = env.spec().default_design.clone();
+    let mut a = vec![0.0; env.spec().act_dim()];
+    let mut ok = 0;
+    for d in 0..n {
+        let first = env.reset(seed * 1_000_003 + 500_000 + d as u64, &design)?[..px].to_vec();
+        let mut z = agent.reset(&first).to_vec();
+        for _ in 0..steps {
+            coadapt_robots::reach::demonstration_action(env.state(), &mut a);
+            let s = env.step(&a)?;
+            let (r, term, trunc) = (s.reward, s.terminated, s.truncated);
+            let next = agent.observe(&s.observation[..px]).to_vec();
+            agent.store(&z, &a, r, &next, term)?;
+            z = next;
+            if r > 0.0 {
+                ok += 1;
+            }
+            if term || trunc {
+                break;
+            }
+        }
+    }
+    Ok(ok)
+}
+
 pub fn run(a: LatentArgs) -> anyhow::Result<()> {
     let cfg = resolve(&a)?;
     let (emb, enc) = load_or_build(&cfg.embedding, || camera_env(&cfg), cfg.episode_steps)?;
@@ -308,6 +350,16 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         let mut agent = LatentAgent::new(cfg.agent.clone(), emb.clone(), enc.clone(), cfg.camera.frames, act, seed, &mut rng)?;
         let dir = out.join(format!("run-{r}"));
         std::fs::create_dir_all(&dir)?;
+        if cfg.demonstrations > 0 {
+            let ok = demonstrate(&mut agent, &mut env, cfg.demonstrations, seed, cfg.episode_steps)?;
+            agent.train(&mut rng);
+            eprintln!(
+                "latent {}: run {}: {} demonstrations in the replay ({ok} successful), model and DDPG trained on them",
+                label(&cfg),
+                r + 1,
+                cfg.demonstrations
+            );
+        }
         let (mut tc, mut ec) = (Vec::new(), Vec::new());
         for ep in 0..cfg.episodes {
             let base = seed * 1_000_003 + 2 * ep as u64;

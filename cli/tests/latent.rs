@@ -186,3 +186,43 @@ fn a_served_camera_robot_learns_over_dm_env_rpc_and_a_wrong_frame_size_is_refuse
     assert!(!o.status.success() && err.contains("camera.side = 16 needs one RGB frame of 768"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn the_sparse_reach_stand_in_starts_from_demonstrations() {
+    let dir = std::env::temp_dir().join(format!("coadapt-latent-reach-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("reach.toml");
+    let text = std::fs::read_to_string(TINY)
+        .unwrap()
+        .replace("robot = \"pendulum\"", "robot = \"reach\"\ndemonstrations = 3")
+        .replace("episode-steps = 30", "episode-steps = 20");
+    std::fs::write(&cfg, text).unwrap();
+    let out = dir.join("run");
+    let o = coadapt(&[
+        "latent",
+        "--config",
+        cfg.to_str().unwrap(),
+        "--embedding",
+        dir.join("e.safetensors").to_str().unwrap(),
+        "--runs",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("3 demonstrations in the replay (3 successful)"), "{err}");
+    // Sparse returns: +1 (reached), -1 (left the workspace) or 0, within 20 steps.
+    for row in rows(&std::fs::read_to_string(out.join("episodes.csv")).unwrap()) {
+        assert!([-1.0, 0.0, 1.0].contains(&row[2]) && [-1.0, 0.0, 1.0].contains(&row[3]), "{row:?}");
+        assert!(row[4] <= 20.0 && row[5] <= 20.0, "{row:?}");
+    }
+    // Only the reach robot has a demonstrator.
+    let text = std::fs::read_to_string(TINY).unwrap().replace("robot = \"pendulum\"", "robot = \"pendulum\"\ndemonstrations = 3");
+    std::fs::write(&cfg, text).unwrap();
+    let o = coadapt(&["latent", "--config", cfg.to_str().unwrap(), "--out", dir.join("x").to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("demonstrations = 3: only robot = \"reach\""), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -11,6 +11,8 @@
 //!   setting and the environment around it.
 //! - [`daisy`]: the thesis's Daisy hexapod (HEBI, 6 legs x 3 motors) in rapier3d, segment lengths
 //!   and base-motor range offsets per leg pair as the design.
+//! - [`reach`]: a three-joint arm reaching a target by small joint deltas, rewarded only on
+//!   success (20 steps): the stand-in for the thesis's Baxter peg insertion (ch. 4), from pixels.
 //! - [`bench`](mod@bench): env steps per second under random actions.
 //! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
 
@@ -21,6 +23,7 @@ pub mod half_cheetah;
 pub mod hopper;
 pub mod pendulum;
 pub mod planar;
+pub mod reach;
 pub mod walker;
 
 use coadapt_core::{Env, TimeLimit};
@@ -29,10 +32,11 @@ pub use daisy::Daisy;
 pub use half_cheetah::HalfCheetah;
 pub use hopper::Hopper;
 pub use pendulum::Pendulum;
+pub use reach::Reach;
 pub use walker::Walker;
 
 /// Names accepted by [`make`].
-pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper", "daisy"];
+pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper", "daisy", "reach"];
 
 #[derive(Debug, thiserror::Error)]
 #[error("unknown environment `{0}` (known: {known})", known = ENV_NAMES.join(", "))]
@@ -87,6 +91,7 @@ pub fn make(name: &str) -> Result<Box<dyn Env>, UnknownEnv> {
         "walker" => Ok(Box::new(TimeLimit::new(Walker::new()))),
         "hopper" => Ok(Box::new(TimeLimit::new(Hopper::new()))),
         "daisy" => Ok(Box::new(TimeLimit::new(Daisy::new()))),
+        "reach" => Ok(Box::new(TimeLimit::new(Reach::new()))),
         other => Err(UnknownEnv(other.to_string())),
     }
 }
