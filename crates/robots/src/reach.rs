@@ -131,7 +131,7 @@ impl Env for Reach {
         let (dx, dz) = (tip[0] - BASE[0], tip[1] - BASE[1]);
         let (reward, terminated) = if self.obs[3].hypot(self.obs[4]) < SUCCESS_RADIUS {
             (1.0, true)
-        } else if dx < WORKSPACE[0] || dx > WORKSPACE[1] || dz < WORKSPACE[2] || dz > WORKSPACE[3] {
+        } else if !(WORKSPACE[0]..=WORKSPACE[1]).contains(&dx) || !(WORKSPACE[2]..=WORKSPACE[3]).contains(&dz) {
             (-1.0, true)
         } else {
             (0.0, false)
