@@ -44,12 +44,31 @@ def window(runs, k, lo, hi):
     return f"{st.mean(per_run):.1f} ± {st.pstdev(per_run):.1f}"
 
 
+def mann_whitney(a, b):
+    """Exact two-sided Mann-Whitney p-value of a vs b (all splits enumerated; ties count half)."""
+    from itertools import combinations
+
+    def u(x, y):
+        return sum(1.0 if xi > yi else 0.5 if xi == yi else 0.0 for xi in x for yi in y)
+
+    pooled = a + b
+    observed = abs(u(a, b) - len(a) * len(b) / 2)
+    hits = total = 0
+    for idx in combinations(range(len(pooled)), len(a)):
+        x = [pooled[i] for i in idx]
+        y = [pooled[i] for i in range(len(pooled)) if i not in idx]
+        total += 1
+        hits += abs(u(x, y) - len(a) * len(b) / 2) >= observed - 1e-12
+    return hits / total
+
+
 def main():
     out, title, pairs = sys.argv[1], sys.argv[2], sys.argv[3:]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
     rows = []
+    per_run = []
     for pair in pairs:
-        label, d = pair.split("=", 1)
+        label, d = pair.rsplit("=", 1)
         runs = load(d)
         n = min(len(r) for r in runs)
         for ax, k in zip(axes, (1, 0)):
@@ -58,6 +77,7 @@ def main():
             (line,) = ax.plot(xs, mean, label=f"{label} ({len(runs)} runs)")
             ax.fill_between(xs, [m - s for m, s in zip(mean, sd)], [m + s for m, s in zip(mean, sd)], color=line.get_color(), alpha=0.2)
         rows.append((label, len(runs), n, [window(runs, k, lo, hi) for k in (1, 0) for lo, hi in ((0, 10), (10, 20), (0, n))]))
+        per_run.append([[st.mean(x[k] for x in r) for r in runs] for k in (1, 0)])
     for ax, name in zip(axes, ("evaluation return (deterministic actor, test time)", "training return (with exploration)")):
         ax.set_xlabel("episode")
         ax.set_ylabel(name)
@@ -70,6 +90,11 @@ def main():
     print("|---|---|---|---|---|---|---|---|---|")
     for label, nr, n, cells in rows:
         print(f"| {label} | {nr} | {n} | " + " | ".join(cells) + " |")
+    if len(rows) > 1:
+        print()
+        print(f"Exact two-sided Mann-Whitney p of each method's per-run means (all episodes) against {rows[0][0]}:")
+        for (label, *_), (ev, tr) in zip(rows[1:], per_run[1:]):
+            print(f"- {label}: evaluation p = {mann_whitney(per_run[0][0], ev):.3f}, training p = {mann_whitney(per_run[0][1], tr):.3f}")
 
 
 if __name__ == "__main__":
