@@ -19,7 +19,7 @@ use coadapt_learner::ddpg::Ddpg;
 use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NnError};
 use rand::Rng;
 
-use crate::{CriticKind, Embedding, EmbeddingWork, LatentDynamics, Lbfgsb, Objective, Planner, ValueDdpg, ValueLosses};
+use crate::{CriticKind, Embedding, EmbeddingWork, LatentDynamics, Lbfgsb, Objective, PlanWork, Planner, ValueDdpg, ValueLosses};
 
 /// How an agent explores while it trains.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -115,6 +115,10 @@ pub struct LatentAgent {
     batch: Batch,
     opt: Lbfgsb,
     plan_actions: Vec<f32>,
+    plan_work: PlanWork,
+    plan_z: Vec<f32>,
+    plan_in: Vec<f32>,
+    plan_g: Vec<f32>,
     rollout_act: Activations,
     /// The stacked state of the running episode.
     z: Vec<f32>,
@@ -176,6 +180,10 @@ impl LatentAgent {
             batch,
             opt: Lbfgsb::default(),
             plan_actions: Vec::new(),
+            plan_work: PlanWork::default(),
+            plan_z: Vec::new(),
+            plan_in: Vec::new(),
+            plan_g: Vec::new(),
             rollout_act: Activations::default(),
             z: vec![0.0; frames * l],
             code: vec![0.0; l],
@@ -237,7 +245,11 @@ impl LatentAgent {
     fn plan(&mut self, action: &mut [f32]) -> (f32, f32) {
         let (a, h, l) = (self.model.act, self.cfg.horizon, self.model.latent);
         self.plan_actions.clear();
-        let mut z = self.z.clone();
+        // Scratch kept across steps: planning allocates nothing once warm.
+        let (mut z, mut input, mut g) =
+            (std::mem::take(&mut self.plan_z), std::mem::take(&mut self.plan_in), std::mem::take(&mut self.plan_g));
+        z.clear();
+        z.extend_from_slice(&self.z);
         let (actor, actor_params) = match &self.critic {
             Critic::Q(d) => (d.actor(), d.actor_params()),
             Critic::V(d) => (&d.actor, &d.p.phi[..]),
@@ -247,7 +259,8 @@ impl LatentAgent {
             let start = self.plan_actions.len();
             self.plan_actions.extend(out.iter().map(|v| v.tanh()));
             if j < h {
-                let mut input = z.clone();
+                input.clear();
+                input.extend_from_slice(&z);
                 input.extend_from_slice(&self.plan_actions[start..start + a]);
                 let next = self.model.net.forward(&self.model_params, &input, 1, &mut self.model_act);
                 let s = z.len();
@@ -262,11 +275,14 @@ impl LatentAgent {
         let reward = self.reward.as_ref().map(|r| (&r.net, &r.params[..]));
         let mut planner = Planner::new(&self.model, &self.model_params, critic, critic_params, h)
             .with(self.cfg.objective, self.cfg.critic, reward)
-            .expect("the agent builds a reward model exactly when its objective needs one");
-        let mut g = vec![0.0; self.plan_actions.len()];
+            .expect("the agent builds a reward model exactly when its objective needs one")
+            .reuse(std::mem::take(&mut self.plan_work));
+        g.resize(self.plan_actions.len(), 0.0);
         let before = planner.value_and_grad(&self.z, &self.plan_actions, &mut g);
         let after = planner.plan(&self.z, &mut self.plan_actions, -1.0, 1.0, self.cfg.plan_iterations, &mut self.opt);
+        self.plan_work = planner.into_work();
         action.copy_from_slice(&self.plan_actions[..a]);
+        (self.plan_z, self.plan_in, self.plan_g) = (z, input, g);
         (after, before)
     }
 

@@ -103,7 +103,15 @@ pub struct Planner<'a> {
     pub kind: CriticKind,
     /// The latent reward model `r(z)` (`[frames * latent] -> ... -> 1`), for f_{r+Q}.
     pub reward: Option<(&'a Mlp, &'a [f32])>,
-    /// Scratch: the rolled-out states and the networks' activations, one per step.
+    /// Scratch, kept between plans with [`Planner::reuse`] / [`Planner::into_work`].
+    w: PlanWork,
+}
+
+/// A planner's scratch: the rolled-out states and the networks' activations, one per step, and
+/// the optimiser's buffers. An agent keeps one across steps so planning allocates nothing once
+/// warm.
+#[derive(Clone, Debug, Default)]
+pub struct PlanWork {
     states: Vec<Vec<f32>>,
     inputs: Vec<Vec<f32>>,
     model_act: Vec<Activations>,
@@ -123,8 +131,7 @@ pub struct Planner<'a> {
 impl<'a> Planner<'a> {
     /// f_Q with the Q critic; see [`Planner::with`] for the other objectives and critics.
     pub fn new(model: &'a LatentDynamics, model_params: &'a [f32], critic: &'a Mlp, critic_params: &'a [f32], horizon: usize) -> Self {
-        let n = horizon + 2;
-        Self {
+        let mut p = Self {
             model,
             model_params,
             critic,
@@ -133,21 +140,34 @@ impl<'a> Planner<'a> {
             objective: Objective::SumQ,
             kind: CriticKind::Q,
             reward: None,
-            states: vec![Vec::new(); n],
-            inputs: vec![Vec::new(); n],
-            model_act: vec![Activations::default(); n],
-            critic_act: vec![Activations::default(); n],
-            reward_act: vec![Activations::default(); n],
-            dz: Vec::new(),
-            dz_prev: Vec::new(),
-            din: Vec::new(),
-            ds: Vec::new(),
-            x32: Vec::new(),
-            g32: Vec::new(),
-            x64: Vec::new(),
-            lo: Vec::new(),
-            hi: Vec::new(),
+            w: PlanWork::default(),
+        };
+        p.fit_work();
+        p
+    }
+
+    /// One scratch slot per step of this horizon.
+    fn fit_work(&mut self) {
+        let n = self.horizon + 2;
+        let w = &mut self.w;
+        for v in [&mut w.states, &mut w.inputs] {
+            v.resize(n, Vec::new());
         }
+        for v in [&mut w.model_act, &mut w.critic_act, &mut w.reward_act] {
+            v.resize(n, Activations::default());
+        }
+    }
+
+    /// The same planner with the scratch of an earlier one (no allocation once it has grown).
+    pub fn reuse(mut self, work: PlanWork) -> Self {
+        self.w = work;
+        self.fit_work();
+        self
+    }
+
+    /// The scratch, to give the next planner.
+    pub fn into_work(self) -> PlanWork {
+        self.w
     }
 
     /// The same planner with another objective, critic kind and (for f_{r+Q}) reward model.
@@ -191,15 +211,15 @@ impl<'a> Planner<'a> {
     /// `iterations` of L-BFGS; `actions` holds the result, the return is its objective.
     pub fn plan(&mut self, z0: &[f32], actions: &mut [f32], low: f32, high: f32, iterations: usize, opt: &mut crate::Lbfgsb) -> f32 {
         let n = actions.len();
-        self.x64.clear();
-        self.x64.extend(actions.iter().map(|&a| f64::from(a)));
-        self.lo.clear();
-        self.lo.resize(n, f64::from(low));
-        self.hi.clear();
-        self.hi.resize(n, f64::from(high));
-        let (mut x, lo, hi) = (std::mem::take(&mut self.x64), std::mem::take(&mut self.lo), std::mem::take(&mut self.hi));
-        let mut x32 = std::mem::take(&mut self.x32);
-        let mut g32 = std::mem::take(&mut self.g32);
+        self.w.x64.clear();
+        self.w.x64.extend(actions.iter().map(|&a| f64::from(a)));
+        self.w.lo.clear();
+        self.w.lo.resize(n, f64::from(low));
+        self.w.hi.clear();
+        self.w.hi.resize(n, f64::from(high));
+        let (mut x, lo, hi) = (std::mem::take(&mut self.w.x64), std::mem::take(&mut self.w.lo), std::mem::take(&mut self.w.hi));
+        let mut x32 = std::mem::take(&mut self.w.x32);
+        let mut g32 = std::mem::take(&mut self.w.g32);
         g32.resize(n, 0.0);
         let r = opt.minimize(&mut x, &lo, &hi, iterations, |x, g| {
             x32.clear();
@@ -210,7 +230,7 @@ impl<'a> Planner<'a> {
             -f64::from(f)
         });
         actions.iter_mut().zip(&x).for_each(|(a, v)| *a = *v as f32);
-        (self.x64, self.lo, self.hi, self.x32, self.g32) = (x, lo, hi, x32, g32);
+        (self.w.x64, self.w.lo, self.w.hi, self.w.x32, self.w.g32) = (x, lo, hi, x32, g32);
         -r.value as f32
     }
 
@@ -227,60 +247,60 @@ impl<'a> Planner<'a> {
         };
         let mut f = 0.0;
         for j in 0..n_states {
-            let (done, rest) = self.states.split_at_mut(j);
+            let (done, rest) = self.w.states.split_at_mut(j);
             let z = &mut rest[0];
             z.clear();
             if j == 0 {
                 z.extend_from_slice(z0);
             } else {
-                let next = m.net.forward(self.model_params, &self.inputs[j - 1], 1, &mut self.model_act[j - 1]);
+                let next = m.net.forward(self.model_params, &self.w.inputs[j - 1], 1, &mut self.w.model_act[j - 1]);
                 z.extend_from_slice(&done[j - 1][l..]);
                 z.extend_from_slice(next);
             }
             if j <= h {
-                let input = &mut self.inputs[j];
+                let input = &mut self.w.inputs[j];
                 input.clear();
                 input.extend_from_slice(z);
                 input.extend_from_slice(&actions[j * a_dim..(j + 1) * a_dim]);
             }
             match self.kind {
                 CriticKind::Q if j <= h && self.q_weight(j) != 0.0 => {
-                    f += self.q_weight(j) * self.critic.forward(self.critic_params, &self.inputs[j], 1, &mut self.critic_act[j])[0];
+                    f += self.q_weight(j) * self.critic.forward(self.critic_params, &self.w.inputs[j], 1, &mut self.w.critic_act[j])[0];
                 }
                 CriticKind::V if j >= 1 && self.q_weight(j - 1) != 0.0 => {
-                    f += self.q_weight(j - 1) * self.critic.forward(self.critic_params, &self.states[j], 1, &mut self.critic_act[j])[0];
+                    f += self.q_weight(j - 1) * self.critic.forward(self.critic_params, &self.w.states[j], 1, &mut self.w.critic_act[j])[0];
                 }
                 _ => {}
             }
             if let (Some((net, p)), w) = (self.reward, self.r_weight(j))
                 && w != 0.0
             {
-                f += w * net.forward(p, &self.states[j], 1, &mut self.reward_act[j])[0];
+                f += w * net.forward(p, &self.w.states[j], 1, &mut self.w.reward_act[j])[0];
             }
         }
         // Backward from the last state: dz carries df/dz_j (from z_j's own terms and later steps).
         grad.fill(0.0);
-        self.dz.clear();
-        self.dz.resize(s, 0.0);
-        self.din.resize(s + a_dim, 0.0);
-        self.ds.resize(s, 0.0);
+        self.w.dz.clear();
+        self.w.dz.resize(s, 0.0);
+        self.w.din.resize(s + a_dim, 0.0);
+        self.w.ds.resize(s, 0.0);
         for j in (0..n_states).rev() {
             match self.kind {
                 CriticKind::Q if j <= h && self.q_weight(j) != 0.0 => {
                     let w = self.q_weight(j);
                     self.critic.backward(
                         self.critic_params,
-                        &self.inputs[j],
-                        &mut self.critic_act[j],
+                        &self.w.inputs[j],
+                        &mut self.w.critic_act[j],
                         0..1,
                         &[w],
                         None,
-                        Some(&mut self.din),
+                        Some(&mut self.w.din),
                     );
-                    for (g, v) in grad[j * a_dim..(j + 1) * a_dim].iter_mut().zip(&self.din[s..]) {
+                    for (g, v) in grad[j * a_dim..(j + 1) * a_dim].iter_mut().zip(&self.w.din[s..]) {
                         *g += v;
                     }
-                    for (d, v) in self.dz.iter_mut().zip(&self.din[..s]) {
+                    for (d, v) in self.w.dz.iter_mut().zip(&self.w.din[..s]) {
                         *d += v;
                     }
                 }
@@ -288,14 +308,14 @@ impl<'a> Planner<'a> {
                     let w = self.q_weight(j - 1);
                     self.critic.backward(
                         self.critic_params,
-                        &self.states[j],
-                        &mut self.critic_act[j],
+                        &self.w.states[j],
+                        &mut self.w.critic_act[j],
                         0..1,
                         &[w],
                         None,
-                        Some(&mut self.ds),
+                        Some(&mut self.w.ds),
                     );
-                    for (d, v) in self.dz.iter_mut().zip(&self.ds) {
+                    for (d, v) in self.w.dz.iter_mut().zip(&self.w.ds) {
                         *d += v;
                     }
                 }
@@ -304,8 +324,8 @@ impl<'a> Planner<'a> {
             if let (Some((net, p)), w) = (self.reward, self.r_weight(j))
                 && w != 0.0
             {
-                net.backward(p, &self.states[j], &mut self.reward_act[j], 0..1, &[w], None, Some(&mut self.ds));
-                for (d, v) in self.dz.iter_mut().zip(&self.ds) {
+                net.backward(p, &self.w.states[j], &mut self.w.reward_act[j], 0..1, &[w], None, Some(&mut self.w.ds));
+                for (d, v) in self.w.dz.iter_mut().zip(&self.w.ds) {
                     *d += v;
                 }
             }
@@ -313,28 +333,28 @@ impl<'a> Planner<'a> {
                 break;
             }
             // Through z_j = [z_j-1[l..]; psi_bar(z_j-1, a_j-1)].
-            self.dz_prev.clear();
-            self.dz_prev.resize(s, 0.0);
+            self.w.dz_prev.clear();
+            self.w.dz_prev.resize(s, 0.0);
             for i in 0..s - l {
-                self.dz_prev[l + i] += self.dz[i];
+                self.w.dz_prev[l + i] += self.w.dz[i];
             }
             m.net.backward(
                 self.model_params,
-                &self.inputs[j - 1],
-                &mut self.model_act[j - 1],
+                &self.w.inputs[j - 1],
+                &mut self.w.model_act[j - 1],
                 0..1,
-                &self.dz[s - l..],
+                &self.w.dz[s - l..],
                 None,
-                Some(&mut self.din),
+                Some(&mut self.w.din),
             );
-            for (d, v) in self.dz_prev.iter_mut().zip(&self.din[..s]) {
+            for (d, v) in self.w.dz_prev.iter_mut().zip(&self.w.din[..s]) {
                 *d += v;
             }
             // The model's action gradient joins a_j-1's (its own terms are added at step j-1).
-            for (g, v) in grad[(j - 1) * a_dim..j * a_dim].iter_mut().zip(&self.din[s..]) {
+            for (g, v) in grad[(j - 1) * a_dim..j * a_dim].iter_mut().zip(&self.w.din[s..]) {
                 *g += v;
             }
-            std::mem::swap(&mut self.dz, &mut self.dz_prev);
+            std::mem::swap(&mut self.w.dz, &mut self.w.dz_prev);
         }
         f
     }

@@ -27,7 +27,7 @@ mod value;
 mod value_ddpg;
 
 pub use agent::{AgentConfig, Critic, Explore, LatentAgent, RewardModel};
-pub use dynamics::{CriticKind, LatentDynamics, Objective, Planner};
+pub use dynamics::{CriticKind, LatentDynamics, Objective, PlanWork, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
 pub use embedding_io::{EmbeddingFileError, load_embedding, save_embedding};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};
