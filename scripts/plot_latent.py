@@ -1,13 +1,16 @@
 """Plots and tabulates `coadapt latent` runs against each other (thesis Fig. 4.5-4.8) for
 docs/EXPERIMENTS.md.
 
-usage: .venv-peers/bin/python scripts/plot_latent.py OUT.png "TITLE" LABEL=DIR [LABEL=DIR ...]
+usage: .venv-peers/bin/python scripts/plot_latent.py [--window W] OUT.png "TITLE" LABEL=DIR [LABEL=DIR ...]
 
 Each DIR holds an episodes.csv of `coadapt latent` (runs x episodes). Two panels: the
 deterministic actor's evaluation return after each episode (test time) and the training
 episode's return with exploration (training time), mean over runs with +-1 standard
 deviation shaded. Prints a markdown table: per method, the runs, and the mean (+- sd over
 runs) of each run's average return over episodes 1-10, 11-20 and all, for both returns.
+With --window W (the sparse reach stand-in, thesis Table 4.1): also each method's best success
+rate (return > 0) over a sliding window of W episodes, per run, mean ± sd over runs, for the
+training episodes and the evaluations, with the same test against the first method.
 (Needs matplotlib: `.venv-peers/bin/pip install matplotlib`.)
 """
 import csv
@@ -63,7 +66,12 @@ def mann_whitney(a, b):
 
 
 def main():
-    out, title, pairs = sys.argv[1], sys.argv[2], sys.argv[3:]
+    args = sys.argv[1:]
+    window_len = None
+    if args and args[0] == "--window":
+        window_len, args = int(args[1]), args[2:]
+    out, title, pairs = args[0], args[1], args[2:]
+    best = []
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
     rows = []
     per_run = []
@@ -78,6 +86,9 @@ def main():
             ax.fill_between(xs, [m - s for m, s in zip(mean, sd)], [m + s for m, s in zip(mean, sd)], color=line.get_color(), alpha=0.2)
         rows.append((label, len(runs), n, [window(runs, k, lo, hi) for k in (1, 0) for lo, hi in ((0, 10), (10, 20), (0, n))]))
         per_run.append([[st.mean(x[k] for x in r) for r in runs] for k in (1, 0)])
+        if window_len:
+            rates = [[max(sum(x[k] > 0 for x in r[i : i + window_len]) / window_len for i in range(len(r) - window_len + 1)) for r in runs] for k in (0, 1)]
+            best.append((label, rates))
     for ax, name in zip(axes, ("evaluation return (deterministic actor, test time)", "training return (with exploration)")):
         ax.set_xlabel("episode")
         ax.set_ylabel(name)
@@ -95,6 +106,13 @@ def main():
         print(f"Exact two-sided Mann-Whitney p of each method's per-run means (all episodes) against {rows[0][0]}:")
         for (label, *_), (ev, tr) in zip(rows[1:], per_run[1:]):
             print(f"- {label}: evaluation p = {mann_whitney(per_run[0][0], ev):.3f}, training p = {mann_whitney(per_run[0][1], tr):.3f}")
+    if best:
+        print()
+        print(f"| method | best training success rate over {window_len} episodes | best evaluation success rate | p (training) vs {best[0][0]} |")
+        print("|---|---|---|---|")
+        for label, (tr, ev) in best:
+            p = "" if label == best[0][0] else f"{mann_whitney(best[0][1][0], tr):.3f}"
+            print(f"| {label} | {100 * st.mean(tr):.1f}% ± {100 * st.pstdev(tr):.1f} | {100 * st.mean(ev):.1f}% ± {100 * st.pstdev(ev):.1f} | {p} |")
 
 
 if __name__ == "__main__":
