@@ -51,6 +51,9 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
     }
     let security = crate::security::from_args(&args.security);
     let auth = security.server_auth()?;
+    if args.pixels > 1024 {
+        anyhow::bail!("--pixels {}: at most 1024 (each observation is 3 x SIDE x SIDE values)", args.pixels);
+    }
     if args.pixels > 0 {
         let px = coadapt_core::PixelsConfig { width: args.pixels, height: args.pixels, frames: 1, action_repeat: args.action_repeat };
         // Fail now on a robot that cannot be drawn or a bad camera.

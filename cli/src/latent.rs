@@ -177,8 +177,8 @@ pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
         cfg.embedding.path = format!("runs/latent/embedding-{name}-{}px.safetensors", cfg.camera.side);
     }
     let c = &cfg.camera;
-    if c.side < 8 || c.frames == 0 || c.action_repeat == 0 {
-        anyhow::bail!("camera: side at least 8, frames and action-repeat at least 1 ({c:?})");
+    if !(8..=1024).contains(&c.side) || c.frames == 0 || c.action_repeat == 0 {
+        anyhow::bail!("camera: side from 8 to 1024, frames and action-repeat at least 1 ({c:?})");
     }
     if cfg.embedding.shape.image != c.side || cfg.embedding.shape.in_channels != 3 {
         anyhow::bail!(

@@ -89,15 +89,16 @@ fn the_value_critic_plans_and_learns_through_the_model() {
 
 #[test]
 fn the_reward_plus_q_objective_learns_its_reward_model() {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+    // The same batch scores both (a fresh generator with the same seed for each).
+    let batch = || rand::rngs::StdRng::seed_from_u64(9);
     let (mut agent, _, planned) = run(Explore::Plan, CriticKind::Q, Objective::RewardPlusQ);
     assert_eq!(planned, 120);
-    let trained = agent.reward_loss(&mut rng);
+    let trained = agent.reward_loss(&mut batch());
     // The same replay scored by an untrained reward model.
     let r = agent.reward.as_mut().expect("f_{r+Q} builds a reward model");
     let kept = r.params.clone();
     r.params.iter_mut().for_each(|p| *p *= 0.0);
-    let untrained = agent.reward_loss(&mut rng);
+    let untrained = agent.reward_loss(&mut batch());
     agent.reward.as_mut().unwrap().params = kept;
     assert!(trained.is_finite() && trained < untrained, "reward model: {trained} trained vs {untrained} at zero");
     // Other objectives need none.
