@@ -19,7 +19,7 @@ use coadapt_learner::ddpg::Ddpg;
 use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NnError};
 use rand::Rng;
 
-use crate::{CriticKind, Embedding, EmbeddingWork, LatentDynamics, Lbfgsb, Objective, PlanWork, Planner, ValueDdpg, ValueLosses};
+use crate::{CriticKind, Embedding, FrameStack, LatentDynamics, Objective, PlanNets, PlanScratch, ValueDdpg, ValueLosses};
 
 /// How an agent explores while it trains.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -98,9 +98,8 @@ pub struct RewardModel {
 #[derive(Debug)]
 pub struct LatentAgent {
     pub cfg: AgentConfig,
-    emb: Embedding,
-    enc: Vec<f32>,
-    work: EmbeddingWork,
+    /// The frozen encoder and the running episode's stacked state.
+    frames: FrameStack,
     pub critic: Critic,
     pub reward: Option<RewardModel>,
     pub model: LatentDynamics,
@@ -113,16 +112,7 @@ pub struct LatentAgent {
     /// newest code of z_t+1).
     pub replay: ReplayBuffer,
     batch: Batch,
-    opt: Lbfgsb,
-    plan_actions: Vec<f32>,
-    plan_work: PlanWork,
-    plan_z: Vec<f32>,
-    plan_in: Vec<f32>,
-    plan_g: Vec<f32>,
-    rollout_act: Activations,
-    /// The stacked state of the running episode.
-    z: Vec<f32>,
-    code: Vec<f32>,
+    scratch: PlanScratch,
 }
 
 impl LatentAgent {
@@ -168,9 +158,7 @@ impl LatentAgent {
             model_adam: Adam::new(model_params.len(), AdamConfig { lr: cfg.model_lr, ..AdamConfig::default() }),
             model_grad: vec![0.0; model_params.len()],
             replay: ReplayBuffer::new(frames * l, act, cfg.replay_capacity),
-            emb,
-            enc,
-            work: EmbeddingWork::default(),
+            frames: FrameStack::new(emb, enc, frames),
             critic,
             reward,
             model,
@@ -178,46 +166,28 @@ impl LatentAgent {
             model_act: Activations::default(),
             model_dy: Vec::new(),
             batch,
-            opt: Lbfgsb::default(),
-            plan_actions: Vec::new(),
-            plan_work: PlanWork::default(),
-            plan_z: Vec::new(),
-            plan_in: Vec::new(),
-            plan_g: Vec::new(),
-            rollout_act: Activations::default(),
-            z: vec![0.0; frames * l],
-            code: vec![0.0; l],
+            scratch: PlanScratch::default(),
             cfg,
         })
     }
 
     /// Values of one frame the agent encodes.
     pub fn image_len(&self) -> usize {
-        self.emb.image_len()
+        self.frames.image_len()
     }
 
     /// The stacked state after a reset to `frame` (every slot its code).
     pub fn reset(&mut self, frame: &[f32]) -> &[f32] {
-        let l = self.emb.cfg.latent;
-        self.code.copy_from_slice(self.emb.encode(&self.enc, frame, 1, &mut self.work));
-        for c in self.z.chunks_exact_mut(l) {
-            c.copy_from_slice(&self.code);
-        }
         match &mut self.critic {
             Critic::Q(d) => d.reset_noise(),
             Critic::V(d) => d.reset_noise(),
         }
-        &self.z
+        self.frames.reset(frame)
     }
 
     /// The stacked state after the newest `frame`.
     pub fn observe(&mut self, frame: &[f32]) -> &[f32] {
-        let l = self.emb.cfg.latent;
-        self.code.copy_from_slice(self.emb.encode(&self.enc, frame, 1, &mut self.work));
-        let s = self.z.len();
-        self.z.copy_within(l..s, 0);
-        self.z[s - l..].copy_from_slice(&self.code);
-        &self.z
+        self.frames.observe(frame)
     }
 
     /// The action at the current state: deterministic, OU-noisy, or planned (see [`Explore`]).
@@ -227,8 +197,8 @@ impl LatentAgent {
             return Some(self.plan(action));
         }
         match &mut self.critic {
-            Critic::Q(d) => d.act(&self.z, !explore, action),
-            Critic::V(d) => d.act(&self.z, !explore, action),
+            Critic::Q(d) => d.act(self.frames.state(), !explore, action),
+            Critic::V(d) => d.act(self.frames.state(), !explore, action),
         }
         None
     }
@@ -243,47 +213,39 @@ impl LatentAgent {
 
     /// Warm start from the actor's rollout through the model, then L-BFGS on the objective.
     fn plan(&mut self, action: &mut [f32]) -> (f32, f32) {
-        let (a, h, l) = (self.model.act, self.cfg.horizon, self.model.latent);
-        self.plan_actions.clear();
-        // Scratch kept across steps: planning allocates nothing once warm.
-        let (mut z, mut input, mut g) =
-            (std::mem::take(&mut self.plan_z), std::mem::take(&mut self.plan_in), std::mem::take(&mut self.plan_g));
-        z.clear();
-        z.extend_from_slice(&self.z);
-        let (actor, actor_params) = match &self.critic {
-            Critic::Q(d) => (d.actor(), d.actor_params()),
-            Critic::V(d) => (&d.actor, &d.p.phi[..]),
+        let (actor, actor_params, critic, critic_params) = match &self.critic {
+            Critic::Q(d) => (d.actor(), d.actor_params(), d.critic(), d.critic_params()),
+            Critic::V(d) => (&d.actor, &d.p.phi[..], &d.v, &d.p.v[..]),
         };
-        for j in 0..=h {
-            let out = actor.forward(actor_params, &z, 1, &mut self.rollout_act);
-            let start = self.plan_actions.len();
-            self.plan_actions.extend(out.iter().map(|v| v.tanh()));
-            if j < h {
-                input.clear();
-                input.extend_from_slice(&z);
-                input.extend_from_slice(&self.plan_actions[start..start + a]);
-                let next = self.model.net.forward(&self.model_params, &input, 1, &mut self.model_act);
-                let s = z.len();
-                z.copy_within(l..s, 0);
-                z[s - l..].copy_from_slice(next);
-            }
+        let nets = PlanNets {
+            actor,
+            actor_params,
+            model: &self.model,
+            model_params: &self.model_params,
+            critic,
+            critic_params,
+            reward: self.reward.as_ref().map(|r| (&r.net, &r.params[..])),
+        };
+        self.scratch.plan(&nets, &self.cfg, self.frames.state(), action)
+    }
+
+    /// The networks an actor elsewhere acts and plans with, packed into one buffer for the
+    /// acting-weights topic: the frozen encoder (about a tenth of the values: an actor then
+    /// needs no embedding file and can never see through another one), actor, critic (Q or
+    /// V), model, reward model (f_{r+Q} only), each in its own parameter order
+    /// ([`crate::LatentActor::set_weights`] unpacks them).
+    pub fn acting_weights(&self, out: &mut Vec<f32>) {
+        out.clear();
+        out.extend_from_slice(self.frames.encoder());
+        out.extend_from_slice(self.actor().1);
+        match &self.critic {
+            Critic::Q(d) => out.extend_from_slice(d.critic_params()),
+            Critic::V(d) => out.extend_from_slice(&d.p.v),
         }
-        let (critic, critic_params) = match &self.critic {
-            Critic::Q(d) => (d.critic(), d.critic_params()),
-            Critic::V(d) => (&d.v, &d.p.v[..]),
-        };
-        let reward = self.reward.as_ref().map(|r| (&r.net, &r.params[..]));
-        let mut planner = Planner::new(&self.model, &self.model_params, critic, critic_params, h)
-            .with(self.cfg.objective, self.cfg.critic, reward)
-            .expect("the agent builds a reward model exactly when its objective needs one")
-            .reuse(std::mem::take(&mut self.plan_work));
-        g.resize(self.plan_actions.len(), 0.0);
-        let before = planner.value_and_grad(&self.z, &self.plan_actions, &mut g);
-        let after = planner.plan(&self.z, &mut self.plan_actions, -1.0, 1.0, self.cfg.plan_iterations, &mut self.opt);
-        self.plan_work = planner.into_work();
-        action.copy_from_slice(&self.plan_actions[..a]);
-        (self.plan_z, self.plan_in, self.plan_g) = (z, input, g);
-        (after, before)
+        out.extend_from_slice(&self.model_params);
+        if let Some(r) = &self.reward {
+            out.extend_from_slice(&r.params);
+        }
     }
 
     /// Stores a step of the running episode (`next` is the stacked state after it).
