@@ -6,6 +6,9 @@
 //! episode (actor, critic, model, reward model); `plots/returns.svg` (both returns, mean and
 //! standard deviation over runs); a JSON summary on stdout.
 //!
+//! With `actors = N` the episodes run on actors that plan where their robot is
+//! ([`crate::latent_fleet`]); the learner only trains, between episodes.
+//!
 //! The embedding is loaded from `[embedding] path`, or built there first (state-based DDPG's
 //! episodes, see `latent_embed`): every method pointed at the same file explores in the same
 //! latent space.
@@ -69,8 +72,22 @@ pub struct LatentConfig {
     pub embedding: EmbeddingSettings,
     /// Deadlines and retries of a dm_env_rpc robot.
     pub remote: crate::roles::RemoteEnvConfig,
-    /// TLS and token of a dm_env_rpc robot's server.
+    /// TLS and token of a dm_env_rpc robot's server (and of the fleet's gRPC).
     pub security: crate::security::SecurityConfig,
+    /// Where the episodes run: 0 in this process; N > 0 on N actors over `fleet.transport`,
+    /// each planning where its robot is (`coadapt latent-actor`): the learner publishes the
+    /// networks before every episode, the latent transitions come back.
+    pub actors: usize,
+    /// With actors over shm or gRPC: start them here as `coadapt latent-actor` processes
+    /// (true), or wait for actors started elsewhere, e.g. on the robots' hosts (false).
+    pub start_actors: bool,
+    /// An episode an actor has sent nothing of for this long goes to another actor (seconds).
+    pub episode_lease_secs: f64,
+    /// An episode not back after this long stops the run (seconds).
+    pub episode_deadline_secs: f64,
+    /// How the learner and its actors talk (`transport`, `name`, `listen`, `connect`, ...:
+    /// as `coadapt run`'s `[fleet]`; in-process threads by default).
+    pub fleet: crate::fleet::FleetConfig,
 }
 
 impl Default for LatentConfig {
@@ -87,6 +104,15 @@ impl Default for LatentConfig {
             embedding: EmbeddingSettings::default(),
             remote: crate::roles::RemoteEnvConfig::default(),
             security: crate::security::SecurityConfig::default(),
+            actors: 0,
+            start_actors: true,
+            episode_lease_secs: 120.0,
+            episode_deadline_secs: 3600.0,
+            fleet: crate::fleet::FleetConfig {
+                transport: crate::fleet::TransportKind::InProcess,
+                listen: "127.0.0.1:0".into(),
+                ..crate::fleet::FleetConfig::default()
+            },
         }
     }
 }
@@ -130,6 +156,13 @@ pub struct LatentArgs {
     /// The run directory (default runs/latent-<explore>-<critic>-h<H>-seed<seed>).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Override `actors`: run the episodes on N actors that plan where the robot is (0: in
+    /// this process).
+    #[arg(long)]
+    pub actors: Option<usize>,
+    /// Override fleet.transport: in-process (threads), shm or grpc.
+    #[arg(long, value_enum)]
+    pub transport: Option<crate::fleet::TransportKind>,
 }
 
 fn parse_enum<T: serde::de::DeserializeOwned>(key: &str, v: &str, choices: &str) -> anyhow::Result<T> {
@@ -171,6 +204,17 @@ pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
     }
     if let Some(p) = &a.embedding {
         cfg.embedding.path = p.display().to_string();
+    }
+    if let Some(n) = a.actors {
+        cfg.actors = n;
+    }
+    if let Some(t) = a.transport {
+        cfg.fleet.transport = t;
+    }
+    for (key, v) in [("episode-lease-secs", cfg.episode_lease_secs), ("episode-deadline-secs", cfg.episode_deadline_secs)] {
+        if !(v.is_finite() && v > 0.0 && v < 1e9) {
+            anyhow::bail!("{key} = {v}: a positive number of seconds");
+        }
     }
     if cfg.embedding.path.trim().is_empty() {
         let name: String = cfg.robot.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
@@ -342,11 +386,15 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
     let mut train_curves: Vec<Vec<f64>> = Vec::new();
     let mut eval_curves: Vec<Vec<f64>> = Vec::new();
     let mut all_plan_ms = Vec::new();
+    let mut fleet = None;
     for r in 0..cfg.runs {
         let seed = cfg.seed + r as u64;
         let mut env = camera_env(&cfg)?;
         let mut rng = coadapt_core::rng(seed, 11);
         let act = env.env().spec().act_dim();
+        if cfg.actors > 0 && fleet.is_none() {
+            fleet = Some(crate::latent_fleet::Fleet::start(&cfg, &out, act)?);
+        }
         let mut agent = LatentAgent::new(cfg.agent.clone(), emb.clone(), enc.clone(), cfg.camera.frames, act, seed, &mut rng)?;
         let dir = out.join(format!("run-{r}"));
         std::fs::create_dir_all(&dir)?;
@@ -363,12 +411,21 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         let (mut tc, mut ec) = (Vec::new(), Vec::new());
         for ep in 0..cfg.episodes {
             let base = seed * 1_000_003 + 2 * ep as u64;
-            let tr =
-                episode(&mut agent, env.env(), base, cfg.episode_steps, true).with_context(|| format!("run {r} training episode {ep}"))?;
+            let index = u32::try_from(r * cfg.episodes + ep).unwrap_or(u32::MAX);
+            let mut play = |agent: &mut LatentAgent, seed: u64, train: bool| -> anyhow::Result<Episode> {
+                match fleet.as_mut() {
+                    None => episode(agent, env.env(), seed, cfg.episode_steps, train),
+                    Some(f) => {
+                        let e = f.runner.episode(agent, train, seed, index)?;
+                        Ok(Episode { ret: e.episode_return, steps: e.steps, plan_ms: Vec::new() })
+                    }
+                }
+            };
+            let tr = play(&mut agent, base, true).with_context(|| format!("run {r} training episode {ep}"))?;
             let loss = agent.train(&mut rng);
-            let ev = episode(&mut agent, env.env(), base + 1, cfg.episode_steps, false)
-                .with_context(|| format!("run {r} evaluation episode {ep}"))?;
-            let (mean, p90) = latency(&tr.plan_ms);
+            let ev = play(&mut agent, base + 1, false).with_context(|| format!("run {r} evaluation episode {ep}"))?;
+            // Through a fleet the latency is measured where the planning runs: the actors' CSVs.
+            let (mean, p90) = if fleet.is_some() { (f64::NAN, f64::NAN) } else { latency(&tr.plan_ms) };
             all_plan_ms.extend_from_slice(&tr.plan_ms);
             writeln!(
                 csv,
@@ -398,6 +455,9 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         train_curves.push(tc);
         eval_curves.push(ec);
     }
+    if let Some(f) = fleet {
+        f.finish();
+    }
     draw(&out.join("plots/returns.svg"), &label(&cfg), &cfg.robot, &train_curves, &eval_curves)?;
     let mean_last = |c: &[Vec<f64>]| c.iter().filter_map(|v| v.last()).sum::<f64>() / c.len().max(1) as f64;
     let (pm, p90) = latency(&all_plan_ms);
@@ -418,7 +478,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
 }
 
 /// Mean and 90th percentile of latencies (0, 0 when none).
-fn latency(ms: &[f64]) -> (f64, f64) {
+pub(crate) fn latency(ms: &[f64]) -> (f64, f64) {
     if ms.is_empty() {
         return (0.0, 0.0);
     }
@@ -497,6 +557,8 @@ mod tests {
                 embedding: None,
                 embed_only: false,
                 out: None,
+                actors: None,
+                transport: None,
             };
             let cfg = resolve(&args).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
             assert!(!cfg.embedding.path.is_empty());

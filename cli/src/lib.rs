@@ -25,9 +25,12 @@
 //!   planar benchmark; [`search_fleet`]: its rollouts on actors and `coadapt search-actor`;
 //!   `search_plot`: its learning-curve and synergy plots.
 //! - [`latent`]: `coadapt latent`, DDPG from pixels exploring by latent trajectory optimisation
-//!   (thesis ch. 4); [`latent_embed`]: its frozen embedding, built from state-based DDPG's frames.
+//!   (thesis ch. 4); [`latent_embed`]: its frozen embedding, built from state-based DDPG's frames;
+//!   [`latent_fleet`]: its episodes on actors that plan where the robot is, `coadapt latent-actor`.
+//! - `actor_procs`: actor processes a learner starts itself (search, latent).
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
+mod actor_procs;
 pub mod bench;
 pub mod bench_conv;
 pub mod bench_design;
@@ -45,6 +48,7 @@ pub mod fleet;
 pub mod health;
 pub mod latent;
 pub mod latent_embed;
+pub mod latent_fleet;
 pub mod launch;
 pub mod metrics;
 pub mod plot;
@@ -90,6 +94,9 @@ pub enum Command {
     /// DDPG from pixels exploring by planning in a learned latent space (thesis ch. 4, Alg. 3):
     /// Q or V critic, trajectory optimisation (three objectives) or OU noise, several runs.
     Latent(latent::LatentArgs),
+    /// Runs the episodes a `coadapt latent` hands out (shm or gRPC), planning every step on
+    /// this machine's camera robot.
+    LatentActor(latent_fleet::LatentActorArgs),
     /// Runs the rollouts a `coadapt search` hands out (shm or gRPC), on this machine's robot.
     SearchActor(search_fleet::SearchActorArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
@@ -122,6 +129,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Search(args) => search::run(args),
         Command::SearchActor(args) => search_fleet::actor(args),
         Command::Latent(args) => latent::run(args),
+        Command::LatentActor(args) => latent_fleet::actor(args),
         Command::Token(cmd) => credentials::token(cmd),
         Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),

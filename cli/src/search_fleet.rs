@@ -7,6 +7,7 @@ use anyhow::Context;
 use clap::Args;
 use coadapt_policy_search::{FleetRunner, PlanarEnv};
 
+use crate::actor_procs::Children;
 use crate::fleet::{LearnerGuard, TransportKind};
 use crate::search::SearchConfig;
 
@@ -45,13 +46,6 @@ pub(crate) struct Fleet {
     children: Children,
 }
 
-/// Actor processes started by the search; killed if the search fails before they end.
-struct Children(std::sync::Arc<std::sync::Mutex<Vec<std::process::Child>>>);
-
-fn lock(c: &Children) -> std::sync::MutexGuard<'_, Vec<std::process::Child>> {
-    c.0.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 impl Fleet {
     pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> anyhow::Result<Self> {
         let env = PlanarEnv::new(cfg.planar());
@@ -59,7 +53,7 @@ impl Fleet {
         let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
         let lease = std::time::Duration::from_secs_f64(cfg.rollout_lease_secs);
         let deadline = std::time::Duration::from_secs_f64(cfg.iteration_deadline_secs);
-        let (links, guard, mut threads, mut children) = match cfg.fleet.transport {
+        let (links, guard, mut threads, children) = match cfg.fleet.transport {
             TransportKind::InProcess => {
                 let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
                 let threads = actors
@@ -74,7 +68,7 @@ impl Fleet {
                         }))
                     })
                     .collect::<anyhow::Result<Vec<_>>>()?;
-                (learner, LearnerGuard::None, threads, Vec::new())
+                (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
             }
             _ => {
                 let mut fleet = cfg.fleet.clone();
@@ -86,24 +80,19 @@ impl Fleet {
                     LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
                     LearnerGuard::None => String::new(),
                 };
-                let mut children = Vec::new();
-                if cfg.start_actors {
-                    let exe = std::env::current_exe().context("finding the coadapt binary to start actors")?;
-                    let config = out.join("config.toml");
+                let children = if cfg.start_actors {
                     let logs = out.join("logs");
-                    std::fs::create_dir_all(&logs)?;
-                    for i in 0..cfg.actors {
-                        let mut cmd = std::process::Command::new(&exe);
-                        cmd.arg("search-actor").arg("--config").arg(&config).arg("--id").arg(i.to_string());
-                        cmd.arg("--transport").arg(fleet.transport.name()).arg("--fleet").arg(&fleet.name);
-                        if !connect.is_empty() {
-                            cmd.arg("--connect").arg(&connect);
-                        }
-                        let log = std::fs::File::create(logs.join(format!("actor-{i}.log")))?;
-                        cmd.stdin(std::process::Stdio::null()).stdout(log.try_clone()?).stderr(log);
-                        children.push(cmd.spawn().with_context(|| format!("starting search actor {i}"))?);
-                    }
+                    let kids = crate::actor_procs::spawn(
+                        "search-actor",
+                        &out.join("config.toml"),
+                        cfg.actors,
+                        &fleet,
+                        &connect,
+                        &logs,
+                        &|_| vec![],
+                    )?;
                     eprintln!("search: {} actors over {} (logs in {})", cfg.actors, fleet.transport.name(), logs.display());
+                    kids
                 } else {
                     eprintln!(
                         "search: waiting for {} actors over {} ({})",
@@ -111,29 +100,19 @@ impl Fleet {
                         fleet.transport.name(),
                         if connect.is_empty() { &fleet.name } else { &connect }
                     );
-                }
+                    Children::new(Vec::new())
+                };
                 (links, guard, Vec::new(), children)
             }
         };
         let mut runner = FleetRunner::new(links, spec.max_episode_steps, spec.act_dim(), spec.obs_dim(), PlanarEnv::step_cost);
         runner.lease = lease;
         runner.deadline = deadline;
-        // Nothing to join yet; keep the handles so that a failure can still end them.
         threads.shrink_to_fit();
-        children.shrink_to_fit();
-        let started = !children.is_empty();
-        let children = Children(std::sync::Arc::new(std::sync::Mutex::new(children)));
-        if started {
-            // Actors started here that have all ended (a robot unreachable, a bad config) will
-            // never bring the rollouts back: say so instead of waiting for the deadline.
-            let kids = children.0.clone();
-            let logs = out.join("logs").display().to_string();
-            runner.abort = Some(Box::new(move || {
-                let mut kids = kids.lock().unwrap_or_else(|e| e.into_inner());
-                kids.iter_mut()
-                    .all(|c| matches!(c.try_wait(), Ok(Some(_))))
-                    .then(|| format!("every search actor has ended; see {logs}/actor-*.log"))
-            }));
+        if !children.is_empty() {
+            // Actors started here that have all ended will never bring the rollouts back: say
+            // so instead of waiting for the deadline.
+            runner.abort = Some(children.all_ended_check("search actor", &out.join("logs")));
         }
         Ok(Self { runner, guard, threads, children })
     }
@@ -150,28 +129,7 @@ impl Fleet {
                 Ok(Ok(_)) => {}
             }
         }
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-        for c in lock(&children).iter_mut() {
-            while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
-                std::thread::sleep(std::time::Duration::from_millis(20));
-            }
-            if matches!(c.try_wait(), Ok(None)) {
-                let _ = c.kill();
-                let _ = c.wait();
-            }
-        }
-    }
-}
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        // A search that failed: its actor processes must not outlive it.
-        for c in lock(self).iter_mut() {
-            if matches!(c.try_wait(), Ok(None)) {
-                let _ = c.kill();
-                let _ = c.wait();
-            }
-        }
+        children.finish();
     }
 }
 

@@ -1,0 +1,217 @@
+//! `coadapt latent`'s fleet: the episodes on N actors (threads, or `coadapt latent-actor`
+//! processes over shared memory or gRPC) that plan where the robot is, and the actor command.
+//!
+//! Each actor holds a [`LatentActor`] and its own camera robot; the learner publishes the
+//! packed networks (encoder included: an actor needs only the run's config) before every
+//! episode and stores the latent transitions that come back. An actor writes each episode's
+//! planning latency to its CSV (`<run>/actors/actor-<id>.csv` for the actors started here):
+//! per-step latency is a property of the robot's host, not of the learner's.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+use coadapt_latent::{ActorEpisode, Embedding, EpisodeRunner, FleetError, LatentActor};
+
+use crate::actor_procs::Children;
+use crate::fleet::{LearnerGuard, TransportKind};
+use crate::latent::{LatentConfig, camera_env};
+
+/// `coadapt latent-actor`: runs the episodes a `coadapt latent` learner hands out on this
+/// machine's robot, planning every step here.
+#[derive(Debug, Args)]
+pub struct LatentActorArgs {
+    /// The run's config (its `config.toml`, or the file the learner was started with).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// This actor's id, unique among the run's actors.
+    #[arg(long)]
+    pub id: u64,
+    /// Override fleet.transport: shm or grpc.
+    #[arg(long, value_enum)]
+    pub transport: Option<TransportKind>,
+    /// Override fleet.name: the shared-memory fleet to join.
+    #[arg(long)]
+    pub fleet: Option<String>,
+    /// Override fleet.connect: the learner's gRPC address.
+    #[arg(long)]
+    pub connect: Option<String>,
+    /// Override `robot`: a built-in robot or `dm-env-rpc://HOST:PORT` (this host's camera
+    /// robot).
+    #[arg(long)]
+    pub robot: Option<String>,
+    /// Append each episode's planning latency here (CSV; created with its header if new).
+    #[arg(long)]
+    pub latency_csv: Option<PathBuf>,
+    /// TLS and the actor's token (over [security]).
+    #[command(flatten)]
+    pub security: crate::security::SecurityArgs,
+}
+
+/// The learner's fleet: the episode runner over its links, and what keeps them up.
+pub(crate) struct Fleet {
+    pub(crate) runner: EpisodeRunner,
+    guard: LearnerGuard,
+    threads: Vec<std::thread::JoinHandle<Result<u64, FleetError>>>,
+    children: Children,
+}
+
+/// One actor: its networks, sized from the config alone.
+fn latent_actor(cfg: &LatentConfig, act: usize, id: u64) -> anyhow::Result<LatentActor> {
+    let emb = Embedding::new(cfg.embedding.shape).context("embedding.shape")?;
+    LatentActor::new(cfg.agent.clone(), emb, cfg.camera.frames, act, cfg.seed.wrapping_mul(1_000_003).wrapping_add(id))
+        .context("building the actor's networks")
+}
+
+/// Writes each episode's figures to `path` (CSV, appended).
+fn latency_log(path: Option<&Path>, id: u64) -> anyhow::Result<impl FnMut(&ActorEpisode) + Send + use<>> {
+    let mut file = match path {
+        Some(p) => {
+            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            }
+            let new = !p.exists();
+            let mut f =
+                std::fs::OpenOptions::new().create(true).append(true).open(p).with_context(|| format!("opening {}", p.display()))?;
+            if new {
+                writeln!(f, "assignment,train,steps,return,plan_ms_mean,plan_ms_p90,seconds")?;
+            }
+            Some(f)
+        }
+        None => None,
+    };
+    Ok(move |e: &ActorEpisode| {
+        let (mean, p90) = crate::latent::latency(&e.plan_ms);
+        eprintln!(
+            "latent actor {id}: {} episode (assignment {}): {} steps, return {:.1}, plan {mean:.1} ms/step (p90 {p90:.1}), {:.1} s",
+            if e.train { "training" } else { "evaluation" },
+            e.assignment,
+            e.steps,
+            e.episode_return,
+            e.seconds
+        );
+        if let Some(f) = file.as_mut() {
+            let row = writeln!(f, "{},{},{},{},{mean},{p90},{:.3}", e.assignment, e.train, e.steps, e.episode_return, e.seconds);
+            if let Err(err) = row.and_then(|()| f.flush()) {
+                eprintln!("latent actor {id}: writing the latency CSV: {err}");
+            }
+        }
+    })
+}
+
+impl Fleet {
+    /// The learner's side over `cfg.fleet`, with `cfg.actors` actors started here (threads,
+    /// or processes unless `start-actors = false`); `out` is the run directory (its
+    /// `config.toml` is what started actors read).
+    pub(crate) fn start(cfg: &LatentConfig, out: &Path, act: usize) -> anyhow::Result<Self> {
+        let state = cfg.camera.frames * cfg.embedding.shape.latent;
+        let dims = coadapt_transport::messages::Dims { obs: state, act, design: 0 };
+        let lease = std::time::Duration::from_secs_f64(cfg.episode_lease_secs);
+        let deadline = std::time::Duration::from_secs_f64(cfg.episode_deadline_secs);
+        let csv = |i: usize| out.join("actors").join(format!("actor-{i}.csv"));
+        let (links, guard, threads, children) = match cfg.fleet.transport {
+            TransportKind::InProcess => {
+                let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
+                let threads = actors
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, mut links)| {
+                        let mut source = camera_env(cfg)?;
+                        let mut actor = latent_actor(cfg, act, i as u64)?;
+                        let mut log = latency_log(Some(&csv(i)), i as u64)?;
+                        let steps = cfg.episode_steps;
+                        Ok(std::thread::spawn(move || {
+                            let stop = std::sync::atomic::AtomicBool::new(false);
+                            coadapt_latent::run_actor(&mut actor, source.env(), steps, i as u64, &mut links, &stop, &mut log)
+                        }))
+                    })
+                    .collect::<anyhow::Result<Vec<_>>>()?;
+                (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
+            }
+            _ => {
+                let mut fleet = cfg.fleet.clone();
+                if fleet.transport == TransportKind::Shm && fleet.name.is_empty() {
+                    fleet.name = format!("coadapt-latent-{}", std::process::id());
+                }
+                let (links, guard) = fleet.learner_links(Some(dims), Some(cfg.episode_steps), &cfg.security)?;
+                let connect = match &guard {
+                    LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
+                    LearnerGuard::None => String::new(),
+                };
+                let children = if cfg.start_actors {
+                    let logs = out.join("logs");
+                    let extra = |i: usize| vec!["--latency-csv".into(), csv(i).into_os_string()];
+                    let kids =
+                        crate::actor_procs::spawn("latent-actor", &out.join("config.toml"), cfg.actors, &fleet, &connect, &logs, &extra)?;
+                    eprintln!("latent: {} actors over {} (logs in {})", cfg.actors, fleet.transport.name(), logs.display());
+                    kids
+                } else {
+                    eprintln!(
+                        "latent: waiting for actors over {} ({}): coadapt latent-actor --config {} --id N",
+                        fleet.transport.name(),
+                        if connect.is_empty() { &fleet.name } else { &connect },
+                        out.join("config.toml").display()
+                    );
+                    Children::new(Vec::new())
+                };
+                (links, guard, Vec::new(), children)
+            }
+        };
+        let mut runner = EpisodeRunner::new(links, state, act, cfg.episode_steps);
+        runner.lease = lease;
+        runner.deadline = deadline;
+        if !children.is_empty() {
+            // Actors started here that have all ended will never bring an episode back.
+            runner.abort = Some(children.all_ended_check("latent actor", &out.join("logs")));
+        }
+        Ok(Self { runner, guard, threads, children })
+    }
+
+    /// Closes the assignment queue (the actors end by themselves) and waits for them.
+    pub(crate) fn finish(self) {
+        let Self { runner, guard, threads, children } = self;
+        drop(runner);
+        drop(guard);
+        for t in threads {
+            match t.join() {
+                Ok(Err(e)) => eprintln!("latent: an actor thread failed: {e}"),
+                Err(_) => eprintln!("latent: an actor thread panicked"),
+                Ok(Ok(_)) => {}
+            }
+        }
+        children.finish();
+    }
+}
+
+/// `coadapt latent-actor`.
+pub fn actor(a: LatentActorArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&a.config).with_context(|| format!("reading {}", a.config.display()))?;
+    let mut cfg: LatentConfig = toml::from_str(&text).with_context(|| format!("parsing {}", a.config.display()))?;
+    if let Some(t) = a.transport {
+        cfg.fleet.transport = t;
+    }
+    if let Some(f) = &a.fleet {
+        cfg.fleet.name = f.clone();
+    }
+    if let Some(c) = &a.connect {
+        cfg.fleet.connect = c.clone();
+    }
+    if cfg.fleet.transport == TransportKind::InProcess {
+        anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
+    }
+    if let Some(r) = &a.robot {
+        cfg.robot = r.clone();
+    }
+    cfg.security = cfg.security.clone().with_args(&a.security);
+    let mut source = camera_env(&cfg)?;
+    let act = source.env().spec().act_dim();
+    let mut actor = latent_actor(&cfg, act, a.id)?;
+    let mut links = cfg.fleet.actor_links(a.id, &cfg.security)?;
+    let shutdown = crate::progress::shutdown_on_ctrl_c();
+    let mut log = latency_log(a.latency_csv.as_deref(), a.id)?;
+    eprintln!("latent actor {}: {} through the camera over {}", a.id, cfg.robot, cfg.fleet.transport.name());
+    let n = coadapt_latent::run_actor(&mut actor, source.env(), cfg.episode_steps, a.id, &mut links, &shutdown, &mut log)?;
+    eprintln!("latent actor {}: done after {n} episodes", a.id);
+    Ok(())
+}
