@@ -7,7 +7,9 @@
 # runs/latent/NAME` (stdout: its JSON summary to runs/latent/NAME.json, stderr to
 # runs/latent/NAME.log) unless runs/latent/NAME.json exists; a finished run's small files
 # (config.toml, episodes.csv, plots/returns.svg, the summary) are copied to
-# docs/latent/results/NAME/ to be committed. Set CONFIG to use another base config.
+# docs/latent/results/NAME/ to be committed. Set CONFIG to use another base config. A NAME
+# whose run directory was left by a stopped campaign goes on with --resume (its finished runs
+# kept; one that cannot be resumed is moved aside and started again).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 config=${CONFIG:-configs/latent/half-cheetah.toml}
@@ -18,10 +20,15 @@ while [ $# -ge 2 ]; do
   name=$1 flags=$2; shift 2
   out=runs/latent/$name
   if [ -s "$out.json" ] || [ -s "docs/latent/results/$name/summary.json" ]; then echo "latent: $name done already"; continue; fi
-  [ -e "$out" ] && mv "$out" "$out.partial-$(date +%s)"
-  echo "latent: start $name ($(date -u +%H:%M:%S))"
+  resume=""
+  if [ -s "$out/episodes.csv" ]; then
+    resume="--resume"
+  elif [ -e "$out" ]; then
+    mv "$out" "$out.partial-$(date +%s)"
+  fi
+  echo "latent: start $name ($(date -u +%H:%M:%S)) $resume"
   # shellcheck disable=SC2086 # FLAGS split into words
-  if RAYON_NUM_THREADS=1 "$bin" latent --config "$config" $flags --out "$out" > "$out.json.tmp" 2> "$out.log"; then
+  if RAYON_NUM_THREADS=1 "$bin" latent --config "$config" $flags --out "$out" $resume > "$out.json.tmp" 2>> "$out.log"; then
     mv "$out.json.tmp" "$out.json"
     mkdir -p "docs/latent/results/$name"
     cp "$out/config.toml" "$out/episodes.csv" "$out/plots/returns.svg" "docs/latent/results/$name/"

@@ -18,249 +18,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use clap::Args;
 use coadapt_core::{Env, Pixels, PixelsConfig};
-use coadapt_latent::{AgentConfig, CriticKind, Explore, LatentAgent, Objective};
-use serde::{Deserialize, Serialize};
+use coadapt_latent::{CriticKind, Explore, LatentAgent, Objective};
 
-use crate::latent_embed::{EmbeddingSettings, FrameSource, load_or_build};
-
-/// The camera (the `[camera]` table).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
-pub struct CameraSettings {
-    /// Square images of this side (64 in the thesis).
-    pub side: usize,
-    /// Codes stacked in the latent state (3 in simulation).
-    pub frames: usize,
-    /// Robot steps per agent step, with the same action (2 in the thesis).
-    pub action_repeat: usize,
-}
-
-impl Default for CameraSettings {
-    fn default() -> Self {
-        Self { side: 64, frames: 3, action_repeat: 2 }
-    }
-}
-
-/// `coadapt latent`'s config (TOML, kebab-case; every key has a default).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
-pub struct LatentConfig {
-    /// A built-in robot that can be drawn (half-cheetah, walker, hopper, pendulum, ...), seen
-    /// through our camera; or `dm-env-rpc://HOST:PORT`, a server whose observation is one
-    /// `side x side` RGB frame, channel-major, in [0, 1] (e.g. DeepMind Control's cheetah:
-    /// `coadapt-gym-serve --dmc cheetah-run`; it repeats actions itself, `camera.action-repeat`
-    /// is not applied again).
-    pub robot: String,
-    pub camera: CameraSettings,
-    /// Agent steps per episode (420 in the thesis's cheetah); fewer if the robot ends it.
-    pub episode_steps: usize,
-    /// Training episodes per run, each followed by an evaluation episode.
-    pub episodes: usize,
-    /// Independent runs (seeds seed, seed + 1, ...) sharing the embedding.
-    pub runs: usize,
-    pub seed: u64,
-    /// Scripted demonstrations put in the replay before each run's first episode (and the model
-    /// and DDPG trained on them once, `agent.updates-per-episode` steps): the thesis put 5
-    /// successful ones in for the sparse insertion task. Only for `robot = "reach"`, whose
-    /// demonstrator is built in.
-    pub demonstrations: usize,
-    /// Alg. 3: critic, exploration, horizon, objective, model, DDPG.
-    pub agent: AgentConfig,
-    /// The frozen embedding: where it is, how it is built when it is not there yet.
-    pub embedding: EmbeddingSettings,
-    /// Deadlines and retries of a dm_env_rpc robot.
-    pub remote: crate::roles::RemoteEnvConfig,
-    /// TLS and token of a dm_env_rpc robot's server (and of the fleet's gRPC).
-    pub security: crate::security::SecurityConfig,
-    /// Where the episodes run: 0 in this process; N > 0 on N actors over `fleet.transport`,
-    /// each planning where its robot is (`coadapt latent-actor`): the learner publishes the
-    /// networks before every episode, the latent transitions come back.
-    pub actors: usize,
-    /// With actors over shm or gRPC: start them here as `coadapt latent-actor` processes
-    /// (true), or wait for actors started elsewhere, e.g. on the robots' hosts (false).
-    pub start_actors: bool,
-    /// An episode an actor has sent nothing of for this long goes to another actor (seconds).
-    pub episode_lease_secs: f64,
-    /// An episode not back after this long stops the run (seconds).
-    pub episode_deadline_secs: f64,
-    /// How the learner and its actors talk (`transport`, `name`, `listen`, `connect`, ...:
-    /// as `coadapt run`'s `[fleet]`; in-process threads by default).
-    pub fleet: crate::fleet::FleetConfig,
-}
-
-impl Default for LatentConfig {
-    fn default() -> Self {
-        Self {
-            robot: "half-cheetah".into(),
-            camera: CameraSettings::default(),
-            episode_steps: 420,
-            episodes: 30,
-            runs: 5,
-            seed: 1,
-            demonstrations: 0,
-            agent: AgentConfig::default(),
-            embedding: EmbeddingSettings::default(),
-            remote: crate::roles::RemoteEnvConfig::default(),
-            security: crate::security::SecurityConfig::default(),
-            actors: 0,
-            start_actors: true,
-            episode_lease_secs: 120.0,
-            episode_deadline_secs: 3600.0,
-            fleet: crate::fleet::FleetConfig {
-                transport: crate::fleet::TransportKind::InProcess,
-                listen: "127.0.0.1:0".into(),
-                ..crate::fleet::FleetConfig::default()
-            },
-        }
-    }
-}
-
-/// DDPG from pixels exploring by latent trajectory optimisation (thesis ch. 4).
-#[derive(Debug, Args)]
-pub struct LatentArgs {
-    /// The TOML config (default: the pixel half-cheetah, Q critic, planning with H = 10).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Override `agent.explore`: plan or ou.
-    #[arg(long)]
-    pub explore: Option<String>,
-    /// Override `agent.critic`: q or v.
-    #[arg(long)]
-    pub critic: Option<String>,
-    /// Override `agent.objective`: sum-q, reward-plus-q or last-q.
-    #[arg(long)]
-    pub objective: Option<String>,
-    /// Override `agent.horizon`.
-    #[arg(long)]
-    pub horizon: Option<usize>,
-    /// Override `agent.updates-per-episode` (1000 in Fig. 4.5, 3000 in Fig. 4.6).
-    #[arg(long)]
-    pub updates_per_episode: Option<usize>,
-    /// Override `runs`.
-    #[arg(long)]
-    pub runs: Option<usize>,
-    /// Override `episodes`.
-    #[arg(long)]
-    pub episodes: Option<usize>,
-    /// Override `seed`.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Override `embedding.path`.
-    #[arg(long)]
-    pub embedding: Option<PathBuf>,
-    /// Only load or build the embedding, then stop.
-    #[arg(long)]
-    pub embed_only: bool,
-    /// The run directory (default runs/latent-<explore>-<critic>-h<H>-seed<seed>).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Override `actors`: run the episodes on N actors that plan where the robot is (0: in
-    /// this process).
-    #[arg(long)]
-    pub actors: Option<usize>,
-    /// Override fleet.transport: in-process (threads), shm or grpc.
-    #[arg(long, value_enum)]
-    pub transport: Option<crate::fleet::TransportKind>,
-}
-
-fn parse_enum<T: serde::de::DeserializeOwned>(key: &str, v: &str, choices: &str) -> anyhow::Result<T> {
-    T::deserialize(serde::de::value::StrDeserializer::<serde::de::value::Error>::new(v))
-        .map_err(|_| anyhow::anyhow!("{key} = {v:?}: one of {choices}"))
-}
-
-pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
-    let mut cfg: LatentConfig = match &a.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            toml::from_str(&text).with_context(|| format!("parsing {}", p.display()))?
-        }
-        None => LatentConfig::default(),
-    };
-    if let Some(v) = &a.explore {
-        cfg.agent.explore = parse_enum("explore", v, "plan, ou")?;
-    }
-    if let Some(v) = &a.critic {
-        cfg.agent.critic = parse_enum("critic", v, "q, v")?;
-    }
-    if let Some(v) = &a.objective {
-        cfg.agent.objective = parse_enum("objective", v, "sum-q, reward-plus-q, last-q")?;
-    }
-    if let Some(h) = a.horizon {
-        cfg.agent.horizon = h;
-    }
-    if let Some(u) = a.updates_per_episode {
-        cfg.agent.updates_per_episode = u;
-    }
-    if let Some(r) = a.runs {
-        cfg.runs = r;
-    }
-    if let Some(e) = a.episodes {
-        cfg.episodes = e;
-    }
-    if let Some(s) = a.seed {
-        cfg.seed = s;
-    }
-    if let Some(p) = &a.embedding {
-        cfg.embedding.path = p.display().to_string();
-    }
-    if let Some(n) = a.actors {
-        cfg.actors = n;
-    }
-    if let Some(t) = a.transport {
-        cfg.fleet.transport = t;
-    }
-    for (key, v) in [("episode-lease-secs", cfg.episode_lease_secs), ("episode-deadline-secs", cfg.episode_deadline_secs)] {
-        if !(v.is_finite() && v > 0.0 && v < 1e9) {
-            anyhow::bail!("{key} = {v}: a positive number of seconds");
-        }
-    }
-    if cfg.embedding.path.trim().is_empty() {
-        let name: String = cfg.robot.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
-        cfg.embedding.path = format!("runs/latent/embedding-{name}-{}px.safetensors", cfg.camera.side);
-    }
-    let c = &cfg.camera;
-    if !(8..=1024).contains(&c.side) || c.frames == 0 || c.action_repeat == 0 {
-        anyhow::bail!("camera: side from 8 to 1024, frames and action-repeat at least 1 ({c:?})");
-    }
-    if cfg.embedding.shape.image != c.side || cfg.embedding.shape.in_channels != 3 {
-        anyhow::bail!(
-            "embedding.shape: image = {} and in-channels = {} must match the camera ({} pixels square, RGB: 3)",
-            cfg.embedding.shape.image,
-            cfg.embedding.shape.in_channels,
-            c.side
-        );
-    }
-    for (key, v) in
-        [("runs", cfg.runs), ("episodes", cfg.episodes), ("episode-steps", cfg.episode_steps), ("agent.horizon", cfg.agent.horizon)]
-    {
-        if v == 0 {
-            anyhow::bail!("{key} = 0: at least 1");
-        }
-    }
-    if cfg.agent.plan_iterations == 0 && cfg.agent.explore == Explore::Plan {
-        anyhow::bail!("agent.plan-iterations = 0: planning needs at least 1 L-BFGS iteration");
-    }
-    if cfg.agent.ddpg.batch_size == 0 || cfg.agent.replay_capacity < cfg.agent.ddpg.batch_size {
-        anyhow::bail!(
-            "agent.ddpg.batch-size = {}: at least 1 and within agent.replay-capacity ({})",
-            cfg.agent.ddpg.batch_size,
-            cfg.agent.replay_capacity
-        );
-    }
-    if cfg.demonstrations > 0 && cfg.robot != "reach" {
-        anyhow::bail!(
-            "demonstrations = {}: only robot = \"reach\" has a scripted demonstrator (robot is {:?})",
-            cfg.demonstrations,
-            cfg.robot
-        );
-    }
-    if cfg.embedding.episodes == 0 || cfg.embedding.steps == 0 || cfg.embedding.batch == 0 {
-        anyhow::bail!("embedding: episodes, steps and batch at least 1 each");
-    }
-    Ok(cfg)
-}
+use crate::latent_config::resolve;
+pub use crate::latent_config::{CameraSettings, LatentArgs, LatentConfig};
+use crate::latent_embed::{FrameSource, load_or_build};
 
 /// The robot seen through the camera: a built-in robot drawn by [`Pixels`] (one frame per
 /// observation; the agent stacks codes), or a served one whose observation is the frame.
@@ -375,19 +138,34 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         anyhow::bail!("embedding {}: {:?} does not match the camera ({} pixels)", cfg.embedding.path, emb.cfg, cfg.camera.side);
     }
     let out = a.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/latent-{}-seed{}", label(&cfg), cfg.seed)));
-    if out.join("episodes.csv").exists() {
-        anyhow::bail!("{} already holds a run (episodes.csv); choose another --out", out.display());
-    }
+    let done = if a.resume {
+        crate::latent_resume::finished(&out, &cfg)?
+    } else {
+        if out.join("episodes.csv").exists() {
+            anyhow::bail!("{} already holds a run (episodes.csv); choose another --out, or --resume it", out.display());
+        }
+        crate::latent_resume::Finished::default()
+    };
     std::fs::create_dir_all(out.join("plots")).with_context(|| format!("creating {}", out.display()))?;
     std::fs::write(out.join("config.toml"), toml::to_string(&cfg)?).context("writing config.toml")?;
-    let mut csv = std::io::BufWriter::new(std::fs::File::create(out.join("episodes.csv"))?);
-    writeln!(csv, "run,episode,train_return,eval_return,train_steps,eval_steps,model_loss,plan_ms_mean,plan_ms_p90,seconds")?;
-    let t0 = Instant::now();
-    let mut train_curves: Vec<Vec<f64>> = Vec::new();
-    let mut eval_curves: Vec<Vec<f64>> = Vec::new();
+    // The finished runs' rows first (a resumed run), through a temporary file: a crash now
+    // leaves the old file or the new one, never half of one.
+    let tmp = out.join("episodes.csv.tmp");
+    let mut head = crate::latent_resume::HEADER.to_string() + "\n";
+    done.rows.iter().for_each(|r| head.extend([r.as_str(), "\n"]));
+    std::fs::write(&tmp, head).context("writing episodes.csv")?;
+    std::fs::rename(&tmp, out.join("episodes.csv")).context("writing episodes.csv")?;
+    let mut csv =
+        std::io::BufWriter::new(std::fs::OpenOptions::new().append(true).open(out.join("episodes.csv")).context("opening episodes.csv")?);
+    if done.runs > 0 {
+        eprintln!("latent {}: resuming {} after its {} finished run(s)", label(&cfg), out.display(), done.runs);
+    }
+    let t0 = Instant::now() - std::time::Duration::from_secs_f64(done.seconds.max(0.0));
+    let mut train_curves: Vec<Vec<f64>> = done.train;
+    let mut eval_curves: Vec<Vec<f64>> = done.eval;
     let mut all_plan_ms = Vec::new();
     let mut fleet = None;
-    for r in 0..cfg.runs {
+    for r in done.runs..cfg.runs {
         let seed = cfg.seed + r as u64;
         let mut env = camera_env(&cfg)?;
         let mut rng = coadapt_core::rng(seed, 11);
@@ -461,6 +239,10 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
     draw(&out.join("plots/returns.svg"), &label(&cfg), &cfg.robot, &train_curves, &eval_curves)?;
     let mean_last = |c: &[Vec<f64>]| c.iter().filter_map(|v| v.last()).sum::<f64>() / c.len().max(1) as f64;
     let (pm, p90) = latency(&all_plan_ms);
+    // A resumed run's earlier planned steps count in the mean (from their per-episode means);
+    // the 90th percentile covers the runs since the resume.
+    let n_new = all_plan_ms.len();
+    let pm = if n_new + done.plan_ms.1 > 0 { (pm * n_new as f64 + done.plan_ms.0) / (n_new + done.plan_ms.1) as f64 } else { pm };
     let summary = serde_json::json!({
         "run_dir": out.display().to_string(),
         "method": label(&cfg),
@@ -471,6 +253,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         "final_eval_return_mean": mean_last(&eval_curves),
         "plan_ms_mean": pm,
         "plan_ms_p90": p90,
+        "resumed_after_runs": done.runs,
         "seconds": t0.elapsed().as_secs_f64(),
     });
     println!("{summary}");
@@ -529,41 +312,4 @@ fn draw(path: &Path, method: &str, robot: &str, train: &[Vec<f64>], eval: &[Vec<
     chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
     root.present()?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
-
-    use super::*;
-
-    /// Every shipped config resolves (known keys, consistent camera and embedding).
-    #[test]
-    fn the_shipped_latent_configs_resolve() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/latent");
-        let mut n = 0;
-        for e in std::fs::read_dir(&dir).unwrap() {
-            let p = e.unwrap().path();
-            let args = LatentArgs {
-                config: Some(p.clone()),
-                explore: None,
-                critic: None,
-                objective: None,
-                horizon: None,
-                updates_per_episode: None,
-                runs: None,
-                episodes: None,
-                seed: None,
-                embedding: None,
-                embed_only: false,
-                out: None,
-                actors: None,
-                transport: None,
-            };
-            let cfg = resolve(&args).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
-            assert!(!cfg.embedding.path.is_empty());
-            n += 1;
-        }
-        assert!(n >= 2, "configs/latent holds {n} configs");
-    }
 }

@@ -26,7 +26,8 @@
 //!   `search_plot`: its learning-curve and synergy plots.
 //! - [`latent`]: `coadapt latent`, DDPG from pixels exploring by latent trajectory optimisation
 //!   (thesis ch. 4); [`latent_embed`]: its frozen embedding, built from state-based DDPG's frames;
-//!   [`latent_fleet`]: its episodes on actors that plan where the robot is, `coadapt latent-actor`.
+//!   [`latent_config`]: its config and flags; [`latent_fleet`]: its episodes on actors that plan where the robot is, `coadapt latent-actor`.
+//! - `latent_resume`: `coadapt latent --resume`, finished runs kept.
 //! - `actor_procs`: actor processes a learner starts itself (search, latent).
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
@@ -47,8 +48,10 @@ pub mod env_serve;
 pub mod fleet;
 pub mod health;
 pub mod latent;
+pub mod latent_config;
 pub mod latent_embed;
 pub mod latent_fleet;
+mod latent_resume;
 pub mod launch;
 pub mod metrics;
 pub mod plot;

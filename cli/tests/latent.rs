@@ -226,3 +226,45 @@ fn the_sparse_reach_stand_in_starts_from_demonstrations() {
     assert!(!o.status.success() && err.contains("demonstrations = 3: only robot = \"reach\""), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A run stopped part-way (here: its episodes.csv cut in the middle of the second run, the
+/// last row half written) goes on with --resume: the finished run is kept, the unfinished one
+/// runs again, and the rows equal an uninterrupted run's. A resume with another config is
+/// refused naming the key.
+#[test]
+fn a_stopped_latent_run_resumes_from_its_first_unfinished_run() {
+    let dir = std::env::temp_dir().join(format!("coadapt-latent-resume-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let emb = dir.join("emb.safetensors");
+    let emb_s = emb.to_str().unwrap();
+    let whole = dir.join("whole");
+    let o = coadapt(&["latent", "--config", TINY, "--embedding", emb_s, "--out", whole.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let results = |out: &std::path::Path| -> Vec<String> {
+        let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+        csv.lines().skip(1).map(|l| l.split(',').take(7).collect::<Vec<_>>().join(",")).collect()
+    };
+    let want = results(&whole);
+    assert_eq!(want.len(), 6);
+    // The "crash": run 0 whole, one episode of run 1, half a row.
+    let cut = dir.join("cut");
+    std::fs::create_dir_all(&cut).unwrap();
+    std::fs::copy(whole.join("config.toml"), cut.join("config.toml")).unwrap();
+    let csv = std::fs::read_to_string(whole.join("episodes.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    let partial = format!("{}\n{}", lines[..5].join("\n"), &lines[5][..10]);
+    std::fs::write(cut.join("episodes.csv"), partial).unwrap();
+    let o = coadapt(&["latent", "--config", TINY, "--embedding", emb_s, "--horizon", "4", "--out", cut.to_str().unwrap(), "--resume"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("config differs") && err.contains("agent.horizon"), "{err}");
+    let o = coadapt(&["latent", "--config", TINY, "--embedding", emb_s, "--out", cut.to_str().unwrap(), "--resume"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("after its 1 finished run(s)") && err.contains("not a whole row"), "{err}");
+    assert!(!err.contains("run 1/2 episode 1/3"), "run 0 ran again: {err}");
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["resumed_after_runs"], 1);
+    assert!(summary["plan_ms_mean"].as_f64().unwrap() > 0.0);
+    assert_eq!(results(&cut), want);
+    assert!(cut.join("run-1/agent.safetensors").exists() && cut.join("plots/returns.svg").exists());
+}
