@@ -216,8 +216,9 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
             )?;
             csv.flush()?;
             agent.save(&dir.join("agent.safetensors")).context("writing the checkpoint")?;
+            let plan = if fleet.is_some() { "on the actors".to_string() } else { format!("{mean:.1} ms/step") };
             eprintln!(
-                "latent {}: run {}/{} episode {}/{}: train {:.1} eval {:.1} model loss {loss:.4} plan {mean:.1} ms/step ({:.0} s)",
+                "latent {}: run {}/{} episode {}/{}: train {:.1} eval {:.1} model loss {loss:.4} plan {plan} ({:.0} s)",
                 label(&cfg),
                 r + 1,
                 cfg.runs,
@@ -233,6 +234,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         train_curves.push(tc);
         eval_curves.push(ec);
     }
+    let on_actors = fleet.is_some();
     if let Some(f) = fleet {
         f.finish();
     }
@@ -243,6 +245,16 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
     // the 90th percentile covers the runs since the resume.
     let n_new = all_plan_ms.len();
     let pm = if n_new + done.plan_ms.1 > 0 { (pm * n_new as f64 + done.plan_ms.0) / (n_new + done.plan_ms.1) as f64 } else { pm };
+    // Through a fleet: the mean over the actors' planned steps (their CSVs, for the actors
+    // started here); no percentile across episodes can be rebuilt from theirs.
+    let (pm, p90) = if on_actors {
+        (
+            crate::latent_fleet::actors_plan_ms(&out.join("actors")).map_or(serde_json::Value::Null, serde_json::Value::from),
+            serde_json::Value::Null,
+        )
+    } else {
+        (serde_json::Value::from(pm), serde_json::Value::from(p90))
+    };
     let summary = serde_json::json!({
         "run_dir": out.display().to_string(),
         "method": label(&cfg),

@@ -100,6 +100,27 @@ fn latency_log(path: Option<&Path>, id: u64) -> anyhow::Result<impl FnMut(&Actor
     })
 }
 
+/// The mean planning latency per planned step over the actors' CSVs in `dir` (each training
+/// episode's mean weighted by its steps); `None` without any.
+pub(crate) fn actors_plan_ms(dir: &Path) -> Option<f64> {
+    let (mut sum, mut n) = (0.0, 0.0);
+    for e in std::fs::read_dir(dir).ok()?.flatten() {
+        let Ok(text) = std::fs::read_to_string(e.path()) else { continue };
+        for row in text.lines().skip(1) {
+            let v: Vec<&str> = row.split(',').collect();
+            let (Some(steps), Some(ms)) = (v.get(2).and_then(|s| s.parse::<f64>().ok()), v.get(4).and_then(|s| s.parse::<f64>().ok()))
+            else {
+                continue;
+            };
+            if v.get(1) == Some(&"true") && ms.is_finite() && ms > 0.0 {
+                sum += ms * steps;
+                n += steps;
+            }
+        }
+    }
+    (n > 0.0).then(|| sum / n)
+}
+
 impl Fleet {
     /// The learner's side over `cfg.fleet`, with `cfg.actors` actors started here (threads,
     /// or processes unless `start-actors = false`); `out` is the run directory (its

@@ -48,6 +48,8 @@ fn a_latent_run_on_actors_equals_the_run_in_process() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(o.status.success(), "{transport}: {err}");
         assert_eq!(results(&out), want, "{transport}");
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert!(summary["plan_ms_mean"].as_f64().unwrap() > 0.0, "{transport}: {summary}");
         // The checkpoints hold the same networks.
         for r in 0..2 {
             let f = format!("run-{r}/agent.safetensors");
