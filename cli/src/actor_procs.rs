@@ -92,3 +92,91 @@ pub(crate) fn spawn(
     }
     Ok(children)
 }
+
+/// How an actor process joins its learner's fleet (over the config's `[fleet]`).
+#[derive(Debug, clap::Args)]
+pub struct JoinArgs {
+    /// Override fleet.transport: shm or grpc.
+    #[arg(long, value_enum)]
+    pub transport: Option<crate::fleet::TransportKind>,
+    /// Override fleet.name: the shared-memory fleet to join.
+    #[arg(long)]
+    pub fleet: Option<String>,
+    /// Override fleet.connect: the learner's gRPC address.
+    #[arg(long)]
+    pub connect: Option<String>,
+}
+
+impl JoinArgs {
+    /// `fleet` with the overrides; an actor process cannot join threads of another process.
+    pub(crate) fn apply(&self, fleet: &mut FleetConfig) -> anyhow::Result<()> {
+        if let Some(t) = self.transport {
+            fleet.transport = t;
+        }
+        if let Some(f) = &self.fleet {
+            fleet.name = f.clone();
+        }
+        if let Some(c) = &self.connect {
+            fleet.connect = c.clone();
+        }
+        if fleet.transport == crate::fleet::TransportKind::InProcess {
+            anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
+        }
+        Ok(())
+    }
+}
+
+/// What a learner starting actor processes needs to say.
+pub(crate) struct ProcessFleet<'a> {
+    /// `search`, `latent`: the learner's name in messages and in a default fleet name.
+    pub role: &'a str,
+    /// The actors' subcommand.
+    pub subcommand: &'a str,
+    pub actors: usize,
+    /// Start them here (true) or wait for actors started elsewhere.
+    pub start: bool,
+    /// The run directory: its `config.toml` is the actors', its `logs/` their logs.
+    pub out: &'a Path,
+    pub extra: &'a dyn Fn(usize) -> Vec<std::ffi::OsString>,
+}
+
+impl ProcessFleet<'_> {
+    /// The learner's links over `fleet` (shm or gRPC; a shm fleet without a name gets one),
+    /// and the actors started here (none when `start` is false).
+    pub(crate) fn start(
+        &self,
+        fleet: &FleetConfig,
+        dims: coadapt_transport::messages::Dims,
+        max_episode_steps: usize,
+        security: &crate::security::SecurityConfig,
+    ) -> anyhow::Result<(coadapt_transport::LearnerLinks, crate::fleet::LearnerGuard, Children)> {
+        use crate::fleet::{LearnerGuard, TransportKind};
+        let mut fleet = fleet.clone();
+        if fleet.transport == TransportKind::Shm && fleet.name.is_empty() {
+            fleet.name = format!("coadapt-{}-{}", self.role, std::process::id());
+        }
+        let (links, guard) = fleet.learner_links(Some(dims), Some(max_episode_steps), security)?;
+        let connect = match &guard {
+            LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
+            LearnerGuard::None => String::new(),
+        };
+        let (role, config) = (self.role, self.out.join("config.toml"));
+        let children = if self.start {
+            let logs = self.out.join("logs");
+            let kids = spawn(self.subcommand, &config, self.actors, &fleet, &connect, &logs, self.extra)?;
+            eprintln!("{role}: {} actors over {} (logs in {})", self.actors, fleet.transport.name(), logs.display());
+            kids
+        } else {
+            eprintln!(
+                "{role}: waiting for {} actors over {} ({}): coadapt {} --config {} --id N",
+                self.actors,
+                fleet.transport.name(),
+                if connect.is_empty() { &fleet.name } else { &connect },
+                self.subcommand,
+                config.display()
+            );
+            Children::new(Vec::new())
+        };
+        Ok((links, guard, children))
+    }
+}

@@ -28,15 +28,9 @@ pub struct LatentActorArgs {
     /// This actor's id, unique among the run's actors.
     #[arg(long)]
     pub id: u64,
-    /// Override fleet.transport: shm or grpc.
-    #[arg(long, value_enum)]
-    pub transport: Option<TransportKind>,
-    /// Override fleet.name: the shared-memory fleet to join.
-    #[arg(long)]
-    pub fleet: Option<String>,
-    /// Override fleet.connect: the learner's gRPC address.
-    #[arg(long)]
-    pub connect: Option<String>,
+    /// How to reach the learner (over the config's [fleet]).
+    #[command(flatten)]
+    pub join: crate::actor_procs::JoinArgs,
     /// Override `robot`: a built-in robot or `dm-env-rpc://HOST:PORT` (this host's camera
     /// robot).
     #[arg(long)]
@@ -151,31 +145,16 @@ impl Fleet {
                 (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
             }
             _ => {
-                let mut fleet = cfg.fleet.clone();
-                if fleet.transport == TransportKind::Shm && fleet.name.is_empty() {
-                    fleet.name = format!("coadapt-latent-{}", std::process::id());
-                }
-                let (links, guard) = fleet.learner_links(Some(dims), Some(cfg.episode_steps), &cfg.security)?;
-                let connect = match &guard {
-                    LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
-                    LearnerGuard::None => String::new(),
+                let extra = |i: usize| vec!["--latency-csv".into(), csv(i).into_os_string()];
+                let procs = crate::actor_procs::ProcessFleet {
+                    role: "latent",
+                    subcommand: "latent-actor",
+                    actors: cfg.actors,
+                    start: cfg.start_actors,
+                    out,
+                    extra: &extra,
                 };
-                let children = if cfg.start_actors {
-                    let logs = out.join("logs");
-                    let extra = |i: usize| vec!["--latency-csv".into(), csv(i).into_os_string()];
-                    let kids =
-                        crate::actor_procs::spawn("latent-actor", &out.join("config.toml"), cfg.actors, &fleet, &connect, &logs, &extra)?;
-                    eprintln!("latent: {} actors over {} (logs in {})", cfg.actors, fleet.transport.name(), logs.display());
-                    kids
-                } else {
-                    eprintln!(
-                        "latent: waiting for actors over {} ({}): coadapt latent-actor --config {} --id N",
-                        fleet.transport.name(),
-                        if connect.is_empty() { &fleet.name } else { &connect },
-                        out.join("config.toml").display()
-                    );
-                    Children::new(Vec::new())
-                };
+                let (links, guard, children) = procs.start(&cfg.fleet, dims, cfg.episode_steps, &cfg.security)?;
                 (links, guard, Vec::new(), children)
             }
         };
@@ -209,18 +188,7 @@ impl Fleet {
 pub fn actor(a: LatentActorArgs) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(&a.config).with_context(|| format!("reading {}", a.config.display()))?;
     let mut cfg: LatentConfig = toml::from_str(&text).with_context(|| format!("parsing {}", a.config.display()))?;
-    if let Some(t) = a.transport {
-        cfg.fleet.transport = t;
-    }
-    if let Some(f) = &a.fleet {
-        cfg.fleet.name = f.clone();
-    }
-    if let Some(c) = &a.connect {
-        cfg.fleet.connect = c.clone();
-    }
-    if cfg.fleet.transport == TransportKind::InProcess {
-        anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
-    }
+    a.join.apply(&mut cfg.fleet)?;
     if let Some(r) = &a.robot {
         cfg.robot = r.clone();
     }

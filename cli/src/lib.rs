@@ -28,10 +28,11 @@
 //!   (thesis ch. 4); [`latent_embed`]: its frozen embedding, built from state-based DDPG's frames;
 //!   [`latent_config`]: its config and flags; [`latent_fleet`]: its episodes on actors that plan where the robot is, `coadapt latent-actor`.
 //! - `latent_resume`: `coadapt latent --resume`, finished runs kept.
-//! - `actor_procs`: actor processes a learner starts itself (search, latent).
+//! - [`actor_procs`]: actor processes a learner starts itself (search, latent), and how an actor
+//!   process joins its learner (`JoinArgs`).
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
 
-mod actor_procs;
+pub mod actor_procs;
 pub mod bench;
 pub mod bench_conv;
 pub mod bench_design;

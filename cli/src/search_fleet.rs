@@ -20,15 +20,9 @@ pub struct SearchActorArgs {
     /// This actor's id, unique among the search's actors.
     #[arg(long)]
     pub id: u64,
-    /// Override fleet.transport: shm or grpc.
-    #[arg(long, value_enum)]
-    pub transport: Option<TransportKind>,
-    /// Override fleet.name: the shared-memory fleet to join.
-    #[arg(long)]
-    pub fleet: Option<String>,
-    /// Override fleet.connect: the search's gRPC address.
-    #[arg(long)]
-    pub connect: Option<String>,
+    /// How to reach the search (over the config's [fleet]).
+    #[command(flatten)]
+    pub join: crate::actor_procs::JoinArgs,
     /// Override `robot`: step this dm_env_rpc robot (`dm-env-rpc://HOST:PORT`) instead of the
     /// built-in planar one.
     #[arg(long)]
@@ -71,37 +65,15 @@ impl Fleet {
                 (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
             }
             _ => {
-                let mut fleet = cfg.fleet.clone();
-                if fleet.transport == TransportKind::Shm && fleet.name.is_empty() {
-                    fleet.name = format!("coadapt-search-{}", std::process::id());
-                }
-                let (links, guard) = fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
-                let connect = match &guard {
-                    LearnerGuard::Grpc(server) => format!("http://127.0.0.1:{}", server.local_addr().port()),
-                    LearnerGuard::None => String::new(),
+                let procs = crate::actor_procs::ProcessFleet {
+                    role: "search",
+                    subcommand: "search-actor",
+                    actors: cfg.actors,
+                    start: cfg.start_actors,
+                    out,
+                    extra: &|_| vec![],
                 };
-                let children = if cfg.start_actors {
-                    let logs = out.join("logs");
-                    let kids = crate::actor_procs::spawn(
-                        "search-actor",
-                        &out.join("config.toml"),
-                        cfg.actors,
-                        &fleet,
-                        &connect,
-                        &logs,
-                        &|_| vec![],
-                    )?;
-                    eprintln!("search: {} actors over {} (logs in {})", cfg.actors, fleet.transport.name(), logs.display());
-                    kids
-                } else {
-                    eprintln!(
-                        "search: waiting for {} actors over {} ({})",
-                        cfg.actors,
-                        fleet.transport.name(),
-                        if connect.is_empty() { &fleet.name } else { &connect }
-                    );
-                    Children::new(Vec::new())
-                };
+                let (links, guard, children) = procs.start(&cfg.fleet, dims, spec.max_episode_steps, &cfg.security)?;
                 (links, guard, Vec::new(), children)
             }
         };
@@ -140,18 +112,7 @@ pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
     if cfg.task != "planar" {
         anyhow::bail!("task: {:?}; only \"planar\" so far", cfg.task);
     }
-    if let Some(t) = a.transport {
-        cfg.fleet.transport = t;
-    }
-    if let Some(f) = &a.fleet {
-        cfg.fleet.name = f.clone();
-    }
-    if let Some(c) = &a.connect {
-        cfg.fleet.connect = c.clone();
-    }
-    if cfg.fleet.transport == TransportKind::InProcess {
-        anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
-    }
+    a.join.apply(&mut cfg.fleet)?;
     if let Some(r) = &a.robot {
         cfg.robot = r.clone();
     }
