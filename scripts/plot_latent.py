@@ -3,6 +3,8 @@ docs/EXPERIMENTS.md.
 
 usage: .venv-peers/bin/python scripts/plot_latent.py [--window W] OUT.png "TITLE" LABEL=DIR [LABEL=DIR ...]
 
+DIR may be `DIR1+DIR2+...` (or CSV files): their runs joined, unfinished runs left out.
+
 Each DIR holds an episodes.csv of `coadapt latent` (runs x episodes). Two panels: the
 deterministic actor's evaluation return after each episode (test time) and the training
 episode's return with exploration (training time), mean over runs with +-1 standard
@@ -24,13 +26,24 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-def load(d):
-    runs = {}
-    with open(os.path.join(d, "episodes.csv")) as f:
-        for row in csv.DictReader(f):
-            r = runs.setdefault(int(row["run"]), [])
-            r.append((float(row["train_return"]), float(row["eval_return"])))
-    return [runs[k] for k in sorted(runs)]
+def load(spec):
+    """Runs of DIR (its episodes.csv) or of a CSV file; `A+B` joins the runs of A and B in
+    order (a campaign continued under another name with later seeds). Runs shorter than the
+    longest (a run cut by a session's end) are left out, and said so."""
+    all_runs = []
+    for d in spec.split("+"):
+        runs = {}
+        path = d if d.endswith(".csv") else os.path.join(d, "episodes.csv")
+        with open(path) as f:
+            for row in csv.DictReader(f):
+                r = runs.setdefault(int(row["run"]), [])
+                r.append((float(row["train_return"]), float(row["eval_return"])))
+        all_runs += [runs[k] for k in sorted(runs)]
+    n = max(len(r) for r in all_runs)
+    cut = [r for r in all_runs if len(r) < n]
+    if cut:
+        print(f"{spec}: {len(cut)} unfinished run(s) left out", file=sys.stderr)
+    return [r for r in all_runs if len(r) == n]
 
 
 def band(curves):
