@@ -11,10 +11,8 @@
 //! [`LatentAgent::acting_weights`]: crate::LatentAgent::acting_weights
 
 use coadapt_core::Rng64;
-use coadapt_learner::Exploration;
+use coadapt_learner::{Exploration, ExplorationNoise};
 use coadapt_nn::{Activations, Mlp, NnError};
-use rand::Rng;
-use rand_distr::StandardNormal;
 
 use crate::{AgentConfig, CriticKind, Embedding, EmbeddingWork, Explore, LatentDynamics, Lbfgsb, Objective, PlanWork, Planner};
 
@@ -158,7 +156,7 @@ pub struct LatentActor {
     model: LatentDynamics,
     model_params: Vec<f32>,
     reward: Option<(Mlp, Vec<f32>)>,
-    ou: Vec<f32>,
+    noise: ExplorationNoise,
     rng: Rng64,
     act_ws: Activations,
     scratch: PlanScratch,
@@ -196,7 +194,7 @@ impl LatentActor {
             critic,
             model,
             reward,
-            ou: vec![0.0; act],
+            noise: ExplorationNoise::new(act),
             rng: coadapt_core::rng(seed, 13),
             act_ws: Activations::default(),
             scratch: PlanScratch::default(),
@@ -250,7 +248,7 @@ impl LatentActor {
 
     /// The stacked state after a reset to `frame`; the OU process restarts.
     pub fn reset(&mut self, frame: &[f32]) -> &[f32] {
-        self.ou.fill(0.0);
+        self.noise.reset();
         self.frames.reset(frame)
     }
 
@@ -280,20 +278,9 @@ impl LatentActor {
             *a = r.tanh();
         }
         if explore {
-            // As the agent's DDPG: OU (x <- x + theta (0 - x) + sigma N(0, 1)), or Gaussian
-            // where the Q critic's DDPG is configured so (the value critic's is always OU).
-            let (sigma, theta) = (self.cfg.ddpg.sigma, self.cfg.ddpg.theta);
-            let ou = self.cfg.critic == CriticKind::V || self.cfg.ddpg.exploration == Exploration::OrnsteinUhlenbeck;
-            for (a, x) in action.iter_mut().zip(&mut self.ou) {
-                let n: f32 = self.rng.sample(StandardNormal);
-                let noise = if ou {
-                    *x += -theta * *x + sigma * n;
-                    *x
-                } else {
-                    sigma * n
-                };
-                *a = (*a + noise).clamp(-1.0, 1.0);
-            }
+            // As the agent's DDPG: the Q critic's as configured, the value critic's always OU.
+            let kind = if self.cfg.critic == CriticKind::V { Exploration::OrnsteinUhlenbeck } else { self.cfg.ddpg.exploration };
+            self.noise.perturb(&mut self.rng, kind, self.cfg.ddpg.sigma, self.cfg.ddpg.theta, action);
         }
         None
     }

@@ -6,10 +6,9 @@
 //! model (see [`crate::ValueLosses`]), then Adam on each and the Polyak targets.
 
 use coadapt_core::{Batch, Rng64};
-use coadapt_learner::config::DdpgConfig;
+use coadapt_learner::ExplorationNoise;
+use coadapt_learner::config::{DdpgConfig, Exploration};
 use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NnError, clamp_elementwise, polyak};
-use rand::Rng;
-use rand_distr::StandardNormal;
 
 use crate::{LatentDynamics, ValueLosses};
 
@@ -36,7 +35,7 @@ pub struct ValueParams {
     grad_v: Vec<f32>,
     rew: Vec<f32>,
     done: Vec<bool>,
-    ou: Vec<f32>,
+    ou: ExplorationNoise,
     act: Activations,
     rng: Rng64,
 }
@@ -67,7 +66,7 @@ impl ValueDdpg {
             v: vp,
             rew: Vec::new(),
             done: Vec::new(),
-            ou: vec![0.0; act],
+            ou: ExplorationNoise::new(act),
             act: Activations::default(),
             rng,
         };
@@ -76,7 +75,7 @@ impl ValueDdpg {
 
     /// Restarts the OU process (at each episode's start).
     pub fn reset_noise(&mut self) {
-        self.p.ou.fill(0.0);
+        self.p.ou.reset();
     }
 
     /// `mu(z)`, plus OU noise unless `deterministic`, clipped to `[-1, 1]`.
@@ -88,12 +87,8 @@ impl ValueDdpg {
         if deterministic {
             return;
         }
-        let (sigma, theta) = (self.cfg.sigma, self.cfg.theta);
-        for (a, x) in action.iter_mut().zip(&mut self.p.ou) {
-            let n: f32 = self.p.rng.sample(StandardNormal);
-            *x += -theta * *x + sigma * n;
-            *a = (*a + *x).clamp(-1.0, 1.0);
-        }
+        // Always OU, whatever `cfg.exploration` says (the thesis's ch. 4 baseline).
+        self.p.ou.perturb(&mut self.p.rng, Exploration::OrnsteinUhlenbeck, self.cfg.sigma, self.cfg.theta, action);
     }
 }
 

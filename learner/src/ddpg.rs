@@ -45,6 +45,41 @@ struct CriticWork {
     grad: Vec<f32>,
 }
 
+/// DDPG's exploration noise on an action in `[-1, 1]`: Ornstein-Uhlenbeck, `x <- x + theta
+/// (0 - x) + sigma N(0, 1)` with dt = 1 as rlkit's OUStrategy, or independent Gaussian
+/// `sigma N(0, 1)`; the noisy action is clipped to the box. The caller owns the random stream.
+#[derive(Clone, Debug)]
+pub struct ExplorationNoise {
+    x: Vec<f32>,
+}
+
+impl ExplorationNoise {
+    /// The process for actions of `dim` values, at rest.
+    pub fn new(dim: usize) -> Self {
+        Self { x: vec![0.0; dim] }
+    }
+
+    /// Back to rest (at each episode's start).
+    pub fn reset(&mut self) {
+        self.x.fill(0.0);
+    }
+
+    /// Adds one step of the noise to `action` and clips it to `[-1, 1]`.
+    pub fn perturb<R: Rng + ?Sized>(&mut self, rng: &mut R, kind: Exploration, sigma: f32, theta: f32, action: &mut [f32]) {
+        for (a, x) in action.iter_mut().zip(&mut self.x) {
+            let n: f32 = rng.sample(StandardNormal);
+            let noise = match kind {
+                Exploration::OrnsteinUhlenbeck => {
+                    *x += -theta * *x + sigma * n;
+                    *x
+                }
+                Exploration::Gaussian => sigma * n,
+            };
+            *a = (*a + noise).clamp(-1.0, 1.0);
+        }
+    }
+}
+
 /// A DDPG agent with its exploration process.
 #[derive(Clone, Debug)]
 pub struct Ddpg {
@@ -62,7 +97,7 @@ pub struct Ddpg {
     aw: ActorWork,
     cw: CriticWork,
     act_ws: Activations,
-    ou_state: Vec<f32>,
+    noise: ExplorationNoise,
     rng: Rng64,
 }
 
@@ -89,7 +124,7 @@ impl Ddpg {
             aw: ActorWork::default(),
             cw: CriticWork::default(),
             act_ws: Activations::default(),
-            ou_state: vec![0.0; act_dim],
+            noise: ExplorationNoise::new(act_dim),
             rng,
             cfg,
         })
@@ -122,7 +157,7 @@ impl Ddpg {
 
     /// Restarts the exploration process (call at each episode start).
     pub fn reset_noise(&mut self) {
-        self.ou_state.fill(0.0);
+        self.noise.reset();
     }
 
     /// `mu(s)`, plus exploration noise unless `deterministic`, clipped to `[-1, 1]`.
@@ -134,19 +169,7 @@ impl Ddpg {
         if deterministic {
             return;
         }
-        let (sigma, theta) = (self.cfg.sigma, self.cfg.theta);
-        for (a, x) in action.iter_mut().zip(&mut self.ou_state) {
-            let n: f32 = self.rng.sample(StandardNormal);
-            let noise = match self.cfg.exploration {
-                // x <- x + theta (0 - x) + sigma N(0, 1), dt = 1 as rlkit's OUStrategy.
-                Exploration::OrnsteinUhlenbeck => {
-                    *x += -theta * *x + sigma * n;
-                    *x
-                }
-                Exploration::Gaussian => sigma * n,
-            };
-            *a = (*a + noise).clamp(-1.0, 1.0);
-        }
+        self.noise.perturb(&mut self.rng, self.cfg.exploration, self.cfg.sigma, self.cfg.theta, action);
     }
 
     /// One gradient step of actor and critic, then the Polyak targets.

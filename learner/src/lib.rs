@@ -34,5 +34,5 @@ pub mod train;
 
 pub use agent::{Agent, Algo};
 pub use config::{DdpgConfig, Exploration, SacConfig};
-pub use ddpg::{Ddpg, DdpgLosses};
+pub use ddpg::{Ddpg, DdpgLosses, ExplorationNoise};
 pub use sac::{Sac, SacLosses};
