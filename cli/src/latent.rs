@@ -68,29 +68,40 @@ struct Episode {
     ret: f32,
     steps: usize,
     plan_ms: Vec<f64>,
+    /// Steps with a positive reward (the reach robot's success).
+    rewarded: usize,
 }
 
-/// One episode of `agent` on `env`: exploring and stored (training), or deterministic.
-fn episode(agent: &mut LatentAgent, env: &mut dyn Env, seed: u64, steps: usize, train: bool) -> anyhow::Result<Episode> {
+/// One episode of `agent` on `env` from `seed`, each action from `choose` (which says whether
+/// it planned), each step stored in the agent's replay if `store`.
+fn play<E: Env + ?Sized>(
+    agent: &mut LatentAgent,
+    env: &mut E,
+    seed: u64,
+    steps: usize,
+    store: bool,
+    mut choose: impl FnMut(&mut LatentAgent, &E, &mut [f32]) -> bool,
+) -> anyhow::Result<Episode> {
     let px = agent.image_len();
     let design = env.spec().default_design.clone();
     let first = env.reset(seed, &design)?[..px].to_vec();
     let mut z = agent.reset(&first).to_vec();
     let mut a = vec![0.0; env.spec().act_dim()];
-    let mut out = Episode { ret: 0.0, steps: 0, plan_ms: Vec::new() };
+    let mut out = Episode { ret: 0.0, steps: 0, plan_ms: Vec::new(), rewarded: 0 };
     for _ in 0..steps {
         let t = Instant::now();
-        if agent.act(train, &mut a).is_some() {
+        if choose(agent, env, &mut a) {
             out.plan_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
         let s = env.step(&a)?;
         let (r, term, trunc) = (s.reward, s.terminated, s.truncated);
         let next = agent.observe(&s.observation[..px]).to_vec();
-        if train {
+        if store {
             agent.store(&z, &a, r, &next, term)?;
         }
         out.ret += r;
         out.steps += 1;
+        out.rewarded += usize::from(r > 0.0);
         z = next;
         if term || trunc {
             break;
@@ -99,31 +110,22 @@ fn episode(agent: &mut LatentAgent, env: &mut dyn Env, seed: u64, steps: usize, 
     Ok(out)
 }
 
+/// One episode of `agent` on `env`: exploring and stored (training), or deterministic.
+fn episode(agent: &mut LatentAgent, env: &mut dyn Env, seed: u64, steps: usize, train: bool) -> anyhow::Result<Episode> {
+    play(agent, env, seed, steps, train, |agent, _, a| agent.act(train, a).is_some())
+}
+
 /// `n` episodes of the reach robot's scripted demonstrator through the camera, stored in the
 /// agent's replay; how many succeeded.
 fn demonstrate(agent: &mut LatentAgent, source: &mut FrameSource, n: usize, seed: u64, steps: usize) -> anyhow::Result<usize> {
     let FrameSource::Drawn(env) = source else { anyhow::bail!("demonstrations need the built-in reach robot") };
-    let px = agent.image_len();
-    let design = env.spec().default_design.clone();
-    let mut a = vec![0.0; env.spec().act_dim()];
     let mut ok = 0;
     for d in 0..n {
-        let first = env.reset(seed * 1_000_003 + 500_000 + d as u64, &design)?[..px].to_vec();
-        let mut z = agent.reset(&first).to_vec();
-        for _ in 0..steps {
-            coadapt_robots::reach::demonstration_action(env.state(), &mut a);
-            let s = env.step(&a)?;
-            let (r, term, trunc) = (s.reward, s.terminated, s.truncated);
-            let next = agent.observe(&s.observation[..px]).to_vec();
-            agent.store(&z, &a, r, &next, term)?;
-            z = next;
-            if r > 0.0 {
-                ok += 1;
-            }
-            if term || trunc {
-                break;
-            }
-        }
+        let e = play(agent, env.as_mut(), seed * 1_000_003 + 500_000 + d as u64, steps, true, |_, env, a| {
+            coadapt_robots::reach::demonstration_action(env.state(), a);
+            false
+        })?;
+        ok += e.rewarded;
     }
     Ok(ok)
 }
@@ -195,7 +197,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
                     None => episode(agent, env.env(), seed, cfg.episode_steps, train),
                     Some(f) => {
                         let e = f.runner.episode(agent, train, seed, index)?;
-                        Ok(Episode { ret: e.episode_return, steps: e.steps, plan_ms: Vec::new() })
+                        Ok(Episode { ret: e.episode_return, steps: e.steps, plan_ms: Vec::new(), rewarded: 0 })
                     }
                 }
             };
