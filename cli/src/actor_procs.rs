@@ -38,10 +38,12 @@ impl Children {
         })
     }
 
-    /// Waits up to ten seconds for the processes to end by themselves (their assignment queue
-    /// closed), then kills what is left.
+    /// Waits for the processes to end by themselves (their assignment queue closed), then
+    /// kills what is left. The grace outlasts an actor's own connect timeout (10 s on shared
+    /// memory): an actor that started late on a loaded machine, after a short run was already
+    /// over, is still looking for its learner and ends by itself, saying so, within it.
     pub(crate) fn finish(self) {
-        let deadline = Instant::now() + Duration::from_secs(10);
+        let deadline = Instant::now() + Duration::from_secs(25);
         for c in self.lock().iter_mut() {
             while matches!(c.try_wait(), Ok(None)) && Instant::now() < deadline {
                 std::thread::sleep(Duration::from_millis(20));
