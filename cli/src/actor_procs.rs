@@ -65,6 +65,17 @@ impl Drop for Children {
     }
 }
 
+/// Joins a learner's actor threads (their assignment queue closed), reporting any that failed.
+pub(crate) fn join_threads<E: std::fmt::Display>(role: &str, threads: Vec<std::thread::JoinHandle<Result<u64, E>>>) {
+    for t in threads {
+        match t.join() {
+            Ok(Err(e)) => eprintln!("{role}: an actor thread failed: {e}"),
+            Err(_) => eprintln!("{role}: an actor thread panicked"),
+            Ok(Ok(_)) => {}
+        }
+    }
+}
+
 /// Starts `n` actors as `coadapt <subcommand> --config <config> --id <i> --transport ...
 /// --fleet ... [--connect ...] <extra(i)>`, each logging to `<logs>/actor-<i>.log`.
 pub(crate) fn spawn(

@@ -173,13 +173,7 @@ impl Fleet {
         let Self { runner, guard, threads, children } = self;
         drop(runner);
         drop(guard);
-        for t in threads {
-            match t.join() {
-                Ok(Err(e)) => eprintln!("latent: an actor thread failed: {e}"),
-                Err(_) => eprintln!("latent: an actor thread panicked"),
-                Ok(Ok(_)) => {}
-            }
-        }
+        crate::actor_procs::join_threads("latent", threads);
         children.finish();
     }
 }

@@ -47,7 +47,7 @@ impl Fleet {
         let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
         let lease = std::time::Duration::from_secs_f64(cfg.rollout_lease_secs);
         let deadline = std::time::Duration::from_secs_f64(cfg.iteration_deadline_secs);
-        let (links, guard, mut threads, children) = match cfg.fleet.transport {
+        let (links, guard, threads, children) = match cfg.fleet.transport {
             TransportKind::InProcess => {
                 let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
                 let threads = actors
@@ -80,7 +80,6 @@ impl Fleet {
         let mut runner = FleetRunner::new(links, spec.max_episode_steps, spec.act_dim(), spec.obs_dim(), PlanarEnv::step_cost);
         runner.lease = lease;
         runner.deadline = deadline;
-        threads.shrink_to_fit();
         if !children.is_empty() {
             // Actors started here that have all ended will never bring the rollouts back: say
             // so instead of waiting for the deadline.
@@ -94,13 +93,7 @@ impl Fleet {
         let Self { runner, guard, threads, children } = self;
         drop(runner);
         drop(guard);
-        for t in threads {
-            match t.join() {
-                Ok(Err(e)) => eprintln!("search: an actor thread failed: {e}"),
-                Err(_) => eprintln!("search: an actor thread panicked"),
-                Ok(Ok(_)) => {}
-            }
-        }
+        crate::actor_procs::join_threads("search", threads);
         children.finish();
     }
 }

@@ -101,7 +101,10 @@ pub fn run_actor(
         };
         let mut out = ActorEpisode { assignment: asg.id, train, ..ActorEpisode::default() };
         let obs = env.reset(asg.seed, design).map_err(|e| fail(format!("reset: {e}")))?;
-        frame.copy_from_slice(&obs[..px]);
+        let Some(f) = obs.get(..px) else {
+            return Err(fail(format!("reset: the observation has {} values, a frame needs {px}", obs.len())));
+        };
+        frame.copy_from_slice(f);
         let mut z = actor.reset(&frame).to_vec();
         for t in 0..steps {
             let start = Instant::now();
