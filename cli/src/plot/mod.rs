@@ -1,0 +1,272 @@
+//! `coadapt plot`: SVG figures of a co-adaptation run directory, and the method comparison.
+//!
+//! [`draw_run`] reads the CSV files of a run directory and writes `plots/learning_curves.svg`,
+//! `plots/best_return.svg` and `plots/landscape.svg` (thesis Fig. 5.9); [`compare`] draws the
+//! best evaluation return so far of several runs in one figure. The figures are SVG drawn by
+//! plotters' SVG backend, which writes text as `<text>` elements: no font files are needed.
+//!
+//! # Input files
+//! Every file is CSV with a header row. Columns are found by their header name, in any order;
+//! columns not listed here are ignored; values may be quoted (`"..."`) and are trimmed. A number
+//! may be empty where it is optional (unknown), and a non-finite one (`nan`, `inf`) is treated as
+//! unknown too.
+//! - `designs.csv`: `index` (integer), `kind` (free text, optional column) and `best_eval_return`
+//!   (optional number) of each design, and `prototype` (optional column): a row whose
+//!   `prototype` is `rejected` (a proposal the operator would not build) is left out; the run
+//!   also writes `design`, `episodes`, `last_eval_return`, `predicted_objective`,
+//!   `design_rollouts` and `method`, which no plot needs.
+//! - `episodes.csv`: `design` (integer index), `episode` (integer, within the design), `return`
+//!   (number) and, if the column exists, `eval_return` (optional number).
+//! - `landscape.csv` (optional): `pc1`, `pc2`, `objective` (optional number) of the points of a
+//!   grid, in any order; the grid is the distinct `pc1` and `pc2` values.
+//! - `landscape_designs.csv` (optional): `index` (integer), `pc1`, `pc2` of the designs tried,
+//!   with `kind` optional.
+//!
+//! A run may have been interrupted: a file may stop anywhere, so a last line without a final
+//! newline that does not parse is dropped with a note, and a missing file skips the plots that
+//! need it with a note. Any other malformed row is an error naming the file, the line and the
+//! column.
+//!
+//! The best evaluation return of a design is `best_eval_return` from `designs.csv`; a design
+//! without one there (not yet written when the run stopped) takes the largest `eval_return` of
+//! its episodes in `episodes.csv`.
+//!
+//! # Layout
+//! `csv` reads the files, this module turns them into what the plots show, `figures` draws.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+mod csv;
+mod figures;
+
+pub use csv::{
+    DesignRow, EpisodeRow, LandscapeDesign, LandscapePoint, read_designs, read_episodes, read_landscape, read_landscape_designs,
+};
+use figures::{best_return, compare_plot, landscape_plot, learning_curves, write_svg};
+
+/// Draw the figures of a co-adaptation run, or compare runs.
+///
+/// `coadapt plot RUN_DIR` writes RUN_DIR/plots/learning_curves.svg (the training return of each
+/// episode within each design, one line per design coloured by design order, evaluation returns
+/// as dots), RUN_DIR/plots/best_return.svg (the best evaluation return so far over the design
+/// index, with each design's best as a dot coloured by how it was chosen) and
+/// RUN_DIR/plots/landscape.svg (the design objective over the first two principal components of
+/// the designs tried, with the designs in order: thesis Fig. 5.9).
+///
+/// Inputs, all CSV with a header row (columns found by name, others ignored):
+/// designs.csv (index, kind, best_eval_return), episodes.csv (design, episode, return,
+/// eval_return), landscape.csv (pc1, pc2, objective) and landscape_designs.csv (index, pc1, pc2).
+/// Empty numbers are unknown. A missing file skips its plots; a file cut short by an interrupted
+/// run is plotted as far as it goes; a malformed value is an error naming file, line and column.
+///
+/// `coadapt plot --compare OUT.svg RUN_DIR RUN_DIR... [--labels a,b,...]` instead draws the best
+/// evaluation return so far over the design index of every run in one figure.
+#[derive(Debug, Args)]
+pub struct PlotArgs {
+    /// Run directories (each written by `coadapt run`).
+    #[arg(required = true, value_name = "RUN_DIR")]
+    pub runs: Vec<PathBuf>,
+    /// Draw one comparison figure of all the runs into this SVG file instead of each run's plots.
+    #[arg(long, value_name = "OUT.svg")]
+    pub compare: Option<PathBuf>,
+    /// Legend labels of the compared runs, comma-separated, one per RUN_DIR (default: the
+    /// directory names). Only with --compare.
+    #[arg(long, value_delimiter = ',', requires = "compare")]
+    pub labels: Option<Vec<String>>,
+}
+
+/// Runs `coadapt plot`.
+pub fn run(args: PlotArgs) -> anyhow::Result<()> {
+    match args.compare {
+        Some(out) => {
+            let labels = match args.labels {
+                Some(labels) => {
+                    if labels.len() != args.runs.len() {
+                        bail!("{} labels for {} run directories", labels.len(), args.runs.len());
+                    }
+                    labels
+                }
+                None => args.runs.iter().map(|r| dir_label(r)).collect(),
+            };
+            let runs: Vec<(String, PathBuf)> = labels.into_iter().zip(args.runs).collect();
+            compare(&runs, &out)?;
+            eprintln!("wrote {}", out.display());
+        }
+        None => {
+            for dir in &args.runs {
+                for path in draw_run(dir)? {
+                    eprintln!("wrote {}", path.display());
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A run directory's name, for a legend.
+fn dir_label(dir: &Path) -> String {
+    dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| dir.display().to_string())
+}
+
+/// Draws the plots of the run in `dir` into `dir/plots/` and returns the files written. A plot
+/// whose input is missing or empty is skipped with a note on stderr; errors for an unreadable or
+/// malformed file, or when no plot could be drawn at all.
+pub fn draw_run(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let designs = read_designs(&dir.join("designs.csv"))?;
+    let episodes = read_episodes(&dir.join("episodes.csv"))?;
+    let landscape = read_landscape(&dir.join("landscape.csv"))?;
+    let landscape_designs = read_landscape_designs(&dir.join("landscape_designs.csv"))?;
+    if designs.is_none() && episodes.is_none() {
+        bail!("{} has neither designs.csv nor episodes.csv: not a run directory", dir.display());
+    }
+    let plots = dir.join("plots");
+    std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+    let mut written = Vec::new();
+
+    let out = plots.join("learning_curves.svg");
+    match &episodes {
+        None => eprintln!("skipping {}: no episodes.csv", out.display()),
+        Some(eps) if !eps.iter().any(|e| e.ret.is_some()) => eprintln!("skipping {}: no episode returns yet", out.display()),
+        Some(eps) => {
+            write_svg(&out, (900, 560), |root| learning_curves(root, eps))?;
+            written.push(out);
+        }
+    }
+
+    let out = plots.join("best_return.svg");
+    let best = best_per_design(designs.as_deref().unwrap_or(&[]), episodes.as_deref().unwrap_or(&[]));
+    if best.iter().any(|b| b.best.is_some()) {
+        write_svg(&out, (900, 560), |root| best_return(root, &best))?;
+        written.push(out);
+    } else {
+        eprintln!("skipping {}: no evaluation returns yet", out.display());
+    }
+
+    let out = plots.join("landscape.svg");
+    match &landscape {
+        None => eprintln!("skipping {}: no landscape.csv", out.display()),
+        Some(points) if !points.iter().any(|p| p.objective.is_some()) => {
+            eprintln!("skipping {}: landscape.csv has no objective values", out.display())
+        }
+        Some(points) => {
+            let tried = landscape_designs.as_deref().unwrap_or(&[]);
+            write_svg(&out, (900, 700), |root| landscape_plot(root, points, tried))?;
+            written.push(out);
+        }
+    }
+    if written.is_empty() {
+        bail!("nothing to plot in {} yet", dir.display());
+    }
+    Ok(written)
+}
+
+/// Draws the best evaluation return so far over the design index of each `(label, run_dir)` in
+/// one figure at `out` (SVG). A run without any evaluation return yet is left out with a note;
+/// errors when none has one, or for a malformed file.
+pub fn compare(runs: &[(String, PathBuf)], out: &Path) -> anyhow::Result<()> {
+    let mut curves = Vec::new();
+    for (label, dir) in runs {
+        let designs = read_designs(&dir.join("designs.csv"))?;
+        let episodes = read_episodes(&dir.join("episodes.csv"))?;
+        if designs.is_none() && episodes.is_none() {
+            bail!("{} has neither designs.csv nor episodes.csv: not a run directory", dir.display());
+        }
+        let best = best_per_design(designs.as_deref().unwrap_or(&[]), episodes.as_deref().unwrap_or(&[]));
+        let steps = best_so_far(&best);
+        if steps.is_empty() {
+            eprintln!("leaving {label} ({}) out: no evaluation returns yet", dir.display());
+        } else {
+            curves.push((label.clone(), steps));
+        }
+    }
+    if curves.is_empty() {
+        bail!("none of the runs has an evaluation return yet");
+    }
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+    }
+    write_svg(out, (900, 560), |root| compare_plot(root, &curves))
+}
+
+/// A design's best evaluation return (see the module doc for where it comes from).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DesignBest {
+    pub index: usize,
+    pub kind: String,
+    pub best: Option<f64>,
+}
+
+/// Every design named in either file, by index, with its best evaluation return.
+pub fn best_per_design(designs: &[DesignRow], episodes: &[EpisodeRow]) -> Vec<DesignBest> {
+    let mut by_index: BTreeMap<usize, DesignBest> = BTreeMap::new();
+    for d in designs {
+        let e = by_index.entry(d.index).or_insert(DesignBest { index: d.index, kind: String::new(), best: None });
+        e.kind.clone_from(&d.kind);
+        e.best = max_opt(e.best, d.best_eval_return);
+    }
+    let mut from_episodes: BTreeMap<usize, Option<f64>> = BTreeMap::new();
+    for ep in episodes {
+        let b = from_episodes.entry(ep.design).or_insert(None);
+        *b = max_opt(*b, ep.eval_return);
+    }
+    for (index, best) in from_episodes {
+        let e = by_index.entry(index).or_insert(DesignBest { index, kind: String::new(), best: None });
+        if e.best.is_none() {
+            e.best = best;
+        }
+    }
+    by_index.into_values().collect()
+}
+
+/// The best evaluation return so far at each design with a known value: `(index, best so far)`.
+pub fn best_so_far(best: &[DesignBest]) -> Vec<(f64, f64)> {
+    let mut top = None;
+    best.iter()
+        .filter_map(|b| {
+            top = max_opt(top, b.best);
+            b.best.and(top).map(|t| (b.index as f64, t))
+        })
+        .collect()
+}
+
+fn max_opt(a: Option<f64>, b: Option<f64>) -> Option<f64> {
+    match (a, b) {
+        (Some(x), Some(y)) => Some(x.max(y)),
+        (x, None) => x,
+        (None, y) => y,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn best_so_far_is_a_running_max_over_known_values() {
+        let best = [
+            DesignBest { index: 0, kind: String::new(), best: Some(1.0) },
+            DesignBest { index: 1, kind: String::new(), best: None },
+            DesignBest { index: 2, kind: String::new(), best: Some(0.5) },
+            DesignBest { index: 3, kind: String::new(), best: Some(3.0) },
+        ];
+        assert_eq!(best_so_far(&best), vec![(0.0, 1.0), (2.0, 1.0), (3.0, 3.0)]);
+    }
+
+    #[test]
+    fn designs_without_a_best_take_their_episodes_eval_returns() {
+        let designs = [DesignRow { index: 0, kind: "initial".into(), best_eval_return: Some(2.0) }];
+        let eps = [
+            EpisodeRow { design: 0, episode: 0, ret: Some(1.0), eval_return: Some(5.0) },
+            EpisodeRow { design: 1, episode: 0, ret: Some(1.0), eval_return: Some(4.0) },
+            EpisodeRow { design: 1, episode: 1, ret: Some(1.0), eval_return: Some(6.0) },
+        ];
+        let b = best_per_design(&designs, &eps);
+        assert_eq!(b.len(), 2);
+        assert_eq!((b[0].best, b[0].kind.as_str()), (Some(2.0), "initial"));
+        assert_eq!(b[1].best, Some(6.0));
+    }
+}
