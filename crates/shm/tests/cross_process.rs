@@ -110,16 +110,29 @@ fn a_killed_child_is_cleaned_up_and_a_new_publisher_takes_over() {
     let mut successor = topic_publisher::<Weights>(&cfg, "w").expect("a new publisher after cleanup");
     successor.publish(weights(5, 10)).expect("publish");
     assert_eq!(sub.wait_for(5, LONG).expect("wait").expect("weights").version, 5);
-    let mut left = 0;
-    let listed = Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
-        let pid = match &state {
-            NodeState::Alive(v) => v.details().as_ref().map(|d| d.process_id().value()),
-            NodeState::Dead(v) => v.details().as_ref().map(|d| d.process_id().value()),
-            _ => None,
-        };
-        left += usize::from(pid.is_some_and(|p| u32::try_from(p) == Ok(child.id())));
-        CallbackProgression::Continue
-    });
-    listed.expect("listing nodes");
+    // The child had two nodes (a sender's and a publisher's). Another cleaner (a receiver's
+    // janitor, a test running beside this one) may be part-way through one of them when
+    // `cleanup_stale` passes it over, so give the machine's cleaners a moment to finish.
+    let child_nodes = || {
+        let mut left = 0;
+        let listed = Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
+            let pid = match &state {
+                NodeState::Alive(v) => v.details().as_ref().map(|d| d.process_id().value()),
+                NodeState::Dead(v) => v.details().as_ref().map(|d| d.process_id().value()),
+                _ => None,
+            };
+            left += usize::from(pid.is_some_and(|p| u32::try_from(p) == Ok(child.id())));
+            CallbackProgression::Continue
+        });
+        listed.expect("listing nodes");
+        left
+    };
+    let deadline = std::time::Instant::now() + LONG;
+    let mut left = child_nodes();
+    while left > 0 && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+        cleanup_stale().expect("cleanup");
+        left = child_nodes();
+    }
     assert_eq!(left, 0, "the killed child's nodes are still registered");
 }
