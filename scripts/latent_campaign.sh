@@ -9,7 +9,9 @@
 # (config.toml, episodes.csv, plots/returns.svg, the summary) are copied to
 # docs/latent/results/NAME/ to be committed. Set CONFIG to use another base config. A NAME
 # whose run directory was left by a stopped campaign goes on with --resume (its finished runs
-# kept; one that cannot be resumed is moved aside and started again).
+# kept; one that cannot be resumed is moved aside and started again). A configuration too long
+# for one session runs in pieces, one seed each (NAME pieces/x-s3, FLAGS "... --runs 1 --seed
+# 3"), each committed as it ends; scripts/merge_latent.py joins them.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 config=${CONFIG:-configs/latent/half-cheetah.toml}
@@ -19,6 +21,7 @@ mkdir -p runs/latent
 while [ $# -ge 2 ]; do
   name=$1 flags=$2; shift 2
   out=runs/latent/$name
+  mkdir -p "$(dirname "$out")"   # NAME may hold a folder: pieces/NAME-s3
   if [ -s "$out.json" ] || [ -s "docs/latent/results/$name/summary.json" ]; then echo "latent: $name done already"; continue; fi
   resume=""
   if [ -s "$out/episodes.csv" ]; then

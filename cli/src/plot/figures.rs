@@ -155,27 +155,36 @@ pub(super) fn learning_curves(root: &Area, episodes: &[EpisodeRow]) -> anyhow::R
     colour_bar(&right, "design", &first.to_string(), &last.to_string())
 }
 
-pub(super) fn best_return(root: &Area, best: &[DesignBest]) -> anyhow::Result<()> {
-    let steps = best_so_far(best);
-    let x_max = best.iter().map(|b| b.index).max().unwrap_or(0) as f64;
-    let x_min = best.iter().map(|b| b.index).min().unwrap_or(0) as f64;
-    let (y0, y1) = range(best.iter().filter_map(|b| b.best)).unwrap_or((0.0, 1.0));
+/// A chart over design indices (integer x labels) with its caption, mesh and axis names.
+fn design_index_chart<'a, 'b>(
+    root: &'a Area<'b>,
+    caption: &str,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+    y_desc: &str,
+) -> anyhow::Result<
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>,
+> {
     let mut chart = ChartBuilder::on(root)
-        .caption("Best evaluation return over the designs", ("sans-serif", 20))
+        .caption(caption, ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        .build_cartesian_2d((x_min - 0.5)..(x_max + 0.5), y0..y1)?;
+        .build_cartesian_2d(x, y)?;
     chart
         .configure_mesh()
         .label_style(("sans-serif", 14))
         .axis_desc_style(("sans-serif", 16))
         .x_desc("design index")
         .x_label_formatter(&integer_label)
-        .y_desc("evaluation return")
+        .y_desc(y_desc)
         .light_line_style(WHITE.mix(0.0))
         .draw()?;
-    // Step line: the best so far holds until the next design with a value.
+    Ok(chart)
+}
+
+/// A step line through `steps`: each value holds until the next point's x.
+fn step_path(steps: &[(f64, f64)]) -> Vec<(f64, f64)> {
     let mut path = Vec::with_capacity(2 * steps.len() + 1);
     for (k, &(x, y)) in steps.iter().enumerate() {
         if k > 0 {
@@ -183,6 +192,17 @@ pub(super) fn best_return(root: &Area, best: &[DesignBest]) -> anyhow::Result<()
         }
         path.push((x, y));
     }
+    path
+}
+
+pub(super) fn best_return(root: &Area, best: &[DesignBest]) -> anyhow::Result<()> {
+    let steps = best_so_far(best);
+    let x_max = best.iter().map(|b| b.index).max().unwrap_or(0) as f64;
+    let x_min = best.iter().map(|b| b.index).min().unwrap_or(0) as f64;
+    let (y0, y1) = range(best.iter().filter_map(|b| b.best)).unwrap_or((0.0, 1.0));
+    let mut chart =
+        design_index_chart(root, "Best evaluation return over the designs", (x_min - 0.5)..(x_max + 0.5), y0..y1, "evaluation return")?;
+    let mut path = step_path(&steps);
     if let Some(&(_, y)) = steps.last() {
         path.push((x_max, y));
     }
@@ -308,32 +328,11 @@ fn bounds(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
 pub(super) fn compare_plot(root: &Area, curves: &[(String, Vec<(f64, f64)>)]) -> anyhow::Result<()> {
     let (x0, x1) = bounds(curves.iter().flat_map(|(_, c)| c.iter().map(|p| p.0)));
     let (y0, y1) = range(curves.iter().flat_map(|(_, c)| c.iter().map(|p| p.1))).unwrap_or((0.0, 1.0));
-    let mut chart = ChartBuilder::on(root)
-        .caption("Best evaluation return so far", ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d((x0 - 0.5)..(x1 + 0.5), y0..y1)?;
-    chart
-        .configure_mesh()
-        .label_style(("sans-serif", 14))
-        .axis_desc_style(("sans-serif", 16))
-        .x_desc("design index")
-        .x_label_formatter(&integer_label)
-        .y_desc("best evaluation return")
-        .light_line_style(WHITE.mix(0.0))
-        .draw()?;
+    let mut chart = design_index_chart(root, "Best evaluation return so far", (x0 - 0.5)..(x1 + 0.5), y0..y1, "best evaluation return")?;
     for (i, (label, steps)) in curves.iter().enumerate() {
         let c = category(i);
-        let mut path = Vec::with_capacity(2 * steps.len());
-        for (k, &(x, y)) in steps.iter().enumerate() {
-            if k > 0 {
-                path.push((x, steps[k - 1].1));
-            }
-            path.push((x, y));
-        }
         chart
-            .draw_series(LineSeries::new(path, c.stroke_width(2)))?
+            .draw_series(LineSeries::new(step_path(steps), c.stroke_width(2)))?
             .label(label.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c.stroke_width(2)));
         chart.draw_series(steps.iter().map(|&(x, y)| Circle::new((x, y), 3, c.filled())))?;
