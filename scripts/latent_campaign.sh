@@ -17,6 +17,11 @@ cd "$(dirname "$0")/.."
 config=${CONFIG:-configs/latent/half-cheetah.toml}
 bin=runs/latent/coadapt
 mkdir -p runs/latent
+# Embeddings committed from earlier sessions (docs/latent/embeddings/, built by `coadapt latent
+# --embed-only`, deterministic given the config) are restored instead of built again.
+for e in docs/latent/embeddings/*.safetensors; do
+  [ -e "$e" ] && [ ! -e "runs/latent/$(basename "$e")" ] && cp "$e" "${e%.safetensors}.csv" runs/latent/ 2>/dev/null || true
+done
 [ -x "$bin" ] || { cargo build --release -q -p coadapt && cp target/release/coadapt "$bin"; }
 while [ $# -ge 2 ]; do
   name=$1 flags=$2; shift 2
