@@ -34,7 +34,7 @@ while [ $# -ge 2 ]; do
   elif [ -e "$out" ]; then
     mv "$out" "$out.partial-$(date +%s)"
   fi
-  echo "latent: start $name ($(date -u +%H:%M:%S)) $resume"
+  echo "latent: start $name ($(date -u +%H:%M:%S)) --config $config $flags $resume"
   # shellcheck disable=SC2086 # FLAGS split into words
   if RAYON_NUM_THREADS=1 "$bin" latent --config "$config" $flags --out "$out" $resume > "$out.json.tmp" 2>> "$out.log"; then
     mv "$out.json.tmp" "$out.json"
