@@ -16,6 +16,12 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 config=${CONFIG:-configs/latent/half-cheetah.toml}
 bin=runs/latent/coadapt
+# A lane started without CONFIG once ran the pixel HalfCheetah under a dmc-* name; refuse that.
+for ((i = 1; i <= $#; i += 2)); do
+  case "${!i}" in *dmc-*) case "$config" in *dmc*) ;; *)
+    echo "latent: ${!i} names DM Control but CONFIG is $config (set CONFIG=configs/latent/dmc-cheetah.toml)" >&2
+    exit 2 ;; esac ;; esac
+done
 mkdir -p runs/latent
 # Embeddings committed from earlier sessions (docs/latent/embeddings/, built by `coadapt latent
 # --embed-only`, deterministic given the config) are restored instead of built again.

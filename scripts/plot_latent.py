@@ -98,7 +98,8 @@ def main():
             (line,) = ax.plot(xs, mean, label=f"{label} ({len(runs)} runs)")
             ax.fill_between(xs, [m - s for m, s in zip(mean, sd)], [m + s for m, s in zip(mean, sd)], color=line.get_color(), alpha=0.2)
         rows.append((label, len(runs), n, [window(runs, k, lo, hi) for k in (1, 0) for lo, hi in ((0, 10), (10, 20), (0, n))]))
-        per_run.append([[st.mean(x[k] for x in r) for r in runs] for k in (1, 0)])
+        # per window (1-10, 11-20, all): [evaluation, training] per-run means
+        per_run.append([[[st.mean(x[k] for x in r[lo:hi]) for r in runs] for k in (1, 0)] for lo, hi in ((0, 10), (10, 20), (0, n))])
         if window_len:
             rates = [[max(sum(x[k] > 0 for x in r[i : i + window_len]) / window_len for i in range(len(r) - window_len + 1)) for r in runs] for k in (0, 1)]
             best.append((label, rates))
@@ -116,9 +117,11 @@ def main():
         print(f"| {label} | {nr} | {n} | " + " | ".join(cells) + " |")
     if len(rows) > 1:
         print()
-        print(f"Exact two-sided Mann-Whitney p of each method's per-run means (all episodes) against {rows[0][0]}:")
-        for (label, *_), (ev, tr) in zip(rows[1:], per_run[1:]):
-            print(f"- {label}: evaluation p = {mann_whitney(per_run[0][0], ev):.3f}, training p = {mann_whitney(per_run[0][1], tr):.3f}")
+        print(f"Exact two-sided Mann-Whitney p of each method's per-run means against {rows[0][0]} (episodes 1-10 / 11-20 / all):")
+        for (label, *_), windows in zip(rows[1:], per_run[1:]):
+            ev = " / ".join(f"{mann_whitney(base[0], w[0]):.3f}" for base, w in zip(per_run[0], windows))
+            tr = " / ".join(f"{mann_whitney(base[1], w[1]):.3f}" for base, w in zip(per_run[0], windows))
+            print(f"- {label}: evaluation p = {ev}, training p = {tr}")
     if best:
         print()
         print(f"| method | best training success rate over {window_len} episodes | best evaluation success rate | p (training) vs {best[0][0]} |")
