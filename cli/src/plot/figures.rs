@@ -5,6 +5,7 @@ use std::path::Path;
 
 use anyhow::Context;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::{DesignBest, EpisodeRow, LandscapeDesign, LandscapePoint, best_so_far};
@@ -156,15 +157,16 @@ pub(super) fn learning_curves(root: &Area, episodes: &[EpisodeRow]) -> anyhow::R
 }
 
 /// A chart over design indices (integer x labels) with its caption, mesh and axis names.
+/// A chart with f64 axes on an SVG drawing area.
+type XyChart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
 fn design_index_chart<'a, 'b>(
     root: &'a Area<'b>,
     caption: &str,
     x: std::ops::Range<f64>,
     y: std::ops::Range<f64>,
     y_desc: &str,
-) -> anyhow::Result<
-    ChartContext<'a, SVGBackend<'b>, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>,
-> {
+) -> anyhow::Result<XyChart<'a, 'b>> {
     let mut chart = ChartBuilder::on(root)
         .caption(caption, ("sans-serif", 20))
         .margin(12)
