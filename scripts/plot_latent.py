@@ -53,8 +53,14 @@ def band(curves):
     return mean, sd
 
 
+def run_means(runs, k, lo, hi):
+    """Each run's mean of return k (1 evaluation, 0 training) over episodes lo+1..hi; empty
+    when the runs are shorter than hi."""
+    return [st.mean(x[k] for x in r[lo:hi]) for r in runs if len(r) >= hi]
+
+
 def window(runs, k, lo, hi):
-    per_run = [st.mean(x[k] for x in r[lo:hi]) for r in runs if len(r) >= hi]
+    per_run = run_means(runs, k, lo, hi)
     if not per_run:
         return "-"
     return f"{st.mean(per_run):.1f} ± {st.pstdev(per_run):.1f}"
@@ -99,7 +105,7 @@ def main():
             ax.fill_between(xs, [m - s for m, s in zip(mean, sd)], [m + s for m, s in zip(mean, sd)], color=line.get_color(), alpha=0.2)
         rows.append((label, len(runs), n, [window(runs, k, lo, hi) for k in (1, 0) for lo, hi in ((0, 10), (10, 20), (0, n))]))
         # per window (1-10, 11-20, all): [evaluation, training] per-run means
-        per_run.append([[[st.mean(x[k] for x in r[lo:hi]) for r in runs] for k in (1, 0)] for lo, hi in ((0, 10), (10, 20), (0, n))])
+        per_run.append([[run_means(runs, k, lo, hi) for k in (1, 0)] for lo, hi in ((0, 10), (10, 20), (0, n))])
         if window_len:
             rates = [[max(sum(x[k] > 0 for x in r[i : i + window_len]) / window_len for i in range(len(r) - window_len + 1)) for r in runs] for k in (0, 1)]
             best.append((label, rates))
@@ -119,8 +125,11 @@ def main():
         print()
         print(f"Exact two-sided Mann-Whitney p of each method's per-run means against {rows[0][0]} (episodes 1-10 / 11-20 / all):")
         for (label, *_), windows in zip(rows[1:], per_run[1:]):
-            ev = " / ".join(f"{mann_whitney(base[0], w[0]):.3f}" for base, w in zip(per_run[0], windows))
-            tr = " / ".join(f"{mann_whitney(base[1], w[1]):.3f}" for base, w in zip(per_run[0], windows))
+            # a window the runs are too short for (fewer than 20 episodes) prints "-"
+            def p(k):
+                return " / ".join(f"{mann_whitney(b[k], w[k]):.3f}" if b[k] and w[k] else "-" for b, w in zip(per_run[0], windows))
+
+            ev, tr = p(0), p(1)
             print(f"- {label}: evaluation p = {ev}, training p = {tr}")
     if best:
         print()

@@ -156,10 +156,10 @@ pub(super) fn learning_curves(root: &Area, episodes: &[EpisodeRow]) -> anyhow::R
     colour_bar(&right, "design", &first.to_string(), &last.to_string())
 }
 
-/// A chart over design indices (integer x labels) with its caption, mesh and axis names.
 /// A chart with f64 axes on an SVG drawing area.
 type XyChart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
+/// A chart over design indices (integer x labels) with its caption, mesh and axis names.
 fn design_index_chart<'a, 'b>(
     root: &'a Area<'b>,
     caption: &str,
