@@ -1,6 +1,12 @@
 """Tables for docs/EXPERIMENTS.md from a campaign's run directories (scripts/campaign.sh).
 
 usage: python3 scripts/campaign_report.py [RUNS_ROOT, default runs/campaign] [--initial 5]
+           [--methods a,b,...] [--baseline random-only] [--split K]
+
+--methods keeps only those methods (e.g. one protocol's runs out of docs/campaign/results);
+--baseline names the method the others are paired against (section 2); --split K adds a table
+of the mean best return of chosen designs before design index K and from K on, per method and
+paired against the baseline (does a gap open as the critic gets more data?).
 
 Reads every RUN/designs.csv under RUNS_ROOT whose RUN is named METHOD-seedN (only finished runs,
 with summary.json, unless --partial) and prints Markdown:
@@ -87,18 +93,33 @@ def on_face(design, low, high, tol=1e-3):
     return any(flags), all(flags)
 
 
+def option(name, default):
+    if name not in sys.argv:
+        return default
+    i = sys.argv.index(name)
+    if i + 1 >= len(sys.argv):
+        sys.exit(f"campaign_report: {name} needs a value")
+    return sys.argv[i + 1]
+
+
 def main():
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    valued = {"--initial", "--methods", "--baseline", "--split"}
+    args = [a for i, a in enumerate(sys.argv[1:], 1) if not a.startswith("--") and sys.argv[i - 1] not in valued]
     root = args[0] if args else "runs/campaign"
     partial = "--partial" in sys.argv
-    n_init = 5
-    if "--initial" in sys.argv:
-        n_init = int(sys.argv[sys.argv.index("--initial") + 1])
+    n_init = int(option("--initial", 5))
+    keep = option("--methods", None)
+    keep = set(keep.split(",")) if keep else None
+    baseline = option("--baseline", "random-only")
+    split = option("--split", None)
+    split = int(split) if split is not None else None
     runs = {}
     for name in sorted(os.listdir(root)):
         m = re.fullmatch(r"(.+)-seed(\d+)", name)
         path = os.path.join(root, name)
         if not m or not os.path.exists(os.path.join(path, "designs.csv")):
+            continue
+        if keep is not None and m.group(1) not in keep:
             continue
         if not partial and not os.path.exists(os.path.join(path, "summary.json")):
             continue
@@ -135,13 +156,13 @@ def main():
         col = lambda k: [m[k] for _, m in ms]
         print(f"| {method} | {len(ms)} | {mean_sd(col('best'))} | {mean_sd(col('chosen'))} | {mean_sd(col('exploit'))} | {statistics.mean(col('rollouts')):,.0f} |")
 
-    if "random-only" in per_method:
-        base = dict(per_method["random-only"])
-        print("\n### Between runs: each method minus random designs, paired by seed\n")
+    if baseline in per_method:
+        base = dict(per_method[baseline])
+        print(f"\n### Between runs: each method minus {baseline}, paired by seed\n")
         print("| method | seeds paired | best | mean best of chosen designs |")
         print("|---|---|---|---|")
         for method, ms in per_method.items():
-            if method == "random-only":
+            if method == baseline:
                 continue
             pairs = [(m, base[s]) for s, m in ms if s in base]
             if not pairs:
@@ -149,6 +170,30 @@ def main():
             d_best = [a["best"] - b["best"] for a, b in pairs]
             d_chosen = [a["chosen"] - b["chosen"] for a, b in pairs]
             print(f"| {method} | {len(pairs)} | {mean_sd(d_best)} | {mean_sd(d_chosen)} |")
+
+    if split is not None:
+        print(f"\n### Mean best return of chosen designs, indices {n_init}-{split - 1} and {split} on\n")
+        print(f"| method | seed | {n_init}-{split - 1} | {split} on | later - earlier |")
+        print("|---|---|---|---|---|")
+        halves = {}
+        for method, seeds in runs.items():
+            for seed, (env, rows) in sorted(seeds.items()):
+                a = [r["best"] for r in rows if n_init <= r["index"] < split]
+                b = [r["best"] for r in rows if r["index"] >= split]
+                if not a or not b:
+                    continue
+                halves.setdefault(method, {})[seed] = (statistics.mean(a), statistics.mean(b))
+                print(f"| {method} | {seed} | {statistics.mean(a):.1f} | {statistics.mean(b):.1f} | {statistics.mean(b) - statistics.mean(a):+.1f} |")
+        if baseline in halves:
+            print(f"\nMinus {baseline}, paired by seed (mean ± sd over seeds):\n")
+            print(f"| method | seeds paired | {n_init}-{split - 1} | {split} on |")
+            print("|---|---|---|---|")
+            for method, hs in halves.items():
+                if method == baseline:
+                    continue
+                pairs = [(h, halves[baseline][s]) for s, h in hs.items() if s in halves[baseline]]
+                if pairs:
+                    print(f"| {method} | {len(pairs)} | {mean_sd([h[0] - b[0] for h, b in pairs])} | {mean_sd([h[1] - b[1] for h, b in pairs])} |")
 
     print("\n### Within runs: exploitation design minus exploration designs (best evaluation return)\n")
     print("| method | pairs | exploit - next explore: mean ± sd | exploit wins | sign test p | exploit - mean of neighbouring explores: mean ± sd | exploit wins | sign test p |")
