@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
-use coadapt_learner::train::{self, TrainConfig};
+use coadapt_learner::train::{self, TrainConfig, UpdateSchedule};
 use coadapt_learner::{Algo, Exploration};
 
 use crate::progress::{duration, shutdown_on_ctrl_c};
@@ -13,6 +13,12 @@ use crate::progress::{duration, shutdown_on_ctrl_c};
 pub enum ExplorationArg {
     Ou,
     Gaussian,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum UpdateScheduleArg {
+    PerStep,
+    PerEpisode,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -70,6 +76,10 @@ pub struct TrainArgs {
     /// Steps of uniform random actions before learning starts.
     #[arg(long)]
     pub learning_starts: Option<u64>,
+    /// When to take the gradient steps: `per-step` (SAC's loop, the default) or `per-episode`
+    /// (the same number, all at the episode's end, as FEAR's learner does).
+    #[arg(long, value_enum)]
+    pub update_schedule: Option<UpdateScheduleArg>,
     /// Report the first step at which the mean return of the last 10 episodes exceeds this.
     #[arg(long, allow_negative_numbers = true)]
     pub target_return: Option<f32>,
@@ -144,6 +154,12 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if let Some(l) = args.learning_starts {
         cfg.learning_starts = l;
+    }
+    if let Some(u) = args.update_schedule {
+        cfg.update_schedule = match u {
+            UpdateScheduleArg::PerStep => UpdateSchedule::PerStep,
+            UpdateScheduleArg::PerEpisode => UpdateSchedule::PerEpisode,
+        };
     }
     if let Some(t) = args.target_return {
         cfg.target_return = Some(t);

@@ -2,6 +2,9 @@
 //!
 //! The schedule is Stable-Baselines3's off-policy loop: uniform random actions for the first
 //! `learning-starts` steps, then one environment step and `updates-per-step` gradient steps.
+//! With `update-schedule = "per-episode"` the same gradient steps are taken in one burst when
+//! the episode ends, with the policy fixed during the episode: FEAR's schedule on one body
+//! (its learner trains after each episode), to tell the burst apart from the rest of FEAR.
 //! Every finished episode is appended (and flushed) to `episodes.csv` in the run directory, and
 //! the agent is checkpointed at the end and every `checkpoint-every` episodes, so a crash loses
 //! at most the episodes since the last checkpoint.
@@ -34,6 +37,8 @@ pub struct TrainConfig {
     pub learning_starts: u64,
     /// Gradient steps per environment step once learning has started.
     pub updates_per_step: u32,
+    /// When those gradient steps are taken: after every step, or all of an episode's at its end.
+    pub update_schedule: UpdateSchedule,
     pub replay_capacity: usize,
     /// Save a checkpoint every this many episodes (0: only at the end).
     pub checkpoint_every: u64,
@@ -62,6 +67,7 @@ impl Default for TrainConfig {
             design: None,
             learning_starts: 100,
             updates_per_step: 1,
+            update_schedule: UpdateSchedule::PerStep,
             replay_capacity: 1_000_000,
             checkpoint_every: 50,
             target_return: None,
@@ -72,6 +78,18 @@ impl Default for TrainConfig {
             ddpg: DdpgConfig::default(),
         }
     }
+}
+
+/// When `coadapt train` takes its gradient steps.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UpdateSchedule {
+    /// `updates-per-step` after every environment step (SAC's and Stable-Baselines3's loop).
+    #[default]
+    PerStep,
+    /// The episode's `updates-per-step` x steps after its last step, on the buffer as it is
+    /// then (FEAR's learner trains this way between episodes).
+    PerEpisode,
 }
 
 impl TrainConfig {
@@ -204,6 +222,8 @@ pub fn run(
     let (mut step, mut updates, mut episode) = (0u64, 0u64, 0u64);
     let mut reached = None;
     let mut failures = 0u32;
+    // Gradient steps owed to this episode under `UpdateSchedule::PerEpisode`.
+    let mut owed = 0u64;
     while step < cfg.steps && !shutdown.load(Ordering::Relaxed) {
         let (mut ret, mut len) = (0.0f32, 0u64);
         let mut failed = None;
@@ -232,16 +252,29 @@ pub fn run(
             len += 1;
             step += 1;
             if step >= cfg.learning_starts {
-                for _ in 0..cfg.updates_per_step {
-                    replay.sample(&mut rng, &mut batch)?;
-                    agent.update(&batch);
-                    updates += 1;
+                match cfg.update_schedule {
+                    UpdateSchedule::PerStep => {
+                        for _ in 0..cfg.updates_per_step {
+                            replay.sample(&mut rng, &mut batch)?;
+                            agent.update(&batch);
+                            updates += 1;
+                        }
+                    }
+                    UpdateSchedule::PerEpisode => owed += u64::from(cfg.updates_per_step),
                 }
             }
             if done || step >= cfg.steps {
                 break;
             }
         }
+        if failed.is_none() {
+            for _ in 0..owed {
+                replay.sample(&mut rng, &mut batch)?;
+                agent.update(&batch);
+                updates += 1;
+            }
+        }
+        owed = 0;
         if let Some(e) = failed {
             // Never half an episode in the replay buffer: take it back and run it again.
             replay.pop_newest(len as usize);
