@@ -3,6 +3,7 @@ against the design index, one thin line per seed and the mean over seeds in bold
 per method; exploitation designs marked with a dot.
 
 usage: .venv-peers/bin/python scripts/plot_campaign.py OUT.png RUNS_ROOT METHOD [METHOD ...]
+       [--title "HalfCheetah, reduced protocol"]
 RUNS_ROOT holds METHOD-seedN/designs.csv (scripts/campaign.sh). Needs matplotlib
 (`.venv-peers/bin/pip install matplotlib`).
 """
@@ -45,7 +46,7 @@ def main(out, root, methods):
     ax.text(4.6, ax.get_ylim()[0], " chosen designs ->", color="grey", va="bottom")
     ax.set_xlabel("design index (0-4: the five fixed initial designs)")
     ax.set_ylabel("best evaluation return of the design")
-    ax.set_title("HalfCheetah, reduced protocol: each design's best evaluation return (dots: exploitation designs)")
+    ax.set_title(f"{TITLE}: each design's best evaluation return (dots: exploitation designs)")
     ax.legend(loc="upper left", fontsize=9)
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -53,4 +54,14 @@ def main(out, root, methods):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2], sys.argv[3:])
+    args = sys.argv[1:]
+    TITLE = "HalfCheetah, reduced protocol"
+    if "--title" in args:
+        i = args.index("--title")
+        if i + 1 >= len(args):
+            sys.exit("plot_campaign: --title needs a value")
+        TITLE = args[i + 1]
+        del args[i : i + 2]
+    if len(args) < 3:
+        sys.exit(__doc__)
+    main(args[0], args[1], args[2:])
