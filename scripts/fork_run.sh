@@ -54,6 +54,7 @@ sys.exit(1)
 PY
 }
 
+[ -d "$src" ] || echo "fork_run: $src does not exist yet; waiting for it (Ctrl-C to stop)" >&2
 until snap=$(find_snapshot); do
   if [ -s "$src/summary.json" ]; then
     echo "fork_run: $src has finished and kept no snapshot at the start of design $k" >&2
