@@ -21,6 +21,11 @@
 # then the optimiser starts fresh, as it does in a fresh run). The config is SRC_RUN's with the
 # overrides applied (scripts/config_with.py). Copy it soon after design K-1 ends: the source
 # keeps only its newest `snapshot.keep` snapshots.
+#
+# The fork is the run a fresh start with the changed config would make only if nothing before
+# design K depended on the changed keys: fork at the first chosen design (K = the number of
+# initial designs). Later, the optimiser's generator has been drawn by the old method (sim-PSO
+# draws its rollout seeds from it), and the fork is a hybrid of the two methods.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 src=${1:?usage: scripts/fork_run.sh SRC_RUN K NEW_RUN [KEY.PATH=VALUE ...]}
@@ -65,7 +70,11 @@ done
 tmp=$dst.forking
 rm -rf "$tmp"
 mkdir -p "$tmp/snapshots"
-cp -a "$src/snapshots/$snap" "$tmp/snapshots/"
+cp -a "$src/snapshots/$snap" "$tmp/snapshots/" || {
+  rm -rf "$tmp"
+  echo "fork_run: $src/snapshots/$snap went away while being copied (the source keeps its newest snapshot.keep); fork sooner or raise snapshot.keep" >&2
+  exit 1
+}
 cp -a "$src/designs.csv" "$src/episodes.csv" "$tmp/"
 [ -d "$src/checkpoints" ] && cp -a "$src/checkpoints" "$tmp/"
 mkdir -p "$tmp/optimizer"
