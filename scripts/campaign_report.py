@@ -1,12 +1,32 @@
 """Tables for docs/EXPERIMENTS.md from a campaign's run directories (scripts/campaign.sh).
 
 usage: python3 scripts/campaign_report.py [RUNS_ROOT, default runs/campaign] [--initial 5]
-           [--methods a,b,...] [--baseline random-only] [--split K]
+           [--methods a,b,...] [--baseline random-only] [--split K] [--tables t1,t2,...]
 
 --methods keeps only those methods (e.g. one protocol's runs out of docs/campaign/results);
 --baseline names the method the others are paired against (section 2); --split K adds a table
 of the mean best return of chosen designs before design index K and from K on, per method and
-paired against the baseline (does a gap open as the critic gets more data?).
+paired against the baseline (does a gap open as the critic gets more data?). --tables prints only
+the named tables (per-run, per-method, between, split, split-paired, within, faces, and the
+three below), without headings: docs/EXPERIMENTS.md includes them that way (scripts/doc_tables.py).
+
+Three tables are printed only when --tables names them, with the columns of --columns
+(comma-separated, in order; see COLUMNS):
+- `runs`: one row per run;
+- `methods`: one row per method, over its seeds: returns as mean ± sample sd over the seeds (the
+  seeds column is n), within-run pairs and coordinates pooled, with a sign test;
+- `paired`: each method minus --baseline, paired by seed: mean ± sample sd of the differences
+  (n = the seeds paired) and each seed's difference, for the return columns.
+Columns: method, seed, seeds, designs, best, chosen (mean best of the chosen designs, index >=
+--initial), exploit (of the exploitation designs: in a run of random designs every chosen design),
+explore (of the exploration designs), initial (each initial design's best, in index order),
+rollouts, next (exploit minus the exploration design after it: mean ± sd, wins/pairs), both
+(exploit minus the mean of the exploration designs on both sides), faces (exploitation designs
+with a coordinate within 0.1 % of the box's width of a bound / with every one), bound (their
+coordinates within 0.1 %), near (within 2 %), early and late (mean best of chosen designs before
+index --split and from it on), gap (late - early), search (summary.json's
+learner_waiting_seconds over the exploitation designs: seconds of design search per
+exploitation design, the random designs' instant replies included).
 
 Reads every RUN/designs.csv under RUNS_ROOT whose RUN is named METHOD-seedN (only finished runs,
 with summary.json, unless --partial) and prints Markdown:
@@ -102,8 +122,211 @@ def option(name, default):
     return sys.argv[i + 1]
 
 
+class Out:
+    """Prints the report's tables, or only those named in --tables (then without headings: the
+    document that includes them has its own, see scripts/doc_tables.py)."""
+
+    def __init__(self, only):
+        self.only = only
+        self.on = True
+        self.first = True
+
+    def section(self, name, heading):
+        self.on = self.only is None or name in self.only
+        if self.on and self.only is None:
+            print(("" if self.first else "\n") + heading + "\n")
+        elif self.on and not self.first:
+            print()
+        if self.on:
+            self.first = False
+
+    def __call__(self, line=""):
+        if self.on:
+            print(line)
+
+
+TABLES = ["per-run", "per-method", "between", "split", "split-paired", "within", "faces", "runs", "methods", "paired"]
+COLUMNS = {
+    "runs": ["method", "seed", "designs", "best", "chosen", "exploit", "explore", "initial", "rollouts", "next", "both",
+             "faces", "bound", "near", "early", "late", "gap", "search"],
+    "methods": ["method", "seeds", "best", "chosen", "exploit", "explore", "rollouts", "next", "both", "faces", "bound",
+                "near", "early", "late", "gap", "search"],
+    "paired": ["method", "seeds", "best", "chosen", "exploit", "explore", "early", "late", "gap"],
+}
+
+
+def near_bound(design, low, high, tol):
+    return sum(min(abs(x - lo), abs(x - hi)) <= tol * (hi - lo) for x, lo, hi in zip(design, low, high))
+
+
+def facts(env, rows, summary, n_init, split):
+    """What the column tables (runs, methods, paired) say about one run."""
+    chosen = [r for r in rows if r["index"] >= n_init]
+    exploit = [r for r in chosen if r["kind"] == "exploit"]
+    explore = [r for r in chosen if r["kind"] == "explore"]
+    avg = lambda rs: statistics.mean(r["best"] for r in rs) if rs else float("nan")
+    by_index = {r["index"]: r for r in rows}
+    d_next, d_both = [], []
+    for r in exploit:
+        nxt, prv = by_index.get(r["index"] + 1), by_index.get(r["index"] - 1)
+        if nxt and nxt["kind"] == "explore":
+            d_next.append(r["best"] - nxt["best"])
+            if prv and prv["kind"] == "explore":
+                d_both.append(r["best"] - (nxt["best"] + prv["best"]) / 2)
+    low, high = BOUNDS.get(env, (None, None))
+    face = corner = on = near = total = 0
+    if low is not None:
+        for r in exploit:
+            f, c = on_face(r["design"], low, high)
+            face += f
+            corner += c
+            on += near_bound(r["design"], low, high, 1e-3)
+            near += near_bound(r["design"], low, high, 2e-2)
+            total += len(r["design"])
+    out = {
+        "designs": len(rows), "best": max(r["best"] for r in rows), "chosen": avg(chosen), "exploit": avg(exploit),
+        "explore": avg(explore), "initial": [r["best"] for r in rows if r["index"] < n_init],
+        "rollouts": sum(r["rollouts"] for r in rows), "next": d_next, "both": d_both, "n_exploit": len(exploit),
+        "face": face, "corner": corner, "on": on, "near": near, "coords": total,
+        "waiting": summary.get("learner_waiting_seconds"),
+    }
+    if split is not None:
+        out["early"] = avg([r for r in chosen if r["index"] < split])
+        out["late"] = avg([r for r in chosen if r["index"] >= split])
+        out["gap"] = out["late"] - out["early"]
+    return out
+
+
+def signed_sd(v):
+    v = [x for x in v if not math.isnan(x)]
+    if not v:
+        return "-"
+    if len(v) == 1:
+        return f"{v[0]:+.1f}"
+    return f"{statistics.mean(v):+.1f} ± {statistics.stdev(v):.1f}"
+
+
+def p_value(p):
+    return f"{p:.2f}" if p >= 0.01 else f"{p:.2g}"
+
+
+def column_tables(out, only, columns, runs, n_init, split, baseline):
+    """The tables `runs`, `methods` and `paired` (only when --tables names them)."""
+    last = max((r["index"] for seeds in runs.values() for _, rows, _ in seeds.values() for r in rows), default=0)
+    head = {
+        "method": "method", "seed": "seed", "seeds": "seeds", "designs": "designs", "best": "best",
+        "chosen": "mean best of chosen designs", "exploit": "of exploitation designs",
+        "explore": "of exploration designs", "initial": "initial designs' best", "rollouts": "design rollouts",
+        "next": "exploit - next explore (wins)", "both": "exploit - mean of neighbouring explores (wins)",
+        "faces": "exploitation designs on a face / corner", "bound": "coordinates on a bound",
+        "near": "coordinates within 2 % of a bound",
+        "early": f"chosen designs {n_init}-{split - 1 if split else '?'}",
+        "late": f"chosen designs {split}-{last}" if split else "chosen designs later",
+        "gap": "later - earlier", "search": "design search per exploitation design (s)",
+    }
+    if any(c in columns for c in ("early", "late", "gap")) and split is None:
+        sys.exit("campaign_report: columns early, late and gap need --split K")
+    data = {m: {s: facts(env, rows, summary, n_init, split) for s, (env, rows, summary) in sorted(seeds.items())}
+            for m, seeds in runs.items()}
+    one = lambda x: "-" if math.isnan(x) else f"{x:.1f}"
+    wins = lambda d: f"{sum(x > 0 for x in d)}/{len(d)}"
+
+    def run_cell(c, method, seed, f):
+        if c == "method":
+            return method
+        if c == "seed":
+            return str(seed)
+        if c in ("best", "chosen", "exploit", "explore", "early", "late"):
+            return one(f[c])
+        if c == "gap":
+            return f"{f[c]:+.1f}"
+        if c == "designs":
+            return str(f["designs"])
+        if c == "initial":
+            return ", ".join(f"{x:.0f}" for x in f["initial"])
+        if c == "rollouts":
+            return f"{f['rollouts']:,}"
+        if c in ("next", "both"):
+            return f"{signed_sd(f[c])} ({wins(f[c])})" if f[c] else "-"
+        if c == "faces":
+            return f"{f['face']} of {f['n_exploit']} / {f['corner']}"
+        if c in ("bound", "near"):
+            return f"{f['on' if c == 'bound' else 'near']}/{f['coords']}" if f["coords"] else "-"
+        if c == "search":
+            return f"{f['waiting'] / f['n_exploit']:.0f}" if f["waiting"] is not None and f["n_exploit"] else "-"
+        sys.exit(f"campaign_report: column {c} is not one of the runs table's ({', '.join(COLUMNS['runs'])})")
+
+    def method_cell(c, method, fs):
+        if c == "method":
+            return method
+        if c == "seeds":
+            return str(len(fs))
+        if c in ("best", "chosen", "exploit", "explore", "early", "late"):
+            return mean_sd([f[c] for f in fs])
+        if c == "gap":
+            return signed_sd([f[c] for f in fs])
+        if c == "rollouts":
+            return f"{statistics.mean(f['rollouts'] for f in fs):,.0f}"
+        if c in ("next", "both"):
+            d = [x for f in fs for x in f[c]]
+            return f"{signed_sd(d)} ({wins(d)}, p = {p_value(sign_test(d))})" if d else "-"
+        if c == "faces":
+            return f"{sum(f['face'] for f in fs)} of {sum(f['n_exploit'] for f in fs)} / {sum(f['corner'] for f in fs)}"
+        if c in ("bound", "near"):
+            n = sum(f["coords"] for f in fs)
+            return f"{sum(f['on' if c == 'bound' else 'near'] for f in fs)}/{n}" if n else "-"
+        if c == "search":
+            w = [f for f in fs if f["waiting"] is not None]
+            n = sum(f["n_exploit"] for f in w)
+            return f"{sum(f['waiting'] for f in w) / n:.0f}" if n else "-"
+        sys.exit(f"campaign_report: column {c} is not one of the methods table's ({', '.join(COLUMNS['methods'])})")
+
+    def paired_cell(c, method, pairs):
+        if c == "method":
+            return method
+        if c == "seeds":
+            return str(len(pairs))
+        if c in ("best", "chosen", "exploit", "explore", "early", "late", "gap"):
+            d = [a[c] - b[c] for _, a, b in pairs]
+            if any(math.isnan(x) for x in d):
+                return "-"
+            return f"{signed_sd(d)} ({', '.join(f'{x:+.1f}' for x in d)})" if len(d) > 1 else signed_sd(d)
+        sys.exit(f"campaign_report: column {c} is not one of the paired table's ({', '.join(COLUMNS['paired'])})")
+
+    def header(cols, rename=None):
+        names = [head[c] for c in cols]
+        if rename:
+            names = [rename.get(c, n) for c, n in zip(cols, names)]
+        out("| " + " | ".join(names) + " |")
+        out("|" + "---|" * len(cols))
+
+    for name in only:
+        if name not in ("runs", "methods", "paired"):
+            continue
+        out.section(name, "")
+        if name == "runs":
+            header(columns)
+            for method, seeds in data.items():
+                for seed, f in seeds.items():
+                    out("| " + " | ".join(run_cell(c, method, seed, f) for c in columns) + " |")
+        elif name == "methods":
+            header(columns)
+            for method, seeds in data.items():
+                out("| " + " | ".join(method_cell(c, method, list(seeds.values())) for c in columns) + " |")
+        else:
+            if baseline not in data:
+                sys.exit(f"campaign_report: paired: no runs of the baseline {baseline}")
+            header(columns, {"seeds": "seeds paired", "gap": "change of the gap (later - earlier)"})
+            for method, seeds in data.items():
+                if method == baseline:
+                    continue
+                pairs = [(s, f, data[baseline][s]) for s, f in seeds.items() if s in data[baseline]]
+                if pairs:
+                    out("| " + " | ".join(paired_cell(c, method, pairs) for c in columns) + " |")
+
+
 def main():
-    valued = {"--initial", "--methods", "--baseline", "--split"}
+    valued = {"--initial", "--methods", "--baseline", "--split", "--tables", "--columns"}
     args = [a for i, a in enumerate(sys.argv[1:], 1) if not a.startswith("--") and sys.argv[i - 1] not in valued]
     root = args[0] if args else "runs/campaign"
     partial = "--partial" in sys.argv
@@ -113,7 +336,19 @@ def main():
     baseline = option("--baseline", "random-only")
     split = option("--split", None)
     split = int(split) if split is not None else None
+    only = option("--tables", None)
+    if only is not None:
+        only = only.split(",")
+        bad = [t for t in only if t not in TABLES]
+        if bad:
+            sys.exit(f"campaign_report: --tables: unknown table {', '.join(bad)} (known: {', '.join(TABLES)})")
+    columns = option("--columns", None)
+    columns = columns.split(",") if columns else None
+    if only is not None and any(t in ("runs", "methods", "paired") for t in only) and not columns:
+        sys.exit("campaign_report: the tables runs, methods and paired need --columns")
+    out = Out(only)
     runs = {}
+    summaries = {}
     for name in sorted(os.listdir(root)):
         m = re.fullmatch(r"(.+)-seed(\d+)", name)
         path = os.path.join(root, name)
@@ -127,6 +362,15 @@ def main():
         if not rows:
             continue
         runs.setdefault(m.group(1), {})[int(m.group(2))] = (env, rows)
+        summary = os.path.join(path, "summary.json")
+        summaries[(m.group(1), int(m.group(2)))] = json.load(open(summary)) if os.path.exists(summary) else {}
+
+    if only is not None and any(t in ("runs", "methods", "paired") for t in only):
+        column_tables(out, only, columns,
+                      {m: {s: (env, rows, summaries[(m, s)]) for s, (env, rows) in seeds.items()} for m, seeds in runs.items()},
+                      n_init, split, baseline)
+        if all(t in ("runs", "methods", "paired") for t in only):
+            return
 
     def metrics(rows):
         chosen = [r for r in rows if r["index"] >= n_init]
@@ -139,28 +383,28 @@ def main():
             "designs": len(rows),
         }
 
-    print("### Per run\n")
-    print("| method | seed | designs | best | mean best of chosen designs | mean best of exploitation designs | design rollouts |")
-    print("|---|---|---|---|---|---|---|")
+    out.section("per-run", "### Per run")
+    out("| method | seed | designs | best | mean best of chosen designs | mean best of exploitation designs | design rollouts |")
+    out("|---|---|---|---|---|---|---|")
     per_method = {}
     for method, seeds in runs.items():
         for seed, (env, rows) in sorted(seeds.items()):
             mt = metrics(rows)
             per_method.setdefault(method, []).append((seed, mt))
-            print(f"| {method} | {seed} | {mt['designs']} | {mt['best']:.1f} | {mt['chosen']:.1f} | {mt['exploit']:.1f} | {mt['rollouts']:,} |")
+            out(f"| {method} | {seed} | {mt['designs']} | {mt['best']:.1f} | {mt['chosen']:.1f} | {mt['exploit']:.1f} | {mt['rollouts']:,} |")
 
-    print("\n### Per method (mean ± sample standard deviation over seeds)\n")
-    print("| method | seeds | best | mean best of chosen designs | mean best of exploitation designs | design rollouts per run |")
-    print("|---|---|---|---|---|---|")
+    out.section("per-method", "### Per method (mean ± sample standard deviation over seeds)")
+    out("| method | seeds | best | mean best of chosen designs | mean best of exploitation designs | design rollouts per run |")
+    out("|---|---|---|---|---|---|")
     for method, ms in per_method.items():
         col = lambda k: [m[k] for _, m in ms]
-        print(f"| {method} | {len(ms)} | {mean_sd(col('best'))} | {mean_sd(col('chosen'))} | {mean_sd(col('exploit'))} | {statistics.mean(col('rollouts')):,.0f} |")
+        out(f"| {method} | {len(ms)} | {mean_sd(col('best'))} | {mean_sd(col('chosen'))} | {mean_sd(col('exploit'))} | {statistics.mean(col('rollouts')):,.0f} |")
 
     if baseline in per_method:
         base = dict(per_method[baseline])
-        print(f"\n### Between runs: each method minus {baseline}, paired by seed\n")
-        print("| method | seeds paired | best | mean best of chosen designs |")
-        print("|---|---|---|---|")
+        out.section("between", f"### Between runs: each method minus {baseline}, paired by seed")
+        out("| method | seeds paired | best | mean best of chosen designs |")
+        out("|---|---|---|---|")
         for method, ms in per_method.items():
             if method == baseline:
                 continue
@@ -169,12 +413,12 @@ def main():
                 continue
             d_best = [a["best"] - b["best"] for a, b in pairs]
             d_chosen = [a["chosen"] - b["chosen"] for a, b in pairs]
-            print(f"| {method} | {len(pairs)} | {mean_sd(d_best)} | {mean_sd(d_chosen)} |")
+            out(f"| {method} | {len(pairs)} | {mean_sd(d_best)} | {mean_sd(d_chosen)} |")
 
     if split is not None:
-        print(f"\n### Mean best return of chosen designs, indices {n_init}-{split - 1} and {split} on\n")
-        print(f"| method | seed | {n_init}-{split - 1} | {split} on | later - earlier |")
-        print("|---|---|---|---|---|")
+        out.section("split", f"### Mean best return of chosen designs, indices {n_init}-{split - 1} and {split} on")
+        out(f"| method | seed | {n_init}-{split - 1} | {split} on | later - earlier |")
+        out("|---|---|---|---|---|")
         halves = {}
         for method, seeds in runs.items():
             for seed, (env, rows) in sorted(seeds.items()):
@@ -183,21 +427,21 @@ def main():
                 if not a or not b:
                     continue
                 halves.setdefault(method, {})[seed] = (statistics.mean(a), statistics.mean(b))
-                print(f"| {method} | {seed} | {statistics.mean(a):.1f} | {statistics.mean(b):.1f} | {statistics.mean(b) - statistics.mean(a):+.1f} |")
+                out(f"| {method} | {seed} | {statistics.mean(a):.1f} | {statistics.mean(b):.1f} | {statistics.mean(b) - statistics.mean(a):+.1f} |")
         if baseline in halves:
-            print(f"\nMinus {baseline}, paired by seed (mean ± sd over seeds):\n")
-            print(f"| method | seeds paired | {n_init}-{split - 1} | {split} on |")
-            print("|---|---|---|---|")
+            out.section("split-paired", f"Minus {baseline}, paired by seed (mean ± sd over seeds):")
+            out(f"| method | seeds paired | {n_init}-{split - 1} | {split} on |")
+            out("|---|---|---|---|")
             for method, hs in halves.items():
                 if method == baseline:
                     continue
                 pairs = [(h, halves[baseline][s]) for s, h in hs.items() if s in halves[baseline]]
                 if pairs:
-                    print(f"| {method} | {len(pairs)} | {mean_sd([h[0] - b[0] for h, b in pairs])} | {mean_sd([h[1] - b[1] for h, b in pairs])} |")
+                    out(f"| {method} | {len(pairs)} | {mean_sd([h[0] - b[0] for h, b in pairs])} | {mean_sd([h[1] - b[1] for h, b in pairs])} |")
 
-    print("\n### Within runs: exploitation design minus exploration designs (best evaluation return)\n")
-    print("| method | pairs | exploit - next explore: mean ± sd | exploit wins | sign test p | exploit - mean of neighbouring explores: mean ± sd | exploit wins | sign test p |")
-    print("|---|---|---|---|---|---|---|---|")
+    out.section("within", "### Within runs: exploitation design minus exploration designs (best evaluation return)")
+    out("| method | pairs | exploit - next explore: mean ± sd | exploit wins | sign test p | exploit - mean of neighbouring explores: mean ± sd | exploit wins | sign test p |")
+    out("|---|---|---|---|---|---|---|---|")
     for method, seeds in runs.items():
         d_next, d_both = [], []
         for seed, (env, rows) in seeds.items():
@@ -214,12 +458,12 @@ def main():
         if not d_next:
             continue
         wins = lambda d: f"{sum(x > 0 for x in d)}/{len(d)}"
-        print(f"| {method} | {len(d_next)} | {mean_sd(d_next)} | {wins(d_next)} | {sign_test(d_next):.2f} | "
+        out(f"| {method} | {len(d_next)} | {mean_sd(d_next)} | {wins(d_next)} | {sign_test(d_next):.2f} | "
               f"{mean_sd(d_both) if d_both else '-'} | {wins(d_both) if d_both else '-'} | {sign_test(d_both) if d_both else float('nan'):.2f} |")
 
-    print("\n### Where the exploitation designs sit (face: a coordinate within 0.1 % of the box's width of a bound; corner: every coordinate; near: within 2 %)\n")
-    print("| method | exploitation designs | on a face | on a corner | coordinates on a bound | coordinates near a bound |")
-    print("|---|---|---|---|---|---|")
+    out.section("faces", "### Where the exploitation designs sit (face: a coordinate within 0.1 % of the box's width of a bound; corner: every coordinate; near: within 2 %)")
+    out("| method | exploitation designs | on a face | on a corner | coordinates on a bound | coordinates near a bound |")
+    out("|---|---|---|---|---|---|")
     for method, seeds in runs.items():
         n = face = corner = coords = near = total = 0
         for seed, (env, rows) in seeds.items():
@@ -237,7 +481,7 @@ def main():
                 near += sum(min(abs(x - lo), abs(x - hi)) <= 2e-2 * (hi - lo) for x, lo, hi in zip(r["design"], low, high))
                 total += len(r["design"])
         if n:
-            print(f"| {method} | {n} | {face} | {corner} | {coords}/{total} | {near}/{total} |")
+            out(f"| {method} | {n} | {face} | {corner} | {coords}/{total} | {near}/{total} |")
 
 
 if __name__ == "__main__":
