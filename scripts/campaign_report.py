@@ -11,7 +11,7 @@ the named tables (per-run, per-method, between, split, split-paired, within, fac
 three below), without headings: docs/EXPERIMENTS.md includes them that way (scripts/doc_tables.py).
 
 Three tables are printed only when --tables names them, with the columns of --columns
-(comma-separated, in order; see COLUMNS):
+(comma-separated, in order; see COLUMNS), their rows in the order of --methods:
 - `runs`: one row per run;
 - `methods`: one row per method, over its seeds: returns as mean ± sample sd over the seeds (the
   seeds column is n), within-run pairs and coordinates pooled, with a sign test;
@@ -210,8 +210,11 @@ def p_value(p):
     return f"{p:.2f}" if p >= 0.01 else f"{p:.2g}"
 
 
-def column_tables(out, only, columns, runs, n_init, split, baseline):
-    """The tables `runs`, `methods` and `paired` (only when --tables names them)."""
+def column_tables(out, only, columns, runs, n_init, split, baseline, order):
+    """The tables `runs`, `methods` and `paired` (only when --tables names them), their rows in
+    the order of --methods when it is given."""
+    if order:
+        runs = {m: runs[m] for m in order if m in runs}
     last = max((r["index"] for seeds in runs.values() for _, rows, _ in seeds.values() for r in rows), default=0)
     head = {
         "method": "method", "seed": "seed", "seeds": "seeds", "designs": "designs", "best": "best",
@@ -301,6 +304,10 @@ def column_tables(out, only, columns, runs, n_init, split, baseline):
         out("|" + "---|" * len(cols))
 
     for name in only:
+        bad = [c for c in columns if name in COLUMNS and c not in COLUMNS[name]]
+        if bad:
+            sys.exit(f"campaign_report: the {name} table has no column {', '.join(bad)} (its columns: {', '.join(COLUMNS[name])})")
+    for name in only:
         if name not in ("runs", "methods", "paired"):
             continue
         out.section(name, "")
@@ -368,7 +375,7 @@ def main():
     if only is not None and any(t in ("runs", "methods", "paired") for t in only):
         column_tables(out, only, columns,
                       {m: {s: (env, rows, summaries[(m, s)]) for s, (env, rows) in seeds.items()} for m, seeds in runs.items()},
-                      n_init, split, baseline)
+                      n_init, split, baseline, option("--methods", "").split(",") if keep else None)
         if all(t in ("runs", "methods", "paired") for t in only):
             return
 
