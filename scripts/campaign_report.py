@@ -1,7 +1,7 @@
 """Tables for docs/EXPERIMENTS.md from a campaign's run directories (scripts/campaign.sh).
 
 usage: python3 scripts/campaign_report.py [RUNS_ROOT, default runs/campaign] [--initial 5]
-           [--methods a,b,...] [--baseline random-only] [--split K] [--tables t1,t2,...]
+           [--methods a,b,...] [--baseline random-only] [--split K] [--tables t1,t2,...] [--columns c1,c2,...]
 
 --methods keeps only those methods (e.g. one protocol's runs out of docs/campaign/results);
 --baseline names the method the others are paired against (section 2); --split K adds a table
