@@ -8,8 +8,15 @@
 # QUEUE_FILE: one experiment per line, `NAME CONFIG SEED [coadapt run flags...]`; `#` starts a
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
 # finished run (summary.json) is skipped, so the same queue can be started again after a stop:
-# an unfinished directory is moved aside to NAME-seedSEED.partial-<time> and the run starts
-# over. CONFIG may carry overrides, `CONFIG+key.path=value+...` (TOML values, e.g.
+# an unfinished directory that holds a snapshot goes on from it (`coadapt run --resume`, the
+# same rows as a run never stopped); one without a snapshot is moved aside to
+# NAME-seedSEED.partial-<time> and the run starts over.
+# CONFIG `fork:SRC:K[+overrides]` forks runs/campaign/SRC-seedSEED at the start of design K
+# (scripts/fork_run.sh, with the overrides, e.g. `fork:fear-random:5+optimizer.exploit="sim-pso"`)
+# and continues the fork: the prefix two methods share is not run twice. The copy is taken by a
+# watcher started when the queue starts (it waits for the source's snapshot at design K and
+# uses no core while it waits); the line itself takes a lane only when its turn comes. Put a
+# fork line after its source and far enough behind it that the source has reached design K. CONFIG may carry overrides, `CONFIG+key.path=value+...` (TOML values, e.g.
 # `configs/half-cheetah-reduced.toml+learner.population-only=true+optimizer.q="pessimistic"`),
 # applied by scripts/config_with.py. `random-only:CONFIG` is CONFIG with `alternate = false`
 # (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
@@ -30,12 +37,65 @@ cargo build --release -q -p coadapt
 # A private copy: rebuilding the workspace during the campaign does not touch running runs.
 cp target/release/coadapt "$bin.new" && mv "$bin.new" "$bin"
 
+archive_run() {
+  local dir=$1 archive=$2 t0=$3
+  mv "$dir.summary.tmp" "$dir/summary.json"
+  mkdir -p "$archive"
+  cp "$dir"/{summary.json,config.toml,designs.csv,episodes.csv} "$archive/"
+  if [ -f "$dir/forked-from.txt" ]; then cp "$dir/forked-from.txt" "$archive/"; fi
+  echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
+}
+
+# Starts the watchers that take the copies for the queue's fork lines.
+start_fork_watchers() {
+  local name config seed rest
+  while read -r name config seed rest; do
+    case $name in ''|'#'*) continue ;; esac
+    case $config in fork:*) ;; *) continue ;; esac
+    local dir=$root/$name-seed$seed
+    if [ -e "$dir" ] || [ -s "docs/campaign/results/$name-seed$seed/summary.json" ]; then continue; fi
+    local spec=${config#fork:} overrides=()
+    local src=${spec%%:*} rest_k=${spec#*:}
+    local k=${rest_k%%+*}
+    if [[ $rest_k == *+* ]]; then IFS=+ read -r -a overrides <<< "${rest_k#*+}"; fi
+    rm -f "$dir.fork.log"
+    scripts/fork_run.sh "$root/$src-seed$seed" "$k" "$dir" "${overrides[@]}" > "$dir.fork.log" 2>&1 &
+    echo $! > "$dir.fork.pid"
+    echo "campaign: watching $root/$src-seed$seed for design $k, to fork $dir"
+  done < "$queue"
+}
+
 run_one() {
   local name=$1 config=$2 seed=$3; shift 3
   local dir=$root/$name-seed$seed
   local archive=docs/campaign/results/$name-seed$seed
   if [ -s "$dir/summary.json" ] || [ -s "$archive/summary.json" ]; then echo "campaign: $name-seed$seed done already, skipped"; return 0; fi
-  if [ -e "$dir" ]; then mv "$dir" "$dir.partial-$(date +%s)"; fi
+  local resume=""
+  case $config in
+    fork:*)
+      # The watcher started below copies the fork into $dir; wait for it (or its failure).
+      until [ -d "$dir" ]; do
+        if ! kill -0 "$(cat "$dir.fork.pid" 2>/dev/null || echo 0)" 2>/dev/null && [ ! -d "$dir" ]; then
+          echo "campaign: FAILED $dir: the fork was not made (see $dir.fork.log)" >&2
+          return 1
+        fi
+        sleep 10
+      done
+      resume=yes ;;
+  esac
+  if [ -z "$resume" ] && [ -e "$dir" ]; then
+    if compgen -G "$dir/snapshots/snap-*" > /dev/null; then resume=yes; else mv "$dir" "$dir.partial-$(date +%s)"; fi
+  fi
+  if [ -n "$resume" ]; then
+    echo "campaign: resume $dir ($(date -u +%H:%M:%S))"
+    local t0=$SECONDS
+    if RAYON_NUM_THREADS=1 "$bin" run --resume "$dir" --transport in-process > "$dir.summary.tmp" 2>> "$dir.log"; then
+      archive_run "$dir" "$archive" "$t0"
+    else
+      echo "campaign: FAILED $dir after $((SECONDS - t0)) s (see $dir.log)" >&2
+    fi
+    return 0
+  fi
   case $config in
     random-only:*) config="${config#random-only:}+schedule.alternate=false" ;;
   esac
@@ -51,15 +111,13 @@ run_one() {
   local t0=$SECONDS
   if RAYON_NUM_THREADS=1 "$bin" run --config "$config" --seed "$seed" --out "$dir" --transport in-process "$@" \
       > "$dir.summary.tmp" 2> "$dir.log"; then
-    mv "$dir.summary.tmp" "$dir/summary.json"
-    mkdir -p "$archive"
-    cp "$dir"/{summary.json,config.toml,designs.csv,episodes.csv} "$archive/"
-    echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
+    archive_run "$dir" "$archive" "$t0"
   else
     echo "campaign: FAILED $dir after $((SECONDS - t0)) s (see $dir.log)" >&2
   fi
 }
 
+start_fork_watchers
 running=0
 while read -r name config seed rest; do
   case $name in ''|'#'*) continue ;; esac
