@@ -54,7 +54,8 @@ pub struct RenderArgs {
 }
 
 /// The acting policy of a checkpoint: the SAC head's mean, or the DDPG actor, squashed by tanh.
-struct Policy {
+#[derive(Debug)]
+pub struct Policy {
     mlp: Mlp,
     params: Vec<f32>,
     gaussian: bool,
@@ -62,7 +63,9 @@ struct Policy {
 }
 
 impl Policy {
-    fn load(path: &Path, obs_dim: usize, act_dim: usize) -> anyhow::Result<Self> {
+    /// Loads the acting network of the checkpoint at `path`, checked against the environment's
+    /// observation and action widths.
+    pub fn load(path: &Path, obs_dim: usize, act_dim: usize) -> anyhow::Result<Self> {
         let nets = coadapt_nn::load_networks(path)?;
         let (net, gaussian) = match (nets.iter().find(|n| n.name == "policy"), nets.iter().find(|n| n.name == "actor")) {
             (Some(p), _) => (p, true),
@@ -79,7 +82,20 @@ impl Policy {
         Ok(Self { mlp: net.mlp.clone(), params: net.params.clone(), gaussian, act: Activations::default() })
     }
 
-    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+    /// A SAC policy's stochastic action for the standard normal draws `eps` (one per action
+    /// dimension), as the learner's actors act; a DDPG actor's action plus nothing (it has no
+    /// distribution).
+    pub fn sample(&mut self, obs: &[f32], eps: &[f32], action: &mut [f32]) {
+        if !self.gaussian {
+            return self.act(obs, action);
+        }
+        let out = self.mlp.forward(&self.params, obs, 1, &mut self.act);
+        let mut log_prob = [0.0];
+        squashed::sample(out, eps, action.len(), action, &mut log_prob);
+    }
+
+    /// The deterministic action (the SAC head's mean, or the DDPG actor's output).
+    pub fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         let out = self.mlp.forward(&self.params, obs, 1, &mut self.act);
         if self.gaussian {
             squashed::mean_action(out, action.len(), action);

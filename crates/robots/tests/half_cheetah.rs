@@ -204,3 +204,43 @@ fn bad_designs_and_actions_are_rejected() {
     let b = unit.step(&[1.0, -1.0, 1.0, -1.0, 1.0, 0.5]).unwrap().observation.to_vec();
     assert_eq!(a, b);
 }
+
+/// The start states that stalled trained policies (issue 28, EXPERIMENTS 5.12): with the joints
+/// limp while the body falls at full gravity, nearly every start has a joint folded to its limit
+/// and some rest on the torso or the head, a crouch from which trained policies stopped dead or
+/// flipped over backwards. The reference's reset (joints held at the drawn angles while settling
+/// at a gravity of 0.5, the default now) starts every body on its feet or just above the ground,
+/// its joints within the range they were drawn from.
+#[test]
+fn episodes_start_on_the_feet_with_the_joints_as_drawn() {
+    let limp = SimConfig { hold_while_settling: false, settle_steps: 60, settle_gravity: 9.81, ..SimConfig::default() };
+    let on_torso = |env: &HalfCheetah| {
+        let mut h = Vec::new();
+        env.part_heights(&mut h);
+        // The torso's capsule and the head come first.
+        h[0] < 0.005 || h[1] < 0.005
+    };
+    let folded = |env: &HalfCheetah| env.joint_angles().unwrap().iter().any(|q| q.abs() > 0.55);
+    let mut old = HalfCheetah::with_config(limp);
+    let mut new = HalfCheetah::new();
+    for design in [[1.0; 6], [2.0, 0.8, 0.8, 2.0, 0.8, 2.0], [2.0; 6], [0.8; 6]] {
+        let mut old_folded = 0;
+        for seed in 0..60 {
+            old.reset(seed, &design).unwrap();
+            old_folded += usize::from(folded(&old));
+            new.reset(seed, &design).unwrap();
+            assert!(!on_torso(&new), "design {design:?}, seed {seed}: starts resting on the torso or head");
+            let q = new.joint_angles().unwrap();
+            assert!(q.iter().all(|q| q.abs() <= 0.55), "design {design:?}, seed {seed}: a joint left its drawn range: {q:?}");
+            let pitch = new.torso().unwrap().pitch;
+            assert!(pitch.abs() < 0.3, "design {design:?}, seed {seed}: starts tilted by {pitch} rad");
+        }
+        // The old reset reproduces the stuck starts: most fold a joint beyond +-0.55.
+        assert!(old_folded > 40, "design {design:?}: the limp reset folded only {old_folded} of 60 starts");
+        if design == [1.0; 6] {
+            // Seed 30 of the default design is one of the stalled episodes of EXPERIMENTS 5.12.
+            old.reset(30, &design).unwrap();
+            assert!(on_torso(&old), "the limp reset no longer lays seed 30 on its torso");
+        }
+    }
+}

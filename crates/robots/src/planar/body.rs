@@ -156,7 +156,7 @@ impl Body {
         let n = plan.limbs.len();
         let sign = plan.sign();
         let mut world = PhysicsWorld::new();
-        world.gravity = Vector::new(0.0, -9.81);
+        world.gravity = Vector::new(0.0, -super::GRAVITY);
         let p = &mut world.integration_parameters;
         p.dt = super::CONTROL_DT / cfg.substeps as f32;
         p.num_solver_iterations = cfg.solver_iterations;
@@ -252,6 +252,11 @@ impl Body {
         }
     }
 
+    /// Sets gravity to `g` m/s^2, downwards.
+    pub fn set_gravity(&mut self, g: f32) {
+        self.world.gravity = Vector::new(0.0, -g);
+    }
+
     /// Advances the world by one physics step.
     pub fn step(&mut self) {
         self.world.step();
@@ -294,15 +299,22 @@ impl Body {
 
     /// Height of the lowest point of any capsule surface: below zero, that part is in the ground.
     pub fn lowest_point(&self) -> f32 {
-        let mut low = f32::INFINITY;
-        for (h, c) in &self.capsules {
-            let y = self.world.bodies.get(*h).map_or(f32::NAN, |rb| {
-                let p = rb.position();
-                (*p * c.a).y.min((*p * c.b).y) - c.radius
-            });
-            low = low.min(y);
-        }
-        low
+        self.capsules.iter().map(|(h, c)| self.surface_low(*h, c)).fold(f32::INFINITY, f32::min)
+    }
+
+    fn surface_low(&self, h: RigidBodyHandle, c: &Capsule) -> f32 {
+        self.world.bodies.get(h).map_or(f32::NAN, |rb| {
+            let p = rb.position();
+            (*p * c.a).y.min((*p * c.b).y) - c.radius
+        })
+    }
+
+    /// For each capsule (the torso's first, then one per limb in joint order), the height of its
+    /// lowest surface point: at or below about 0 it touches the ground (contacts are found at
+    /// rapier's prediction distance, a few millimetres).
+    pub fn part_heights(&self, out: &mut Vec<f32>) {
+        out.clear();
+        out.extend(self.capsules.iter().map(|(h, c)| self.surface_low(*h, c)));
     }
 
     pub fn torso(&self) -> Torso {

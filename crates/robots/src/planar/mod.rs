@@ -32,6 +32,8 @@ use std::marker::PhantomData;
 
 /// Seconds per control step (the reference: 4 PyBullet steps of 0.0165 / 4).
 pub const CONTROL_DT: f32 = 0.0165;
+/// Gravity during episodes, m/s^2.
+pub const GRAVITY: f32 = 9.81;
 /// The reference scales every joint power by 0.9.
 pub const POWER_FACTOR: f32 = 0.9;
 /// Torso values after the joint angles and velocities in every state.
@@ -69,6 +71,10 @@ pub struct SimConfig {
     /// Multibody joints only: hold the joints at their start angles while settling (stiff, damped
     /// springs; they give about 0.01 rad under the body's weight), then free them.
     pub hold_while_settling: bool,
+    /// Gravity while settling, m/s^2 (full gravity, 9.81, comes back for the episode): the
+    /// reference lowers HalfCheetah for 0.8 s at 0.5 with its joints held, so the episode starts
+    /// with the body on or just above the ground, its joints at the drawn angles.
+    pub settle_gravity: f32,
 }
 
 impl Default for SimConfig {
@@ -82,6 +88,7 @@ impl Default for SimConfig {
             joint_damping: true,
             settle_steps: 60,
             hold_while_settling: false,
+            settle_gravity: GRAVITY,
         }
     }
 }
@@ -218,6 +225,21 @@ impl<R: Robot> PlanarEnv<R> {
         self.body.as_ref().map(Body::lowest_point)
     }
 
+    /// The torso's state (position, velocity, pitch), or `None` before the first reset.
+    pub fn torso(&self) -> Option<Torso> {
+        self.body.as_ref().map(Body::torso)
+    }
+
+    /// Height of each capsule's lowest surface point (the torso's capsules first, then one per
+    /// limb in joint order), for diagnosing where a body rests on the ground; empty before the
+    /// first reset.
+    pub fn part_heights(&self, out: &mut Vec<f32>) {
+        match self.body.as_ref() {
+            Some(b) => b.part_heights(out),
+            None => out.clear(),
+        }
+    }
+
     /// One control step with `self.torques`.
     fn advance(&mut self) {
         if let Some(body) = self.body.as_mut() {
@@ -267,13 +289,17 @@ impl<R: Robot> Env for PlanarEnv<R> {
         if hold {
             body.hold_joints(true);
         }
+        body.set_gravity(self.cfg.settle_gravity);
         self.body = Some(body);
         self.torques.fill(0.0);
         for _ in 0..self.cfg.settle_steps {
             self.advance();
         }
-        if hold && let Some(body) = self.body.as_mut() {
-            body.hold_joints(false);
+        if let Some(body) = self.body.as_mut() {
+            body.set_gravity(GRAVITY);
+            if hold {
+                body.hold_joints(false);
+            }
         }
         self.initial_height = self.torso_height().unwrap_or(0.0);
         if let Err(e) = self.observe() {
