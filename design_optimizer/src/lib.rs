@@ -24,12 +24,16 @@
 //! - [`role`]: the optimiser role: design requests in, designs out, by PSO/CMA-ES over Q,
 //!   the simulation baselines (through a [`role::RolloutEvaluator`]), ES or random; and
 //!   exploration by random designs or novelty.
+//! - [`calibration`]: at each exploitation request, the objective's value for the chosen design,
+//!   the next random design and every design trained before, with that request's networks
+//!   (`calibration.csv`: does the critic order bodies as the robot does?).
 //! - [`resume`]: the optimiser's state file (generator, request count, ES state, every reply
 //!   by request), so a restarted optimiser continues exactly where it stopped.
 //!
 //! Every search is seeded (`coadapt_core::rng(seed, <its stream>)`): the same seed gives the
 //! same design.
 
+pub mod calibration;
 pub mod cmaes;
 pub mod es;
 pub mod landscape;

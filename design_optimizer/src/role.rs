@@ -278,7 +278,20 @@ impl<'a> Optimizer<'a> {
         })
     }
 
-    fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, String> {
+    /// How the objective combines the critics (`optimizer.q`).
+    pub(crate) fn q_mode(&self) -> QMode {
+        match self.cfg.q {
+            QModeConfig::Q1 => QMode::First,
+            QModeConfig::MinOfTwin => QMode::MinOfTwin,
+            QModeConfig::Pessimistic => QMode::MeanMinusKStd(self.cfg.pessimism),
+        }
+    }
+
+    pub(crate) fn spec_bounds(&self) -> &BoxSpace {
+        &self.spec.bounds
+    }
+
+    pub(crate) fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, String> {
         let thetas: Vec<&[f32]> = match self.cfg.q {
             QModeConfig::Q1 => vec![&w.q1],
             QModeConfig::MinOfTwin | QModeConfig::Pessimistic => vec![&w.q1, &w.q2],
@@ -306,12 +319,7 @@ impl<'a> Optimizer<'a> {
         self.requests += 1;
         let seed = self.seed.wrapping_add(self.requests.wrapping_mul(0x9E37_79B9));
         let objective = self.objective(w, &req.start_states).map_err(err)?;
-        let mode = match self.cfg.q {
-            QModeConfig::Q1 => QMode::First,
-            QModeConfig::MinOfTwin => QMode::MinOfTwin,
-            QModeConfig::Pessimistic => QMode::MeanMinusKStd(self.cfg.pessimism),
-        };
-        let mut q = CriticObjective::new(&objective, mode, self.cfg.cores);
+        let mut q = CriticObjective::new(&objective, self.q_mode(), self.cfg.cores);
         let bounds = self.spec.bounds.clone();
         let rejected = Rejected::new(&req.rejected, &bounds, self.cfg.reject_radius);
         let (method, result, rollouts): (&str, SearchResult, u64) = match req.kind {
@@ -361,9 +369,18 @@ impl<'a> Optimizer<'a> {
     /// Uniform in the box, drawn again while it falls near a rejected design (at most
     /// [`RANDOM_DRAWS`] times).
     fn random(&mut self, rejected: &Rejected) -> Result<SearchResult, String> {
+        let mut rng = std::mem::replace(&mut self.rng, rng(0, 0));
+        let r = self.random_with(&mut rng, rejected);
+        self.rng = rng;
+        r
+    }
+
+    /// [`Self::random`] drawing from `rng` (a copy of the optimiser's generator, to see the
+    /// next random design without drawing it).
+    pub(crate) fn random_with(&self, rng: &mut Rng64, rejected: &Rejected) -> Result<SearchResult, String> {
         let mut d = vec![0.0; self.spec.bounds.dim()];
         for _ in 0..RANDOM_DRAWS {
-            self.spec.bounds.sample(&mut self.rng, &mut d);
+            self.spec.bounds.sample(rng, &mut d);
             if !rejected.near(&d) {
                 return Ok(SearchResult { design: d, score: f32::NAN, history: vec![], evaluations: 0 });
             }
@@ -475,6 +492,18 @@ pub fn run(
             c.last_seconds_bits.store(secs.to_bits(), Relaxed);
             let total = f64::from_bits(c.total_seconds_bits.load(Relaxed)) + secs;
             c.total_seconds_bits.store(total.to_bits(), Relaxed);
+        }
+        if let Some(s) = store {
+            // Evidence, not the run: a failure to score or write is reported and the run goes on.
+            let file = crate::calibration::CalibrationFile::beside(s.path());
+            match opt.calibration(&req, &w, &reply) {
+                Ok(rows) => {
+                    if let Err(e) = file.append(&rows) {
+                        eprintln!("optimizer: design {}: writing {}: {e}", req.index, file.path().display());
+                    }
+                }
+                Err(e) => eprintln!("optimizer: design {}: calibration scores: {e}", req.index),
+            }
         }
         let stored = crate::resume::StoredReply::of(&reply);
         if let Some(s) = store {

@@ -129,3 +129,61 @@ fn a_bad_pessimism_is_refused_naming_the_field() {
         assert!(e.contains("optimizer.pessimism"), "{e}");
     }
 }
+
+/// Weights that make the objective depend on the design (not all equal).
+fn varied_weights(s: &OptimizerSpec) -> Weights {
+    let v = |n: usize, k: f32| (0..n).map(|i| (i as f32 * k).sin() * 0.5).collect::<Vec<f32>>();
+    Weights { version: 1, policy: v(s.policy.n_params(), 0.7), q1: v(s.critic.n_params(), 1.3), q2: v(s.critic.n_params(), 2.1) }
+}
+
+#[test]
+fn calibration_scores_the_chosen_the_next_random_and_the_trained_designs_without_drawing() {
+    use coadapt_design_optimizer::calibration::{CalibrationFile, Candidate};
+    let cfg = OptimizerConfig { exploit: ExploitMethod::Random, ..OptimizerConfig::default() };
+    let s = spec();
+    let w = varied_weights(&s);
+    let trained = vec![1.0, 1.0, 1.9, 0.9, 0.85, 1.7];
+    let exploit = DesignRequest { chosen: trained.clone(), ..request(3) };
+    let explore = DesignRequest { index: 4, kind: DesignKind::Explore, chosen: trained.clone(), ..request(4) };
+
+    let mut opt = Optimizer::new(cfg.clone(), spec(), None, 5).unwrap();
+    let reply = opt.choose(&exploit, &w).unwrap();
+    let rows = opt.calibration(&exploit, &w, &reply).unwrap();
+    let next = opt.choose(&explore, &w).unwrap();
+    assert!(opt.calibration(&explore, &w, &next).unwrap().is_empty(), "exploration requests are not scored");
+
+    assert_eq!(rows.len(), 5, "chosen, next random, three trained: {rows:?}");
+    assert!(rows.iter().all(|r| r.request == 3));
+    assert_eq!((rows[0].candidate, &rows[0].design), (Candidate::Chosen, &reply.design));
+    assert_eq!(Some(rows[0].predicted), reply.predicted_objective, "the chosen design's score is the reply's");
+    assert_eq!(rows[1].candidate, Candidate::NextRandom);
+    assert_eq!(rows[1].design, next.design, "the design peeked at is the one the next request gets");
+    for (i, r) in rows[2..].iter().enumerate() {
+        assert_eq!((r.candidate, &r.design[..]), (Candidate::Trained(i as u32), &trained[2 * i..2 * i + 2]));
+    }
+    let scores: Vec<f32> = rows.iter().map(|r| r.predicted).collect();
+    assert!(scores.iter().all(|x| x.is_finite()), "{scores:?}");
+    assert!(scores.windows(2).any(|p| p[0] != p[1]), "the designs score differently: {scores:?}");
+
+    // Scoring draws nothing: the same seed without calibration gives the same designs.
+    let mut plain = Optimizer::new(cfg, spec(), None, 5).unwrap();
+    assert_eq!(plain.choose(&exploit, &w).unwrap().design, reply.design);
+    assert_eq!(plain.choose(&explore, &w).unwrap().design, next.design);
+
+    // The file: a header once, one line per row, the design as designs.csv writes it.
+    let dir = std::env::temp_dir().join(format!("coadapt-calibration-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = CalibrationFile::beside(&dir.join("optimizer-state.jsonl"));
+    file.append(&rows).unwrap();
+    file.append(&rows[..1]).unwrap();
+    let text = std::fs::read_to_string(file.path()).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 1 + 5 + 1, "{text}");
+    assert_eq!(lines[0], "request,candidate,trained_index,predicted_objective,design");
+    assert!(
+        lines[1].starts_with("3,chosen,,") && lines[2].starts_with("3,next-random,,") && lines[3].starts_with("3,trained,0,"),
+        "{text}"
+    );
+    assert!(lines[5].ends_with("0.85;1.7"), "{text}");
+}
