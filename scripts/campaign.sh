@@ -3,7 +3,7 @@
 # single-threaded (RAYON_NUM_THREADS=1), in-process (the same results as a fleet of processes,
 # tested byte for byte; fewer processes competing for two cores).
 #
-#   usage: scripts/campaign.sh [-j N] QUEUE_FILE
+#   usage: [BIN=coadapt-binary] scripts/campaign.sh [-j N] QUEUE_FILE
 #
 # QUEUE_FILE: one experiment per line, `NAME CONFIG SEED [coadapt run flags...]`; `#` starts a
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
@@ -21,7 +21,8 @@
 # applied by scripts/config_with.py. `random-only:CONFIG` is CONFIG with `alternate = false`
 # (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
 # Each run's stdout (the JSON summary line) goes to RUN/summary.json, stderr to RUN.log.
-# A finished run's small files (summary.json, config.toml, designs.csv, episodes.csv) are also
+# A finished run's small files (summary.json, config.toml, designs.csv, episodes.csv, and the
+# optimiser's calibration.csv and a fork's forked-from.txt where there are some) are also
 # copied to docs/campaign/results/NAME-seedSEED/ to be committed: runs/ does not survive a new
 # checkout, and a line whose results are archived there is skipped too.
 set -euo pipefail
@@ -33,9 +34,16 @@ queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE}
 root=runs/campaign
 mkdir -p "$root/configs"
 bin=$root/coadapt
-cargo build --release -q -p coadapt
 # A private copy: rebuilding the workspace during the campaign does not touch running runs.
-cp target/release/coadapt "$bin.new" && mv "$bin.new" "$bin"
+# BIN=path runs that binary instead of building the checkout: a queue whose runs must be made by
+# an older build (say, before a change to a robot) names it in its header.
+if [ -n "${BIN:-}" ]; then
+  [ -x "$BIN" ] || { echo "campaign: BIN=$BIN is not an executable" >&2; exit 2; }
+  cp "$BIN" "$bin.new" && mv "$bin.new" "$bin"
+else
+  cargo build --release -q -p coadapt
+  cp target/release/coadapt "$bin.new" && mv "$bin.new" "$bin"
+fi
 
 archive_run() {
   local dir=$1 archive=$2 t0=$3
@@ -43,6 +51,7 @@ archive_run() {
   mkdir -p "$archive"
   cp "$dir"/{summary.json,config.toml,designs.csv,episodes.csv} "$archive/"
   if [ -f "$dir/forked-from.txt" ]; then cp "$dir/forked-from.txt" "$archive/"; fi
+  if [ -f "$dir/optimizer/calibration.csv" ]; then cp "$dir/optimizer/calibration.csv" "$archive/"; fi
   echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
 }
 
@@ -59,8 +68,10 @@ start_fork_watchers() {
     local k=${rest_k%%+*}
     if [[ $rest_k == *+* ]]; then IFS=+ read -r -a overrides <<< "${rest_k#*+}"; fi
     rm -f "$dir.fork.log"
-    scripts/fork_run.sh "$root/$src-seed$seed" "$k" "$dir" "${overrides[@]}" > "$dir.fork.log" 2>&1 &
-    echo $! > "$dir.fork.pid"
+    # In a subshell that returns at once: the watcher is then no child of this shell, and
+    # `wait -n` below, which counts the lanes, never mistakes its end for a finished run.
+    ( scripts/fork_run.sh "$root/$src-seed$seed" "$k" "$dir" "${overrides[@]}" > "$dir.fork.log" 2>&1 < /dev/null &
+      echo $! > "$dir.fork.pid" )
     echo "campaign: watching $root/$src-seed$seed for design $k, to fork $dir"
   done < "$queue"
 }

@@ -18,6 +18,8 @@
 #                   "learner.sac.auto-alpha=true" or "learner.warmup-episodes=0"
 #   SAC_FLAGS="..." extra `coadapt train` flags
 #   ONLY=fear|sac   run one learner only
+#   BIN=path        run this coadapt binary instead of building the checkout (e.g. a copy built
+#                   before a change to the robot, to rerun the runs it made)
 # Writes runs/fear-vs-sac/{fear,sac}-seedN/ and prints one line per run: the mean training
 # return of the last 10 episodes, its maximum over the run (of the 10-episode mean), and, for
 # FEAR, the last and best deterministic evaluation returns. Single-threaded, two runs at a time.
@@ -33,9 +35,13 @@ only=${ONLY:-both}
 read -r -a fear_set <<< "${FEAR_SET:-}"
 read -r -a sac_flags <<< "${SAC_FLAGS:-}"
 mkdir -p "$root"
-cargo build --release -q -p coadapt
 bin=$root/coadapt
-cp target/release/coadapt "$bin.new" && mv "$bin.new" "$bin"
+if [ -n "${BIN:-}" ]; then
+  cp "$BIN" "$bin.new" && mv "$bin.new" "$bin"
+else
+  cargo build --release -q -p coadapt
+  cp target/release/coadapt "$bin.new" && mv "$bin.new" "$bin"
+fi
 cfg=$root/one-design.toml
 python3 scripts/config_with.py "$base" \
   schedule.designs=1 "schedule.initial-designs=[[1.0, 1.0, 1.0, 1.0, 1.0, 1.0]]" \
