@@ -11,6 +11,8 @@
 # an unfinished directory that holds a snapshot goes on from it (`coadapt run --resume`, the
 # same rows as a run never stopped); one without a snapshot is moved aside to
 # NAME-seedSEED.partial-<time> and the run starts over.
+# CONFIG `retrain:SRC:exploit|explore|best` retrains a finished run's chosen body from scratch
+# (see retrain_one below).
 # CONFIG `fork:SRC:K[+overrides]` forks runs/campaign/SRC-seedSEED at the start of design K
 # (scripts/fork_run.sh, with the overrides, e.g. `fork:fear-random:5+optimizer.exploit="sim-pso"`)
 # and continues the fork: the prefix two methods share is not run twice. The copy is taken by a
@@ -55,6 +57,52 @@ archive_run() {
   echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
 }
 
+# `NAME retrain:SRC:WHICH SEED [coadapt train flags]`: the body apart from the controller. Waits
+# for SRC-seedSEED to finish, picks its best exploitation (WHICH = exploit), exploration
+# (explore) or any (best) design (scripts/pick_design.py), and trains plain SAC on it from
+# scratch with train seeds 1 and 2 (`coadapt train`, 30 episodes unless the flags say
+# --steps), into NAME-seedSEED/train-seed{1,2}.
+retrain_one() {
+  local name=$1 config=$2 seed=$3; shift 3
+  local spec=${config#retrain:}
+  local src=${spec%%:*} which=${spec#*:}
+  local dir=$root/$name-seed$seed archive=docs/campaign/results/$name-seed$seed
+  local srcdir=docs/campaign/results/$src-seed$seed
+  [ -s "$srcdir/summary.json" ] || srcdir=$root/$src-seed$seed
+  until [ -s "$srcdir/summary.json" ]; do sleep 30; done
+  local design env
+  design=$(python3 scripts/pick_design.py "$srcdir" "$which") || { echo "campaign: FAILED $dir: no design to retrain" >&2; return 1; }
+  env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb"))["env"])' "$srcdir/config.toml")
+  mkdir -p "$dir"
+  echo "campaign: start $dir: SAC from scratch on $env, $which design of $srcdir ($design) ($(date -u +%H:%M:%S))"
+  local t0=$SECONDS k steps=(--steps 30000) a
+  for a in "$@"; do [ "$a" = --steps ] && steps=(); done
+  for k in 1 2; do
+    if [ -s "$dir/train-seed$k/summary.json" ]; then continue; fi
+    rm -rf "$dir/train-seed$k"
+    if RAYON_NUM_THREADS=1 "$bin" train --env "$env" --algo sac --design "$design" "${steps[@]}" --seed "$k" --quiet \
+        --out "$dir/train-seed$k" "$@" > "$dir/train-seed$k.summary" 2>> "$dir.log"; then
+      mv "$dir/train-seed$k.summary" "$dir/train-seed$k/summary.json"
+    else
+      echo "campaign: FAILED $dir train seed $k (see $dir.log)" >&2
+      return 1
+    fi
+  done
+  python3 - "$dir" "$srcdir" "$which" "$design" > "$dir/summary.json" <<'PY'
+import csv, json, statistics, sys
+d, src, which, design = sys.argv[1:5]
+out = {"source": src, "which": which, "design": [float(x) for x in design.split(",")], "seeds": {}}
+for k in (1, 2):
+    r = [float(x["return"]) for x in csv.DictReader(open(f"{d}/train-seed{k}/episodes.csv"))]
+    out["seeds"][str(k)] = {"episodes": len(r), "last10_mean_return": statistics.mean(r[-10:]), "best10_mean_return": max(statistics.mean(r[max(0, i - 9):i + 1]) for i in range(len(r)))}
+print(json.dumps(out))
+PY
+  mkdir -p "$archive"
+  cp "$dir/summary.json" "$archive/"
+  for k in 1 2; do mkdir -p "$archive/train-seed$k"; cp "$dir/train-seed$k"/{summary.json,config.toml,episodes.csv} "$archive/train-seed$k/"; done
+  echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
+}
+
 # Starts the watchers that take the copies for the queue's fork lines.
 start_fork_watchers() {
   local name config seed rest
@@ -82,6 +130,9 @@ run_one() {
   local archive=docs/campaign/results/$name-seed$seed
   if [ -s "$dir/summary.json" ] || [ -s "$archive/summary.json" ]; then echo "campaign: $name-seed$seed done already, skipped"; return 0; fi
   local resume=""
+  case $config in
+    retrain:*) retrain_one "$name" "$config" "$seed" "$@"; return 0 ;;
+  esac
   case $config in
     fork:*)
       # The watcher started below copies the fork into $dir; wait for it (or its failure).
