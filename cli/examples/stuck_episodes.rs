@@ -7,7 +7,7 @@
 //! ```sh
 //! cargo run --release -p coadapt --example stuck_episodes -- \
 //!     --weights runs/stuck/sac-seed5/checkpoint.safetensors --episodes 200 [--stochastic] \
-//!     [--threshold 5] [--design 1,1,1,1,1,1] [--out runs/stuck/episodes]
+//!     [--threshold 5] [--design 1,1,1,1,1,1] [--out runs/stuck/episodes] [--limp-reset]
 //! ```
 //! Writes `OUT/seed-S.csv` for each stuck episode (and `OUT/seed-S.csv` for the first two that
 //! are not, as a contrast) and one summary line per episode class to stdout.
@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use coadapt_cli::render::Policy;
 use coadapt_core::Env;
-use coadapt_robots::half_cheetah::{HalfCheetah, JOINT_LIMITS};
+use coadapt_robots::half_cheetah::{HalfCheetah, JOINT_LIMITS, SimConfig};
 use rand_distr::{Distribution, StandardNormal};
 
 const PARTS: [&str; 8] = ["torso", "head", "bthigh", "bshin", "bfoot", "fthigh", "fshin", "ffoot"];
@@ -30,6 +30,7 @@ struct Args {
     threshold: f32,
     design: Vec<f32>,
     out: PathBuf,
+    limp: bool,
 }
 
 fn args() -> anyhow::Result<Args> {
@@ -40,6 +41,7 @@ fn args() -> anyhow::Result<Args> {
         threshold: 5.0,
         design: vec![1.0; 6],
         out: PathBuf::from("runs/stuck/episodes"),
+        limp: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -51,6 +53,8 @@ fn args() -> anyhow::Result<Args> {
             "--threshold" => a.threshold = value()?.parse().context("--threshold")?,
             "--design" => a.design = value()?.split(',').map(str::parse).collect::<Result<_, _>>().context("--design")?,
             "--out" => a.out = value()?.into(),
+            // The reset before issue 28: joints limp while the body falls at full gravity.
+            "--limp-reset" => a.limp = true,
             _ => bail!("unknown argument {flag}"),
         }
     }
@@ -100,7 +104,11 @@ impl Tally {
 
 fn main() -> anyhow::Result<()> {
     let a = args()?;
-    let mut env = HalfCheetah::new();
+    let mut env = if a.limp {
+        HalfCheetah::with_config(SimConfig { hold_while_settling: false, settle_steps: 60, settle_gravity: 9.81, ..SimConfig::default() })
+    } else {
+        HalfCheetah::new()
+    };
     let spec = env.spec().clone();
     let mut policy = Policy::load(&a.weights, spec.obs_dim(), spec.act_dim())?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
