@@ -26,9 +26,10 @@ Pure Python (no numpy), so it runs with the system python3.
 import csv
 import math
 import os
-import re
 import statistics
 import sys
+
+from campaign_runs import run_dirs
 
 
 def option(name, default):
@@ -114,16 +115,8 @@ def main():
     tables = option("--tables", "pairs,within").split(",")
     partial = "--partial" in sys.argv
     per_method = {}
-    for name in sorted(os.listdir(root)):
-        m = re.fullmatch(r"(.+)-seed(\d+)", name)
-        path = os.path.join(root, name)
-        if not m or not os.path.exists(os.path.join(path, "calibration.csv")):
-            continue
-        if keep is not None and m.group(1) not in keep:
-            continue
-        if not partial and not os.path.exists(os.path.join(path, "summary.json")):
-            continue
-        per_method.setdefault(m.group(1), []).append((int(m.group(2)), read_run(path)))
+    for method, seed, path in run_dirs(root, "calibration.csv", keep, partial):
+        per_method.setdefault(method, []).append((seed, read_run(path)))
     methods = keep if keep is not None else sorted(per_method)
     methods = [x for x in methods if x in per_method]
     if not methods:

@@ -55,6 +55,8 @@ import re
 import statistics
 import sys
 
+from campaign_runs import run_dirs
+
 BOUNDS = {
     "half-cheetah": ([0.8] * 6, [2.0] * 6),
     "walker": ([0.5] * 6, [1.5] * 6),
@@ -87,13 +89,15 @@ def read_run(path):
     return env, out
 
 
-def mean_sd(v):
+def mean_sd(v, sign=""):
+    """Mean ± sample sd of the finite values (the mean alone for one, `-` for none); `sign="+"`
+    writes the mean's sign always (differences)."""
     v = [x for x in v if not math.isnan(x)]
     if not v:
         return "-"
     if len(v) == 1:
-        return f"{v[0]:.1f}"
-    return f"{statistics.mean(v):.1f} ± {statistics.stdev(v):.1f}"
+        return f"{v[0]:{sign}.1f}"
+    return f"{statistics.mean(v):{sign}.1f} ± {statistics.stdev(v):.1f}"
 
 
 def sign_test(diffs):
@@ -198,12 +202,7 @@ def facts(env, rows, summary, n_init, split):
 
 
 def signed_sd(v):
-    v = [x for x in v if not math.isnan(x)]
-    if not v:
-        return "-"
-    if len(v) == 1:
-        return f"{v[0]:+.1f}"
-    return f"{statistics.mean(v):+.1f} ± {statistics.stdev(v):.1f}"
+    return mean_sd(v, sign="+")
 
 
 def p_value(p):
@@ -356,21 +355,13 @@ def main():
     out = Out(only)
     runs = {}
     summaries = {}
-    for name in sorted(os.listdir(root)):
-        m = re.fullmatch(r"(.+)-seed(\d+)", name)
-        path = os.path.join(root, name)
-        if not m or not os.path.exists(os.path.join(path, "designs.csv")):
-            continue
-        if keep is not None and m.group(1) not in keep:
-            continue
-        if not partial and not os.path.exists(os.path.join(path, "summary.json")):
-            continue
+    for method, seed, path in run_dirs(root, "designs.csv", keep, partial):
         env, rows = read_run(path)
         if not rows:
             continue
-        runs.setdefault(m.group(1), {})[int(m.group(2))] = (env, rows)
+        runs.setdefault(method, {})[seed] = (env, rows)
         summary = os.path.join(path, "summary.json")
-        summaries[(m.group(1), int(m.group(2)))] = json.load(open(summary)) if os.path.exists(summary) else {}
+        summaries[(method, seed)] = json.load(open(summary)) if os.path.exists(summary) else {}
 
     if only is not None and any(t in ("runs", "methods", "paired") for t in only):
         column_tables(out, only, columns,

@@ -1,0 +1,20 @@
+"""The run directories of a campaign archive, for the report scripts (campaign_report.py,
+calibration_report.py): RUNS_ROOT/METHOD-seedN directories that hold a given file."""
+import os
+import re
+
+
+def run_dirs(root, needs, keep=None, partial=False):
+    """Yields (method, seed, path) for every METHOD-seedN directory under `root` (sorted by name)
+    that holds `needs`, whose method is in `keep` (all when None), and that finished (holds
+    summary.json) unless `partial`."""
+    for name in sorted(os.listdir(root)):
+        m = re.fullmatch(r"(.+)-seed(\d+)", name)
+        path = os.path.join(root, name)
+        if not m or not os.path.exists(os.path.join(path, needs)):
+            continue
+        if keep is not None and m.group(1) not in keep:
+            continue
+        if not partial and not os.path.exists(os.path.join(path, "summary.json")):
+            continue
+        yield m.group(1), int(m.group(2)), path
