@@ -29,16 +29,11 @@ import os
 import statistics
 import sys
 
-from campaign_runs import run_dirs
+from campaign_runs import flag_value, run_dirs
 
 
 def option(name, default):
-    if name not in sys.argv:
-        return default
-    i = sys.argv.index(name)
-    if i + 1 >= len(sys.argv):
-        sys.exit(f"calibration_report: {name} needs a value")
-    return sys.argv[i + 1]
+    return flag_value(name, default, "calibration_report")
 
 
 def ranks(v):

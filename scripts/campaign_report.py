@@ -55,7 +55,7 @@ import re
 import statistics
 import sys
 
-from campaign_runs import run_dirs
+from campaign_runs import flag_value, run_dirs
 
 BOUNDS = {
     "half-cheetah": ([0.8] * 6, [2.0] * 6),
@@ -118,12 +118,7 @@ def on_face(design, low, high, tol=1e-3):
 
 
 def option(name, default):
-    if name not in sys.argv:
-        return default
-    i = sys.argv.index(name)
-    if i + 1 >= len(sys.argv):
-        sys.exit(f"campaign_report: {name} needs a value")
-    return sys.argv[i + 1]
+    return flag_value(name, default, "campaign_report")
 
 
 class Out:

@@ -1,7 +1,19 @@
-"""The run directories of a campaign archive, for the report scripts (campaign_report.py,
-calibration_report.py): RUNS_ROOT/METHOD-seedN directories that hold a given file."""
+"""What the report scripts (campaign_report.py, calibration_report.py) share: the run directories
+of a campaign archive (RUNS_ROOT/METHOD-seedN holding a given file) and their flag parsing."""
 import os
 import re
+import sys
+
+
+def flag_value(name, default, prog):
+    """The value after `name` on the command line, `default` without the flag; exits naming
+    `prog` when the flag ends the line."""
+    if name not in sys.argv:
+        return default
+    i = sys.argv.index(name)
+    if i + 1 >= len(sys.argv):
+        sys.exit(f"{prog}: {name} needs a value")
+    return sys.argv[i + 1]
 
 
 def run_dirs(root, needs, keep=None, partial=False):
