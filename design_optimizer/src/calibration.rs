@@ -54,7 +54,7 @@ impl Optimizer<'_> {
         if self.cfg.explore == ExploreMethod::Random {
             let mut rng = self.rng.clone();
             let rejected = crate::reject::Rejected::new(&req.rejected, self.spec_bounds(), self.cfg.reject_radius);
-            if let Ok(r) = self.random_with(&mut rng, &rejected) {
+            if let Ok(r) = crate::role::random_design(self.spec_bounds(), &mut rng, &rejected, self.cfg.reject_radius) {
                 candidates.push((Candidate::NextRandom, r.design));
             }
         }

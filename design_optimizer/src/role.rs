@@ -369,26 +369,7 @@ impl<'a> Optimizer<'a> {
     /// Uniform in the box, drawn again while it falls near a rejected design (at most
     /// [`RANDOM_DRAWS`] times).
     fn random(&mut self, rejected: &Rejected) -> Result<SearchResult, String> {
-        let mut rng = std::mem::replace(&mut self.rng, rng(0, 0));
-        let r = self.random_with(&mut rng, rejected);
-        self.rng = rng;
-        r
-    }
-
-    /// [`Self::random`] drawing from `rng` (a copy of the optimiser's generator, to see the
-    /// next random design without drawing it).
-    pub(crate) fn random_with(&self, rng: &mut Rng64, rejected: &Rejected) -> Result<SearchResult, String> {
-        let mut d = vec![0.0; self.spec.bounds.dim()];
-        for _ in 0..RANDOM_DRAWS {
-            self.spec.bounds.sample(rng, &mut d);
-            if !rejected.near(&d) {
-                return Ok(SearchResult { design: d, score: f32::NAN, history: vec![], evaluations: 0 });
-            }
-        }
-        Err(format!(
-            "{RANDOM_DRAWS} random designs all fell within optimizer.reject-radius ({}) of a rejected design; lower the radius",
-            self.cfg.reject_radius
-        ))
+        random_design(&self.spec.bounds, &mut self.rng, rejected, self.cfg.reject_radius)
     }
 
     fn by_simulation(
@@ -450,6 +431,19 @@ impl CriticObjective<'_> {
     fn evaluate_one(&mut self, design: &[f32], out: &mut [f32; 1]) {
         crate::SwarmObjective::evaluate(self, design, out);
     }
+}
+
+/// [`Optimizer::random`] drawing from `rng` (the calibration passes a copy of the optimiser's
+/// generator, to see the next random design without drawing it).
+pub(crate) fn random_design(bounds: &BoxSpace, rng: &mut Rng64, rejected: &Rejected, radius: f32) -> Result<SearchResult, String> {
+    let mut d = vec![0.0; bounds.dim()];
+    for _ in 0..RANDOM_DRAWS {
+        bounds.sample(rng, &mut d);
+        if !rejected.near(&d) {
+            return Ok(SearchResult { design: d, score: f32::NAN, history: vec![], evaluations: 0 });
+        }
+    }
+    Err(format!("{RANDOM_DRAWS} random designs all fell within optimizer.reject-radius ({radius}) of a rejected design; lower the radius"))
 }
 
 /// Random draws before `random` gives up finding a design away from every rejected one.
