@@ -35,12 +35,14 @@ queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE}
 [ -f "$queue" ] || { echo "campaign: no queue file $queue" >&2; exit 2; }
 root=runs/campaign
 mkdir -p "$root/configs"
-bin=$root/coadapt
 # A private copy: rebuilding the workspace during the campaign does not touch running runs.
 # BIN=path runs that binary instead of building the checkout: a queue whose runs must be made by
-# an older build (say, before a change to a robot) names it in its header.
+# an older build (say, before a change to a robot) names it in its header. Its copy is named after
+# it, so that two queues running at once with different binaries do not swap each other's.
+bin=$root/coadapt
 if [ -n "${BIN:-}" ]; then
   [ -x "$BIN" ] || { echo "campaign: BIN=$BIN is not an executable" >&2; exit 2; }
+  bin=$root/bin-$(basename "$BIN")
   cp "$BIN" "$bin.new" && mv "$bin.new" "$bin"
 else
   cargo build --release -q -p coadapt
