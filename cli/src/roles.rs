@@ -2,6 +2,7 @@
 //! as threads (`coadapt run` over the in-process transport) and as separate processes
 //! (`coadapt learner`, `coadapt actor`, `coadapt optimizer`).
 
+use std::ops::ControlFlow;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -97,27 +98,40 @@ struct SimEvaluator {
     version: u64,
 }
 
-impl RolloutEvaluator for SimEvaluator {
-    fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String> {
+impl SimEvaluator {
+    /// One deterministic rollout per design (of at most `steps` steps, 0 for the whole
+    /// episode), its statistics turned into a score by `score`.
+    fn rollouts(
+        &mut self,
+        policy: &[f32],
+        designs: &[f32],
+        seeds: &[u64],
+        steps: usize,
+        out: &mut [f32],
+        score: fn(&coadapt_actors::EpisodeStats) -> f32,
+    ) -> Result<(), String> {
         self.version += 1;
-        let dim = designs.len() / fitness.len().max(1);
-        let per = fitness.len().div_ceil(self.actors.len());
+        let dim = designs.len() / out.len().max(1);
+        let per = out.len().div_ceil(self.actors.len());
         let version = self.version;
         std::thread::scope(|s| {
             let jobs: Vec<_> = self
                 .actors
                 .iter_mut()
-                .zip(fitness.chunks_mut(per.max(1)))
+                .zip(out.chunks_mut(per.max(1)))
                 .zip(designs.chunks(per.max(1) * dim))
                 .zip(seeds.chunks(per.max(1)))
                 .map(|(((actor, fit), des), seeds)| {
                     s.spawn(move || -> Result<(), String> {
                         actor.set_weights(version, policy).map_err(|e| e.to_string())?;
                         for ((f, d), &seed) in fit.iter_mut().zip(des.chunks_exact(dim)).zip(seeds) {
-                            let st = actor
-                                .run_episode(seed, d, false, &mut |_| std::ops::ControlFlow::Continue(()))
-                                .map_err(|e| e.to_string())?;
-                            *f = st.episode_return / st.length.max(1) as f32;
+                            let mut taken = 0usize;
+                            let mut cut = |_: &coadapt_core::Transition<'_>| {
+                                taken += 1;
+                                if steps > 0 && taken >= steps { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+                            };
+                            let st = actor.run_episode(seed, d, false, &mut cut).map_err(|e| e.to_string())?;
+                            *f = score(&st);
                         }
                         Ok(())
                     })
@@ -125,6 +139,16 @@ impl RolloutEvaluator for SimEvaluator {
                 .collect();
             jobs.into_iter().try_for_each(|j| j.join().map_err(|_| "a rollout thread panicked".to_string())?)
         })
+    }
+}
+
+impl RolloutEvaluator for SimEvaluator {
+    fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String> {
+        self.rollouts(policy, designs, seeds, 0, fitness, |st| st.episode_return / st.length.max(1) as f32)
+    }
+
+    fn returns(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], steps: usize, returns: &mut [f32]) -> Result<(), String> {
+        self.rollouts(policy, designs, seeds, steps, returns, |st| st.episode_return)
     }
 }
 

@@ -123,7 +123,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Override the exploitation method: pso-q (FEAR), cmaes-q, sim-pso, sim-cmaes, openai-es,
-    /// cmaes-es, random.
+    /// cmaes-es, random, or screened (PSO over Q proposes a few designs, short rollouts choose;
+    /// `[optimizer.screen]`).
     #[arg(long)]
     pub exploit: Option<String>,
     /// Override the exploration method: random or novelty.

@@ -173,6 +173,17 @@ fn simulation_baselines_spend_rollouts_and_fear_spends_none() {
     assert_eq!(r[2], ("exploit".into(), "sim-cmaes".into(), 6));
     let r = rollouts_and_methods(&small(ExploitMethod::CmaesQ), "cmaes-q");
     assert_eq!(r[2], ("exploit".into(), "cmaes-q".into(), 0));
+    // Critic-screened: 3 candidates x 2 short rollouts of the real robot, under a trust region.
+    let mut c = small(ExploitMethod::Screened);
+    c.optimizer.pso.particles = 20;
+    c.optimizer.pso.iterations = 5;
+    c.optimizer.screen.candidates = 3;
+    c.optimizer.screen.rollouts = 2;
+    c.optimizer.screen.steps = 20;
+    c.optimizer.screen.separation = 0.01;
+    c.optimizer.trust_radius = 0.3;
+    let r = rollouts_and_methods(&c, "screened");
+    assert_eq!(r[2], ("exploit".into(), "screened".into(), 6));
 }
 
 #[test]

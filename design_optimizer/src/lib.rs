@@ -27,6 +27,10 @@
 //! - [`calibration`]: at each exploitation request, the objective's value for the chosen design,
 //!   the next random design and every design trained before, with that request's networks
 //!   (`calibration.csv`: does the critic order bodies as the robot does?).
+//! - [`trust`]: a trust region around the designs trained so far, widening as they accumulate:
+//!   the searches over Q score every design at its projection into it (beyond the thesis).
+//! - [`screen`]: critic-screened rollouts: PSO over Q proposes its best few diverse designs,
+//!   short rollouts of the population policy choose among them (beyond the thesis).
 //! - [`resume`]: the optimiser's state file (generator, request count, ES state, every reply
 //!   by request), so a restarted optimiser continues exactly where it stopped.
 //!
@@ -43,7 +47,9 @@ pub mod pso;
 pub mod reject;
 pub mod resume;
 pub mod role;
+pub mod screen;
 pub mod swarm;
+pub mod trust;
 
 pub use cmaes::Cmaes;
 pub use cmaes::CmaesConfig;

@@ -10,6 +10,12 @@
 //! - `openai-es`, `cmaes-es`: one generation of a persistent ES per design (256 and 9
 //!   candidates evaluated in simulation); the generation's best candidate is trained on.
 //! - `random`: uniform in the box.
+//! - `screened` (beyond the thesis): PSO over Eq. 5.6 proposes its best few diverse designs,
+//!   a few short rollouts of the population policy choose among them ([`crate::screen`]).
+//!
+//! With `trust-radius > 0` the searches over Q (`pso-q`, `cmaes-q`, `screened`) look only
+//! within a radius of the designs trained so far, growing as designs accumulate
+//! ([`crate::trust`]; beyond the thesis).
 //!
 //! Exploration requests use `explore`: `random` or `novelty` (Eq. 5.7). Every reply carries
 //! the Eq. 5.6 score of the chosen design under the current population networks.
@@ -46,6 +52,7 @@ pub enum ExploitMethod {
     OpenaiEs,
     CmaesEs,
     Random,
+    Screened,
 }
 
 impl ExploitMethod {
@@ -58,11 +65,12 @@ impl ExploitMethod {
             Self::OpenaiEs => "openai-es",
             Self::CmaesEs => "cmaes-es",
             Self::Random => "random",
+            Self::Screened => "screened",
         }
     }
 
     pub fn needs_rollouts(self) -> bool {
-        matches!(self, Self::SimPso | Self::SimCmaes | Self::OpenaiEs | Self::CmaesEs)
+        matches!(self, Self::SimPso | Self::SimCmaes | Self::OpenaiEs | Self::CmaesEs | Self::Screened)
     }
 }
 
@@ -93,7 +101,8 @@ pub enum QModeConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct OptimizerConfig {
-    /// `pso-q` (FEAR), `cmaes-q`, `sim-pso`, `sim-cmaes`, `openai-es`, `cmaes-es` or `random`.
+    /// `pso-q` (FEAR), `cmaes-q`, `sim-pso`, `sim-cmaes`, `openai-es`, `cmaes-es`, `random` or
+    /// `screened` (PSO over Q proposes, short rollouts decide: `[optimizer.screen]`).
     pub exploit: ExploitMethod,
     /// `random` or `novelty`.
     pub explore: ExploreMethod,
@@ -125,6 +134,14 @@ pub struct OptimizerConfig {
     /// proposal must be from every design an operator rejected as a prototype; 0.05 = 5 % of
     /// the box.
     pub reject_radius: f32,
+    /// The trust region of the searches over Q (`pso-q`, `cmaes-q`, `screened`): the radius
+    /// (box-normalised distance) around the designs trained so far within which they look, at
+    /// five designs; 0 (the default, the thesis) searches the whole box.
+    pub trust_radius: f32,
+    /// How the trust region widens: `r = trust-radius * (designs seen / 5)^trust-growth`.
+    pub trust_growth: f32,
+    /// `exploit = "screened"`: candidates, rollouts per candidate, steps per rollout, spacing.
+    pub screen: crate::screen::ScreenConfig,
 }
 
 impl Default for OptimizerConfig {
@@ -145,6 +162,9 @@ impl Default for OptimizerConfig {
             es_train_on: EsTrainOn::BestSeen,
             sim_seed: SimSeed::Fresh,
             reject_radius: 0.05,
+            trust_radius: 0.0,
+            trust_growth: 0.5,
+            screen: crate::screen::ScreenConfig::default(),
         }
     }
 }
@@ -153,6 +173,13 @@ impl Default for OptimizerConfig {
 /// `seeds[k]` for design `k`, fitness the mean per-step reward (higher is better).
 pub trait RolloutEvaluator {
     fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String>;
+
+    /// The return of one rollout of `policy` per design from `seeds[k]`, over at most `steps`
+    /// steps (the whole episode when 0), for the critic-screened rollouts. An evaluator that
+    /// cannot cut an episode short says so.
+    fn returns(&mut self, _policy: &[f32], _designs: &[f32], _seeds: &[u64], _steps: usize, _returns: &mut [f32]) -> Result<(), String> {
+        Err("this rollout evaluator cannot run the short rollouts of exploit = \"screened\"".into())
+    }
 }
 
 /// Which candidate of the ES baselines is trained on.
@@ -251,6 +278,13 @@ impl<'a> Optimizer<'a> {
         if !(cfg.reject_radius.is_finite() && cfg.reject_radius >= 0.0) {
             return Err(OptimizerError::Config(format!("optimizer.reject-radius: {} is not a finite number >= 0", cfg.reject_radius)));
         }
+        if !(cfg.trust_radius.is_finite() && cfg.trust_radius >= 0.0) {
+            return Err(OptimizerError::Config(format!("optimizer.trust-radius: {} is not a finite number >= 0", cfg.trust_radius)));
+        }
+        if !(cfg.trust_growth.is_finite() && cfg.trust_growth >= 0.0) {
+            return Err(OptimizerError::Config(format!("optimizer.trust-growth: {} is not a finite number >= 0", cfg.trust_growth)));
+        }
+        cfg.screen.check().map_err(OptimizerError::Config)?;
         if cfg.exploit.needs_rollouts() && evaluator.is_none() {
             return Err(OptimizerError::Config(format!("optimizer.exploit = {} needs simulation rollouts", cfg.exploit.name())));
         }
@@ -322,6 +356,7 @@ impl<'a> Optimizer<'a> {
         let mut q = CriticObjective::new(&objective, self.q_mode(), self.cfg.cores);
         let bounds = self.spec.bounds.clone();
         let rejected = Rejected::new(&req.rejected, &bounds, self.cfg.reject_radius);
+        let trust = crate::trust::TrustRegion::new(&req.chosen, &bounds, self.cfg.trust_radius, self.cfg.trust_growth);
         let (method, result, rollouts): (&str, SearchResult, u64) = match req.kind {
             DesignKind::Explore => match self.cfg.explore {
                 ExploreMethod::Random => ("random", self.random(&rejected).map_err(err)?, 0),
@@ -335,8 +370,17 @@ impl<'a> Optimizer<'a> {
             DesignKind::Exploit => {
                 let m = self.cfg.exploit;
                 let r = match m {
-                    ExploitMethod::PsoQ => pso::maximise(&mut rejected.guard(&mut q), &bounds, &self.cfg.pso, seed),
-                    ExploitMethod::CmaesQ => cmaes::maximise(&mut rejected.guard(&mut q), &bounds, &self.cfg.cmaes, seed),
+                    ExploitMethod::PsoQ | ExploitMethod::CmaesQ | ExploitMethod::Screened if trust.is_some() => {
+                        let region = trust.as_ref().expect("checked");
+                        let mut inside = region.wrap(&mut q);
+                        self.over_q(m, &mut inside, &w.policy, &bounds, &rejected, seed).map(|mut r| {
+                            region.project(&mut r.design);
+                            r
+                        })
+                    }
+                    ExploitMethod::PsoQ | ExploitMethod::CmaesQ | ExploitMethod::Screened => {
+                        self.over_q(m, &mut q, &w.policy, &bounds, &rejected, seed)
+                    }
                     ExploitMethod::Random => self.random(&rejected).map_err(crate::SearchError::Config),
                     ExploitMethod::SimPso | ExploitMethod::SimCmaes | ExploitMethod::OpenaiEs | ExploitMethod::CmaesEs => {
                         self.by_simulation(m, &w.policy, &bounds, &rejected, seed)
@@ -351,6 +395,7 @@ impl<'a> Optimizer<'a> {
                         req.rejected.len() / bounds.dim().max(1)
                     )));
                 }
+                // `screened` counts the rollouts it ran in `evaluations`.
                 let rollouts = if m.needs_rollouts() { r.evaluations as u64 } else { 0 };
                 (m.name(), r, rollouts)
             }
@@ -370,6 +415,64 @@ impl<'a> Optimizer<'a> {
     /// [`RANDOM_DRAWS`] times).
     fn random(&mut self, rejected: &Rejected) -> Result<SearchResult, String> {
         random_design(&self.spec.bounds, &mut self.rng, rejected, self.cfg.reject_radius)
+    }
+
+    /// The searches over Q: PSO (`pso-q`), CMA-ES (`cmaes-q`), or PSO whose best diverse
+    /// designs are screened by short rollouts (`screened`).
+    fn over_q(
+        &mut self,
+        m: ExploitMethod,
+        q: &mut dyn crate::SwarmObjective,
+        policy: &[f32],
+        bounds: &BoxSpace,
+        rejected: &Rejected,
+        seed: u64,
+    ) -> Result<SearchResult, crate::SearchError> {
+        match m {
+            ExploitMethod::CmaesQ => cmaes::maximise(&mut rejected.guard(q), bounds, &self.cfg.cmaes, seed),
+            ExploitMethod::Screened if self.cfg.screen.candidates > 1 => {
+                let mut guarded = rejected.guard(q);
+                let mut recorded = crate::screen::Recorded::new(&mut guarded);
+                let best = pso::maximise(&mut recorded, bounds, &self.cfg.pso, seed)?;
+                let scale: Vec<f32> =
+                    bounds.low.iter().zip(&bounds.high).map(|(lo, hi)| if hi > lo { 1.0 / (hi - lo) } else { 0.0 }).collect();
+                let sc = self.cfg.screen.clone();
+                let candidates =
+                    crate::screen::diverse_best(&recorded.designs, &recorded.scores, bounds.dim(), &scale, sc.candidates, sc.separation);
+                self.screen(policy, candidates, best)
+            }
+            ExploitMethod::Screened => {
+                pso::maximise(&mut rejected.guard(q), bounds, &self.cfg.pso, seed).map(|r| SearchResult { evaluations: 0, ..r })
+            }
+            _ => pso::maximise(&mut rejected.guard(q), bounds, &self.cfg.pso, seed),
+        }
+    }
+
+    /// `screened`: `screen.rollouts` rollouts of each candidate from the same reset seeds; the
+    /// highest mean return wins (its score is that mean return).
+    fn screen(&mut self, policy: &[f32], candidates: Vec<Vec<f32>>, best: SearchResult) -> Result<SearchResult, crate::SearchError> {
+        let fail = |e: String| crate::SearchError::Config(format!("screening rollouts failed: {e}"));
+        if candidates.len() < 2 {
+            return Ok(SearchResult { evaluations: 0, ..best });
+        }
+        let Some(ev) = self.evaluator.as_deref_mut() else {
+            return Err(crate::SearchError::Config("screened needs simulation rollouts".into()));
+        };
+        let (r, k) = (self.cfg.screen.rollouts, candidates.len());
+        let seeds: Vec<u64> = (0..r).map(|_| self.rng.random::<u64>()).collect();
+        let designs: Vec<f32> = candidates.iter().flat_map(|c| std::iter::repeat_n(c.as_slice(), r).flatten().copied()).collect();
+        let seeds: Vec<u64> = (0..k).flat_map(|_| seeds.iter().copied()).collect();
+        let mut returns = vec![0.0f32; k * r];
+        ev.returns(policy, &designs, &seeds, self.cfg.screen.steps, &mut returns).map_err(fail)?;
+        let means: Vec<f32> = returns.chunks_exact(r).map(|c| c.iter().sum::<f32>() / r as f32).collect();
+        // The first of the highest means (the critic's order breaks ties).
+        let mut win = 0;
+        for (i, m) in means.iter().enumerate() {
+            if crate::swarm::key(*m) > crate::swarm::key(means[win]) {
+                win = i;
+            }
+        }
+        Ok(SearchResult { design: candidates[win].clone(), score: means[win], history: means, evaluations: k * r })
     }
 
     fn by_simulation(
