@@ -60,8 +60,17 @@ PY
 }
 
 [ -d "$src" ] || echo "fork_run: $src does not exist yet; waiting for it (Ctrl-C to stop)" >&2
-until snap=$(find_snapshot); do
+# Looks into the snapshots (a Python start) only when their directory listing or times have
+# changed: a campaign queue keeps dozens of these watchers waiting for hours.
+seen=""
+while :; do
+  now=$(ls -l --time-style=+%s.%N "$src/snapshots" 2>/dev/null || true)
+  if [ -n "$now" ] && [ "$now" != "$seen" ]; then
+    if snap=$(find_snapshot); then break; fi
+    seen=$now
+  fi
   if [ -s "$src/summary.json" ]; then
+    snap=$(find_snapshot) && break
     echo "fork_run: $src has finished and kept no snapshot at the start of design $k" >&2
     exit 1
   fi
