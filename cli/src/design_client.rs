@@ -159,10 +159,11 @@ pub fn score(a: ScoreArgs) -> anyhow::Result<()> {
         .collect::<anyhow::Result<Vec<_>>>()?;
     let (rt, mut c, _) = client(&a.server)?;
     let r = rt.block_on(c.score(pb::ScoreRequest { designs: designs.clone() })).map_err(status)?.into_inner();
-    println!("design,objective,spread");
+    println!("design,objective,spread,disagreement");
     for (d, s) in designs.iter().zip(&r.scores) {
         let v: Vec<String> = d.values.iter().map(|v| v.to_string()).collect();
-        println!("{},{},{}", v.join(";"), s.objective, s.spread);
+        let gap = s.disagreement.map(|d| d.to_string()).unwrap_or_default();
+        println!("{},{},{},{gap}", v.join(";"), s.objective, s.spread);
     }
     eprintln!("score: population weights version {}, mean over {} start states", r.weights_version, r.start_states);
     Ok(())

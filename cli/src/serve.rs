@@ -53,11 +53,14 @@ pub fn design_model(
     let hidden = &cfg.learner.sac.hidden;
     let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
     let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
-    let (mode, thetas): (QMode, Vec<&[f32]>) = match cfg.optimizer.q {
-        QModeConfig::Q1 => (QMode::First, vec![q1]),
-        QModeConfig::MinOfTwin => (QMode::MinOfTwin, vec![q1, q2]),
-        QModeConfig::Pessimistic => (QMode::MeanMinusKStd(cfg.optimizer.pessimism), vec![q1, q2]),
+    let mode = match cfg.optimizer.q {
+        QModeConfig::Q1 => QMode::First,
+        QModeConfig::MinOfTwin => QMode::MinOfTwin,
+        QModeConfig::Pessimistic => QMode::MeanMinusKStd(cfg.optimizer.pessimism),
     };
+    // Both critics always: Q1 alone scores under `q1`, and the pair gives each score's
+    // disagreement.
+    let thetas: Vec<&[f32]> = vec![q1, q2];
     Ok(DesignModel::new(
         spec.name.clone(),
         spec.design_names.clone(),

@@ -77,6 +77,9 @@ fn python_clients_query_a_finished_run_through_both_protocols() {
     assert_eq!(objective.len(), 2);
     assert!(objective.iter().all(|v| v.is_finite()) && objective[0] != objective[1], "{objective:?}");
     assert_eq!(got["oip_value"], got["objective"]);
+    // The served run has the twin critics: every score says how far they disagree.
+    let gap: Vec<f64> = serde_json::from_value(got["disagreement"].clone()).unwrap();
+    assert!(gap.len() == 2 && gap.iter().all(|g| g.is_finite() && *g >= 0.0) && gap[0] != gap[1], "{gap:?}");
     assert_eq!(got["oip_shape"], serde_json::json!([2, 1]));
     assert_eq!(got["oip_model_versions"], serde_json::json!([got["weights_version"].to_string()]));
     // Optimize to the end: an answer inside the box whose objective Score confirms below; and

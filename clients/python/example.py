@@ -145,6 +145,7 @@ def main():
         "designs": batch.tolist(),
         "objective": [s.objective for s in scores.scores],
         "spread": [s.spread for s in scores.scores],
+        "disagreement": [s.disagreement if s.HasField("disagreement") else None for s in scores.scores],
         "oip_value": values.reshape(-1).tolist(),
         "oip_shape": list(values.shape),
         "oip_model_versions": list(meta.versions),

@@ -275,6 +275,35 @@ impl DesignObjective {
         }
     }
 
+    /// Critic heads loaded (1: Q1 alone; 2: the twin critics).
+    pub fn heads(&self) -> usize {
+        self.critics.len()
+    }
+
+    /// How far the twin critics disagree about each design: per design the mean over the start
+    /// states of `|Q1 - Q2| / 2` (the two heads are that far either side of their mean), into
+    /// `out` (`particles`), on this thread. `false` (and `out` untouched) with one head.
+    pub fn disagreement(&self, designs: &[f32], chunk_rows: usize, out: &mut [f32], ws: &mut ObjectiveWorkspace) -> bool {
+        if self.critics.len() < 2 {
+            return false;
+        }
+        let (p, n) = (out.len(), self.n_states);
+        assert_eq!(designs.len(), p * self.design_dim, "designs are not particles x design_dim");
+        let per_chunk = (chunk_rows / n).max(1);
+        let mut mean_rows = Vec::new();
+        for (o, d) in out.chunks_mut(per_chunk).zip(designs.chunks(per_chunk * self.design_dim)) {
+            // Per row: (Q1 + Q2)/2 with k = 0, and (Q1 + Q2)/2 - |Q1 - Q2|/2 with k = 1.
+            self.rows(d, QMode::MeanMinusKStd(0.0), o.len(), ws);
+            mean_rows.clear();
+            mean_rows.extend_from_slice(&ws.q);
+            self.rows(d, QMode::MeanMinusKStd(1.0), o.len(), ws);
+            for ((o, m), low) in o.iter_mut().zip(mean_rows.chunks_exact(n)).zip(ws.q.chunks_exact(n)) {
+                *o = m.iter().zip(low).map(|(m, l)| f64::from(m - l)).sum::<f64>() as f32 / n as f32;
+            }
+        }
+        true
+    }
+
     /// The value of every (particle, start state) row into `ws.q` (`particles x n_states`).
     fn rows(&self, designs: &[f32], mode: QMode, particles: usize, ws: &mut ObjectiveWorkspace) {
         let (n, act) = (self.n_states, self.act_dim);

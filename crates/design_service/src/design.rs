@@ -73,9 +73,12 @@ impl DesignService for Design {
     async fn score(&self, req: Request<pb::ScoreRequest>) -> Result<Response<pb::ScoreReply>, Status> {
         let m = self.shared.model()?;
         let designs = designs_of(req.get_ref(), &m, self.shared.cfg.max_score_batch)?;
-        let (mean, spread) = self.shared.score(m.clone(), designs).await?;
+        let s = self.shared.score_with(m.clone(), designs, true).await?;
+        let gap = |i: usize| s.disagreement.as_ref().map(|d| d[i]);
         Ok(Response::new(pb::ScoreReply {
-            scores: mean.into_iter().zip(spread).map(|(objective, spread)| pb::DesignScore { objective, spread }).collect(),
+            scores: (0..s.mean.len())
+                .map(|i| pb::DesignScore { objective: s.mean[i], spread: s.spread[i], disagreement: gap(i) })
+                .collect(),
             weights_version: m.weights_version,
             start_states: u32::try_from(m.start_states()).unwrap_or(u32::MAX),
         }))

@@ -1,6 +1,8 @@
 //! The Open Inference Protocol (KServe v2): the design critic as the model `design-critic`,
-//! input `design` FP32 `[N, D]`, output `value` FP32 `[N, 1]` (Eq. 5.6, as Score's
-//! `objective`).
+//! input `design` FP32 `[N, D]`, outputs FP32 `[N, 1]`: `value` (Eq. 5.6, as Score's
+//! `objective`), `spread` (its standard deviation over the start states) and, when the served
+//! networks have the twin critics, `disagreement` (the mean over the start states of
+//! `|Q1 - Q2| / 2`). A request that names no output gets them all, as the protocol says.
 
 use std::sync::Arc;
 
@@ -17,7 +19,53 @@ pub(crate) struct Inference {
 }
 
 const INPUT: &str = "design";
-const OUTPUT: &str = "value";
+
+/// An output of the model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Output {
+    Value,
+    Spread,
+    Disagreement,
+}
+
+impl Output {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Value => "value",
+            Self::Spread => "spread",
+            Self::Disagreement => "disagreement",
+        }
+    }
+
+    /// The outputs `m` has, in the order an unnamed request gets them.
+    fn of(m: &crate::DesignModel) -> Vec<Self> {
+        let mut all = vec![Self::Value, Self::Spread];
+        if m.has_disagreement() {
+            all.push(Self::Disagreement);
+        }
+        all
+    }
+}
+
+/// The outputs `req` asks for (all when it names none), or `INVALID_ARGUMENT` naming the field.
+fn outputs_of(req: &oip::ModelInferRequest, m: &crate::DesignModel) -> Result<Vec<Output>, Status> {
+    let all = Output::of(m);
+    if req.outputs.is_empty() {
+        return Ok(all);
+    }
+    let names = all.iter().map(|o| format!("{:?}", o.name())).collect::<Vec<_>>().join(", ");
+    let mut asked = Vec::new();
+    for (i, o) in req.outputs.iter().enumerate() {
+        let Some(&out) = all.iter().find(|x| x.name() == o.name) else {
+            return Err(Status::invalid_argument(format!("outputs[{i}].name: {:?}; {MODEL_NAME} has the outputs {names}", o.name)));
+        };
+        if asked.contains(&out) {
+            return Err(Status::invalid_argument(format!("outputs[{i}].name: {:?} is asked for twice", o.name)));
+        }
+        asked.push(out);
+    }
+    Ok(asked)
+}
 
 impl Inference {
     /// The model asked for, if it is ours (any version: empty or the current one).
@@ -60,11 +108,6 @@ fn designs_of(req: &oip::ModelInferRequest, m: &crate::DesignModel, max: usize) 
         return Err(bad("inputs[0].shape", format!("[{n}, {d}]: N must be 1 to {max} (the server's max-score-batch)")));
     }
     let count = n as usize * dim;
-    for (i, o) in req.outputs.iter().enumerate() {
-        if o.name != OUTPUT {
-            return Err(bad(&format!("outputs[{i}].name"), format!("{:?}; {MODEL_NAME} has one output, {OUTPUT:?}", o.name)));
-        }
-    }
     let given = input.contents.as_ref().is_some_and(|c| !c.fp32_contents.is_empty());
     let (values, raw) = if req.raw_input_contents.is_empty() {
         let c = input.contents.as_ref().map(|c| c.fp32_contents.as_slice()).unwrap_or_default();
@@ -131,7 +174,7 @@ impl GrpcInferenceService for Inference {
             versions: vec![m.weights_version.to_string()],
             platform: "coadapt".into(),
             inputs: vec![tensor(INPUT, vec![-1, m.design_dim() as i64])],
-            outputs: vec![tensor(OUTPUT, vec![-1, 1])],
+            outputs: Output::of(&m).into_iter().map(|o| tensor(o.name(), vec![-1, 1])).collect(),
         }))
     }
 
@@ -139,29 +182,38 @@ impl GrpcInferenceService for Inference {
         let r = req.into_inner();
         let m = self.model_named(&r.model_name, &r.model_version)?;
         let (designs, raw) = designs_of(&r, &m, self.shared.cfg.max_score_batch)?;
+        let wanted = outputs_of(&r, &m)?;
         let n = designs.len() / m.design_dim();
-        let (values, _) = self.shared.score(m.clone(), designs).await?;
-        let mut out = oip::model_infer_response::InferOutputTensor {
-            name: OUTPUT.into(),
-            datatype: "FP32".into(),
-            shape: vec![n as i64, 1],
-            parameters: Default::default(),
-            contents: None,
-        };
-        // Answer in kind: raw bytes to a raw request (what Triton's clients send), typed
-        // contents otherwise.
-        let raw_output_contents = if raw {
-            vec![values.iter().flat_map(|v| v.to_le_bytes()).collect()]
-        } else {
-            out.contents = Some(oip::InferTensorContents { fp32_contents: values, ..Default::default() });
-            vec![]
-        };
+        let s = self.shared.score_with(m.clone(), designs, wanted.contains(&Output::Disagreement)).await?;
+        let (mut outputs, mut raw_output_contents) = (Vec::new(), Vec::new());
+        for o in wanted {
+            let values = match o {
+                Output::Value => s.mean.clone(),
+                Output::Spread => s.spread.clone(),
+                Output::Disagreement => s.disagreement.clone().ok_or_else(|| Status::internal("the disagreement was not computed"))?,
+            };
+            let mut out = oip::model_infer_response::InferOutputTensor {
+                name: o.name().into(),
+                datatype: "FP32".into(),
+                shape: vec![n as i64, 1],
+                parameters: Default::default(),
+                contents: None,
+            };
+            // Answer in kind: raw bytes to a raw request (what Triton's clients send), typed
+            // contents otherwise.
+            if raw {
+                raw_output_contents.push(values.iter().flat_map(|v| v.to_le_bytes()).collect());
+            } else {
+                out.contents = Some(oip::InferTensorContents { fp32_contents: values, ..Default::default() });
+            }
+            outputs.push(out);
+        }
         Ok(Response::new(oip::ModelInferResponse {
             model_name: MODEL_NAME.into(),
             model_version: m.weights_version.to_string(),
             id: r.id,
             parameters: Default::default(),
-            outputs: vec![out],
+            outputs,
             raw_output_contents,
         }))
     }

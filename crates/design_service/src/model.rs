@@ -61,6 +61,17 @@ impl DesignModel {
     pub fn score(&self, designs: &[f32], mean: &mut [f32], spread: &mut [f32], ws: &mut ObjectiveWorkspace) {
         self.objective.evaluate_with_spread(designs, self.mode, 256, mean, spread, ws);
     }
+
+    /// Whether the model has the twin critics, so that [`Self::disagreement`] says something.
+    pub fn has_disagreement(&self) -> bool {
+        self.objective.heads() >= 2
+    }
+
+    /// The twin critics' disagreement about each design (the mean over the start states of
+    /// `|Q1 - Q2| / 2`) into `out`; `false` when the model has one critic.
+    pub fn disagreement(&self, designs: &[f32], out: &mut [f32], ws: &mut ObjectiveWorkspace) -> bool {
+        self.objective.disagreement(designs, 256, out, ws)
+    }
 }
 
 /// One row of the run's designs (`designs.csv`).

@@ -99,13 +99,22 @@ impl Shared {
     /// Eq. 5.6 and its spread for `designs` (checked), on the bounded pool; the pool's place
     /// is kept through the rest the busy share asks for, after the answer is on its way.
     pub(crate) async fn score(&self, m: Arc<DesignModel>, designs: Vec<f32>) -> Result<(Vec<f32>, Vec<f32>), Status> {
+        self.score_with(m, designs, false).await.map(|s| (s.mean, s.spread))
+    }
+
+    /// [`Self::score`], and the twin critics' disagreement when `disagreement` is asked for
+    /// and the model has both critics.
+    pub(crate) async fn score_with(&self, m: Arc<DesignModel>, designs: Vec<f32>, disagreement: bool) -> Result<Scores, Status> {
         let permit = self.permit().await?;
-        let (mean, spread, busy) = tokio::task::spawn_blocking(move || {
+        let (scores, busy) = tokio::task::spawn_blocking(move || {
             let t = std::time::Instant::now();
             let n = designs.len() / m.design_dim().max(1);
             let (mut mean, mut spread) = (vec![0.0; n], vec![0.0; n]);
-            m.score(&designs, &mut mean, &mut spread, &mut ObjectiveWorkspace::default());
-            (mean, spread, t.elapsed())
+            let mut ws = ObjectiveWorkspace::default();
+            m.score(&designs, &mut mean, &mut spread, &mut ws);
+            let mut gap = vec![0.0; n];
+            let disagreement = (disagreement && m.disagreement(&designs, &mut gap, &mut ws)).then_some(gap);
+            (Scores { mean, spread, disagreement }, t.elapsed())
         })
         .await
         .map_err(|e| Status::internal(format!("scoring failed: {e}")))?;
@@ -118,8 +127,17 @@ impl Shared {
                 drop(permit);
             });
         }
-        Ok((mean, spread))
+        Ok(scores)
     }
+}
+
+/// What [`Shared::score_with`] gives per design.
+#[derive(Debug)]
+pub(crate) struct Scores {
+    pub mean: Vec<f32>,
+    pub spread: Vec<f32>,
+    /// The twin critics' disagreement (`None`: not asked for, or one critic).
+    pub disagreement: Option<Vec<f32>>,
 }
 
 /// `busy (1/share - 1)`, none for a share of 1 or more (or not a number).

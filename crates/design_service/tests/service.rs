@@ -29,6 +29,8 @@ struct Nets {
     phi: Vec<f32>,
     critic: Mlp,
     theta: Vec<f32>,
+    /// A second critic (the twin), for the disagreement.
+    theta2: Vec<f32>,
     starts: Vec<f32>,
 }
 
@@ -42,13 +44,30 @@ fn nets() -> Nets {
     policy.init(&mut phi, 0.5, &mut rng);
     critic.init(&mut theta, 0.5, &mut rng);
     let starts = (0..STATES * obs).map(|_| rng.random_range(-1.0..1.0)).collect();
-    Nets { policy, phi, critic, theta, starts }
+    let mut theta2 = critic.zeros();
+    critic.init(&mut theta2, 0.5, &mut rng);
+    Nets { policy, phi, critic, theta, theta2, starts }
 }
 
 /// Eq. 5.6 by plain forward passes: for each start state, the design put in its design
 /// columns, the policy's mean squashed by tanh, Q1 of that; mean and standard deviation over
 /// the states.
 fn reference(n: &Nets, design: &[f32]) -> (f32, f32) {
+    let qs = q_per_state(n, &n.theta, design);
+    let mu = qs.iter().sum::<f64>() / qs.len() as f64;
+    let sd = (qs.iter().map(|q| (q - mu).powi(2)).sum::<f64>() / qs.len() as f64).sqrt();
+    (mu as f32, sd as f32)
+}
+
+/// The twin critics' disagreement by plain forward passes: the mean over the start states of
+/// |Q1 - Q2| / 2.
+fn reference_disagreement(n: &Nets, design: &[f32]) -> f32 {
+    let (q1, q2) = (q_per_state(n, &n.theta, design), q_per_state(n, &n.theta2, design));
+    (q1.iter().zip(&q2).map(|(a, b)| (a - b).abs() / 2.0).sum::<f64>() / q1.len() as f64) as f32
+}
+
+/// Q of critic `theta` at each start state with `design` and the policy's squashed mean.
+fn q_per_state(n: &Nets, theta: &[f32], design: &[f32]) -> Vec<f64> {
     let obs = STATE + DIM;
     let mut qs = Vec::new();
     for s in n.starts.chunks_exact(obs) {
@@ -59,11 +78,9 @@ fn reference(n: &Nets, design: &[f32]) -> (f32, f32) {
         let a: Vec<f32> = out[..ACT].iter().map(|m| m.tanh()).collect();
         let xa: Vec<f32> = x.iter().chain(&a).copied().collect();
         let mut act = n.critic.activations(1);
-        qs.push(f64::from(n.critic.forward(&n.theta, &xa, 1, &mut act)[0]));
+        qs.push(f64::from(n.critic.forward(theta, &xa, 1, &mut act)[0]));
     }
-    let mu = qs.iter().sum::<f64>() / qs.len() as f64;
-    let sd = (qs.iter().map(|q| (q - mu).powi(2)).sum::<f64>() / qs.len() as f64).sqrt();
-    (mu as f32, sd as f32)
+    qs
 }
 
 fn row(index: usize, prototype: &str) -> HistoryRow {
@@ -82,13 +99,17 @@ fn row(index: usize, prototype: &str) -> HistoryRow {
 }
 
 fn model(n: &Nets) -> DesignModel {
+    model_with(n, &[&n.theta])
+}
+
+fn model_with(n: &Nets, thetas: &[&[f32]]) -> DesignModel {
     DesignModel::new(
         "toy".into(),
         vec!["thigh".into(), "shin".into(), "foot".into()],
         BoxSpace::new(vec![0.5; DIM], vec![2.0; DIM]).unwrap(),
         42,
         "run-1".into(),
-        (&n.policy, &n.phi, &n.critic, &[&n.theta]),
+        (&n.policy, &n.phi, &n.critic, thetas),
         &n.starts,
         STATE,
         QMode::First,
@@ -143,6 +164,7 @@ fn score_and_model_infer_give_eq_5_6_of_the_networks() {
             let (mu, sd) = reference(&n, x);
             assert!((sc.objective - mu).abs() <= 1e-4 * (1.0 + mu.abs()), "objective {} vs {mu} for {x:?}", sc.objective);
             assert!((sc.spread - sd).abs() <= 1e-4 * (1.0 + sd.abs()), "spread {} vs {sd} for {x:?}", sc.spread);
+            assert_eq!(sc.disagreement, None, "one critic: no disagreement to report");
             distinct.push(sc.objective);
         }
         distinct.dedup();
@@ -168,6 +190,10 @@ fn score_and_model_infer_give_eq_5_6_of_the_networks() {
         assert_eq!((r.id.as_str(), r.model_version.as_str(), r.outputs[0].shape.as_slice()), ("q1", "42", &[4, 1][..]));
         let values = &r.outputs[0].contents.as_ref().unwrap().fp32_contents;
         assert_eq!(values, &got.scores.iter().map(|s| s.objective).collect::<Vec<_>>());
+        let names: Vec<&str> = r.outputs.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["value", "spread"], "no output named: all of the model's");
+        let spread = &r.outputs[1].contents.as_ref().unwrap().fp32_contents;
+        assert_eq!(spread, &got.scores.iter().map(|s| s.spread).collect::<Vec<_>>());
         let raw = oip::ModelInferRequest {
             inputs: vec![input(None)],
             raw_input_contents: vec![flat.iter().flat_map(|v| v.to_le_bytes()).collect()],
@@ -184,6 +210,7 @@ fn score_and_model_infer_give_eq_5_6_of_the_networks() {
             .into_inner();
         assert_eq!((meta.inputs[0].name.as_str(), meta.inputs[0].shape.as_slice()), ("design", &[-1, 3][..]));
         assert_eq!((meta.outputs[0].name.as_str(), meta.outputs[0].shape.as_slice()), ("value", &[-1, 1][..]));
+        assert_eq!(meta.outputs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>(), ["value", "spread"]);
         assert!(i.server_live(oip::ServerLiveRequest {}).await.unwrap().into_inner().live);
         assert!(i.server_ready(oip::ServerReadyRequest {}).await.unwrap().into_inner().ready);
         assert!(
@@ -191,6 +218,59 @@ fn score_and_model_infer_give_eq_5_6_of_the_networks() {
         );
         let e = i.model_ready(oip::ModelReadyRequest { name: "nope".into(), version: String::new() }).await.unwrap_err();
         assert_eq!(e.code(), Code::NotFound);
+    });
+}
+
+#[test]
+fn with_the_twin_critics_a_score_says_how_far_they_disagree() {
+    let n = nets();
+    let model = model_with(&n, &[&n.theta, &n.theta2]);
+    let s =
+        serve("127.0.0.1:0".parse().unwrap(), ServeConfig::default(), Arc::new(StaticSource { model: Arc::new(model), history: vec![] }))
+            .unwrap();
+    rt().block_on(async {
+        let ch = channel(&s).await;
+        let batch = [[1.0, 1.0, 1.0], [0.5, 2.0, 1.3], [2.0, 0.5, 0.7]];
+        let got = DesignServiceClient::new(ch.clone()).score(designs(&batch)).await.unwrap().into_inner();
+        for (x, sc) in batch.iter().zip(&got.scores) {
+            let (mu, _) = reference(&n, x);
+            assert!((sc.objective - mu).abs() <= 1e-4 * (1.0 + mu.abs()), "Q1 still scores: {} vs {mu}", sc.objective);
+            let want = reference_disagreement(&n, x);
+            let d = sc.disagreement.expect("two critics: a disagreement");
+            assert!(want > 1e-3, "the critics differ here: {want}");
+            assert!((d - want).abs() <= 1e-4 * (1.0 + want), "disagreement {d} vs {want} for {x:?}");
+        }
+
+        let mut i = GrpcInferenceServiceClient::new(ch);
+        let flat: Vec<f32> = batch.iter().flatten().copied().collect();
+        let out = |name: &str| oip::model_infer_request::InferRequestedOutputTensor { name: name.into(), parameters: Default::default() };
+        let req = oip::ModelInferRequest {
+            model_name: "design-critic".into(),
+            inputs: vec![oip::model_infer_request::InferInputTensor {
+                name: "design".into(),
+                datatype: "FP32".into(),
+                shape: vec![3, DIM as i64],
+                parameters: Default::default(),
+                contents: None,
+            }],
+            raw_input_contents: vec![flat.iter().flat_map(|v| v.to_le_bytes()).collect()],
+            outputs: vec![out("disagreement"), out("value")],
+            ..Default::default()
+        };
+        let r = i.model_infer(req.clone()).await.unwrap().into_inner();
+        assert_eq!(r.outputs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>(), ["disagreement", "value"], "in the order asked");
+        let raw: Vec<Vec<f32>> =
+            r.raw_output_contents.iter().map(|b| b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()).collect();
+        assert_eq!(raw[0], got.scores.iter().map(|s| s.disagreement.unwrap()).collect::<Vec<_>>());
+        assert_eq!(raw[1], got.scores.iter().map(|s| s.objective).collect::<Vec<_>>());
+        let meta = i
+            .model_metadata(oip::ModelMetadataRequest { name: "design-critic".into(), version: String::new() })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(meta.outputs.iter().map(|o| o.name.as_str()).collect::<Vec<_>>(), ["value", "spread", "disagreement"]);
+        let twice = oip::ModelInferRequest { outputs: vec![out("value"), out("value")], ..req };
+        invalid(i.model_infer(twice).await, "outputs[1].name");
     });
 }
 
