@@ -1,0 +1,191 @@
+"""The design-choice benchmark, per robot (issue 28 section 2): does a method's chosen body beat a
+random one?
+
+usage: python3 scripts/design_bench_report.py [RUNS_ROOT, default docs/campaign/results]
+           [--robots hc,walker-bench,...] [--tables methods,random,within,bodies,calibration]
+
+Runs are RUNS_ROOT/PREFIX-METHOD-seedN (docs/campaign/design-bench.queue and
+design-choice.queue): PREFIX names the robot (hc = HalfCheetah, walker-bench, hopper-bench,
+daisy-bench, mujoco-bench), METHOD is fear, random, sim-pso or a method of section 3; the
+retrained bodies are PREFIX-fear-body and PREFIX-random-body. Only finished runs (summary.json)
+count. Per robot:
+
+1. methods: per method, mean ± sample sd over seeds (n stated) of the quality of the chosen
+   designs (the mean best evaluation return of the exploitation designs), of the best design
+   found, the exploitation coordinates within 2 % of a bound, design rollouts and the learner's
+   wall time (all starts of a resumed run; a fork's includes the designs it shares with its
+   source; runs shared the machine's two cores with one to three others, so times are rough);
+2. random: each method minus random designs only, paired by seed, with the exact two-sided
+   sign-flip (permutation) test of the mean difference;
+3. within: pooled over seeds, each exploitation design minus the exploration (random) design
+   trained right after it in the same run: mean ± sd, wins, exact sign-flip test;
+4. bodies: the run's best exploitation design and its best random design, each trained from
+   scratch with plain SAC (2 training seeds): the mean return of the last 10 episodes, and
+   the difference paired by run seed and training seed, with the exact sign-flip test;
+5. calibration: scripts/calibration_report.py over the robot's methods.
+
+Pure Python (no numpy), so it runs with the system python3.
+"""
+import csv
+import itertools
+import json
+import math
+import os
+import random
+import statistics
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import campaign_report as cr  # noqa: E402
+
+ROBOTS = [("HalfCheetah", "hc"), ("Walker", "walker-bench"), ("Hopper", "hopper-bench"), ("Daisy", "daisy-bench"),
+          ("MuJoCo HalfCheetah (bridge)", "mujoco-bench")]
+# Methods in this order; others after them, by name.
+ORDER = ["fear", "random", "sim-pso", "pessimistic", "trust", "screened"]
+
+
+def option(name, default):
+    return sys.argv[sys.argv.index(name) + 1] if name in sys.argv else default
+
+
+def sign_flip_p(diffs):
+    """Exact two-sided p of the sign-flip (paired permutation) test of mean(diffs) = 0: the share
+    of the 2^n sign patterns whose |mean| is at least the observed one (Monte Carlo with 2^18
+    draws and a fixed seed past n = 20, marked with ~)."""
+    d = [x for x in diffs if not math.isnan(x)]
+    n = len(d)
+    if n == 0:
+        return "-"
+    obs = abs(sum(d)) - 1e-9 * max(1.0, max(abs(x) for x in d))
+    if n <= 20:
+        hits = sum(abs(sum(s * x for s, x in zip(signs, d))) >= obs for signs in itertools.product((1, -1), repeat=n))
+        return cr.p_value(hits / 2 ** n)
+    rng = random.Random(1)
+    draws = 1 << 18
+    hits = sum(abs(sum(x if rng.random() < 0.5 else -x for x in d)) >= obs for _ in range(draws))
+    return "~" + cr.p_value(hits / draws)
+
+
+def runs_of(root, prefix):
+    """{method: {seed: (facts, summary)}} of the finished co-adaptation runs of one robot."""
+    out = {}
+    if not os.path.isdir(root):
+        return out
+    for name in sorted(os.listdir(root)):
+        if not name.startswith(prefix + "-") or "-seed" not in name:
+            continue
+        method, _, seed = name[len(prefix) + 1:].rpartition("-seed")
+        path = os.path.join(root, name)
+        if method.endswith("-body") or not seed.isdigit() or not os.path.exists(os.path.join(path, "summary.json")):
+            continue
+        if not os.path.exists(os.path.join(path, "designs.csv")):
+            continue
+        summary = json.load(open(os.path.join(path, "summary.json")))
+        # The learner's wall clock over every start of the run (summary.json has the last
+        # start's only): the seconds column of the last episode row.
+        with open(os.path.join(path, "episodes.csv")) as f:
+            last = None
+            for last in csv.DictReader(f):
+                pass
+        summary = dict(summary, wall_seconds=float(last["seconds"]) if last and last.get("seconds") else float("nan"))
+        env, rows = cr.read_run(path)
+        n_init = sum(r["kind"] == "initial" for r in rows)
+        out.setdefault(method, {})[int(seed)] = (cr.facts(env, rows, summary, n_init, None), summary)
+    return out
+
+
+def bodies_of(root, prefix):
+    """{which: {seed: [last-10 mean return per training seed]}} of the retrained bodies."""
+    out = {}
+    for which in ("fear", "random"):
+        for name in sorted(os.listdir(root)) if os.path.isdir(root) else []:
+            head = f"{prefix}-{which}-body-seed"
+            if not name.startswith(head) or not name[len(head):].isdigit():
+                continue
+            path = os.path.join(root, name, "summary.json")
+            if not os.path.exists(path):
+                continue
+            s = json.load(open(path))
+            seeds = s.get("seeds", {})
+            out.setdefault(which, {})[int(name[len(head):])] = [seeds[k]["last10_mean_return"] for k in sorted(seeds)]
+    return out
+
+
+def ordered(methods):
+    return [m for m in ORDER if m in methods] + sorted(m for m in methods if m not in ORDER)
+
+
+def report(root, title, prefix, tables):
+    runs = runs_of(root, prefix)
+    bodies = bodies_of(root, prefix)
+    if not runs and not bodies:
+        return False
+    print(f"### {title} (`{prefix}-*`)\n")
+    methods = ordered(runs)
+    if "methods" in tables and runs:
+        print("| method | seeds | quality of chosen designs | best design found | exploitation coordinates within 2 % of a bound | design rollouts per run | wall hours per run |")
+        print("|---|---|---|---|---|---|---|")
+        for m in methods:
+            fs = [f for f, _ in runs[m].values()]
+            near = sum(f["near"] for f in fs)
+            coords = sum(f["coords"] for f in fs)
+            hours = [s["wall_seconds"] / 3600 for _, s in runs[m].values()]
+            hours_cell = cr.mean_sd(hours) if len(hours) else "-"
+            if hours and all(h < 10 for h in hours):
+                hours_cell = (f"{statistics.mean(hours):.2f} ± {statistics.stdev(hours):.2f}" if len(hours) > 1 else f"{hours[0]:.2f}")
+            print(f"| {m} | {len(fs)} | {cr.mean_sd([f['exploit'] for f in fs])} | {cr.mean_sd([f['best'] for f in fs])} | "
+                  f"{near}/{coords} | {statistics.mean(f['rollouts'] for f in fs):.0f} | {hours_cell} |")
+        print()
+    if "random" in tables and "random" in runs:
+        print("| method minus random designs, paired by seed | seeds | quality of chosen designs | p | best design found | p |")
+        print("|---|---|---|---|---|---|")
+        for m in methods:
+            if m == "random":
+                continue
+            seeds = sorted(set(runs[m]) & set(runs["random"]))
+            q = [runs[m][s][0]["exploit"] - runs["random"][s][0]["exploit"] for s in seeds]
+            b = [runs[m][s][0]["best"] - runs["random"][s][0]["best"] for s in seeds]
+            print(f"| {m} | {len(seeds)} | {cr.signed_sd(q)} | {sign_flip_p(q)} | {cr.signed_sd(b)} | {sign_flip_p(b)} |")
+        print()
+    if "within" in tables and runs:
+        print("| method: exploitation design minus the random design after it, pooled over seeds | seeds | pairs | mean ± sd | exploit wins | p |")
+        print("|---|---|---|---|---|---|")
+        for m in methods:
+            d = [x for f, _ in runs[m].values() for x in f["next"]]
+            if d:
+                print(f"| {m} | {len(runs[m])} | {len(d)} | {cr.signed_sd(d)} | {sum(x > 0 for x in d)}/{len(d)} | {sign_flip_p(d)} |")
+        print()
+    if "bodies" in tables and bodies:
+        print("| body, trained from scratch with plain SAC | run seeds | training runs | last-10-episode return |")
+        print("|---|---|---|---|")
+        for which in ("fear", "random"):
+            v = [x for r in bodies.get(which, {}).values() for x in r]
+            print(f"| {which} (best {'exploitation' if which == 'fear' else 'random'} design) | {len(bodies.get(which, {}))} | {len(v)} | {cr.mean_sd(v)} |")
+        seeds = sorted(set(bodies.get("fear", {})) & set(bodies.get("random", {})))
+        d = [a - b for s in seeds for a, b in zip(bodies["fear"][s], bodies["random"][s])]
+        if d:
+            print(f"| FEAR's body minus the random one, paired by run and training seed | {len(seeds)} | {len(d)} | {cr.signed_sd(d)} (p {sign_flip_p(d)}) |")
+        print()
+    if "calibration" in tables and runs:
+        names = [f"{prefix}-{m}" for m in methods]
+        here = os.path.dirname(os.path.abspath(__file__))
+        r = subprocess.run([sys.executable, os.path.join(here, "calibration_report.py"), root, "--methods", ",".join(names),
+                            "--tables", "pairs"], capture_output=True, text=True)
+        if r.returncode == 0 and r.stdout.strip():
+            print(r.stdout.rstrip() + "\n")
+    return True
+
+
+def main():
+    args = [a for i, a in enumerate(sys.argv[1:], 1) if not a.startswith("--") and sys.argv[i - 1] not in {"--robots", "--tables"}]
+    root = args[0] if args else "docs/campaign/results"
+    keep = option("--robots", None)
+    tables = option("--tables", "methods,random,within,bodies,calibration").split(",")
+    robots = [r for r in ROBOTS if keep is None or r[1] in keep.split(",")]
+    if not any([report(root, title, prefix, tables) for title, prefix in robots]):
+        sys.exit(f"design_bench_report: no finished benchmark run under {root}")
+
+
+if __name__ == "__main__":
+    main()
