@@ -139,7 +139,10 @@ run_one() {
     fork:*)
       # The watcher started below copies the fork into $dir; wait for it (or its failure).
       until [ -d "$dir" ]; do
-        if ! kill -0 "$(cat "$dir.fork.pid" 2>/dev/null || echo 0)" 2>/dev/null && [ ! -d "$dir" ]; then
+        # (No pid file counts as a dead watcher: `kill -0 0` would ask about our own group.)
+        local wpid
+        wpid=$(cat "$dir.fork.pid" 2>/dev/null || true)
+        if { [[ ! $wpid =~ ^[1-9][0-9]*$ ]] || ! kill -0 "$wpid" 2>/dev/null; } && [ ! -d "$dir" ]; then
           echo "campaign: FAILED $dir: the fork was not made (see $dir.fork.log)" >&2
           return 1
         fi
