@@ -90,7 +90,7 @@ pub fn run<E: Env>(
                 Err(ActorError::Env(e)) if failures < env_retries && !shutdown.load(std::sync::atomic::Ordering::Relaxed) => {
                     failures += 1;
                     summary.failed_episodes += 1;
-                    eprintln!(
+                    coadapt_log::logln!(
                         "actor {actor_id}: episode of assignment {} dropped after {steps} steps ({failures} in a row), running it again: {e}",
                         a.id
                     );

@@ -69,8 +69,8 @@ impl Drop for Children {
 pub(crate) fn join_threads<E: std::fmt::Display>(role: &str, threads: Vec<std::thread::JoinHandle<Result<u64, E>>>) {
     for t in threads {
         match t.join() {
-            Ok(Err(e)) => eprintln!("{role}: an actor thread failed: {e}"),
-            Err(_) => eprintln!("{role}: an actor thread panicked"),
+            Ok(Err(e)) => coadapt_log::logln!("{role}: an actor thread failed: {e}"),
+            Err(_) => coadapt_log::logln!("{role}: an actor thread panicked"),
             Ok(Ok(_)) => {}
         }
     }
@@ -177,10 +177,10 @@ impl ProcessFleet<'_> {
         let children = if self.start {
             let logs = self.out.join("logs");
             let kids = spawn(self.subcommand, &config, self.actors, &fleet, &connect, &logs, self.extra)?;
-            eprintln!("{role}: {} actors over {} (logs in {})", self.actors, fleet.transport.name(), logs.display());
+            coadapt_log::logln!("{role}: {} actors over {} (logs in {})", self.actors, fleet.transport.name(), logs.display());
             kids
         } else {
-            eprintln!(
+            coadapt_log::logln!(
                 "{role}: waiting for {} actors over {} ({}): coadapt {} --config {} --id N",
                 self.actors,
                 fleet.transport.name(),

@@ -287,7 +287,7 @@ pub fn run(a: &ConvBenchArgs) -> anyhow::Result<()> {
     let layers = embedding_layers(&EmbeddingConfig::default())?;
     if let Some(path) = &a.dump {
         std::fs::write(path, dump(&layers, 2, a.seed).to_string())?;
-        eprintln!("bench conv: shapes, inputs and outputs written to {}", path.display());
+        coadapt_log::logln!("bench conv: shapes, inputs and outputs written to {}", path.display());
         if a.dump_only {
             return Ok(());
         }

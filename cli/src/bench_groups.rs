@@ -88,7 +88,7 @@ pub fn run(a: &GroupsBenchArgs) -> anyhow::Result<()> {
         let mut g = copy_of(&state);
         one_update(&mut g, best, &phi);
         std::fs::write(path, dump(&state, &samples, &phi, &g).to_string())?;
-        eprintln!("bench groups: inputs and outputs written to {}", path.display());
+        coadapt_log::logln!("bench groups: inputs and outputs written to {}", path.display());
     }
     for _ in 0..a.warmup {
         let mut g = copy_of(&state);

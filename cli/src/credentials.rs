@@ -54,13 +54,13 @@ pub fn token(cmd: TokenCommand) -> anyhow::Result<()> {
     }
     let mut f = create_private(&a.out)?;
     writeln!(f, "{}", token.expose()).and_then(|()| f.sync_all()).with_context(|| format!("writing {}", a.out.display()))?;
-    eprintln!("token: a new {role} token in {} (mode 600)", a.out.display());
+    coadapt_log::logln!("token: a new {role} token in {} (mode 600)", a.out.display());
     if let Some(t) = &a.tokens_file {
         let mut f = std::fs::OpenOptions::new().create(true).append(true).open(t).with_context(|| format!("opening {}", t.display()))?;
         writeln!(f, "{role} {}", hash_token(token.expose()))
             .and_then(|()| f.sync_all())
             .with_context(|| format!("writing {}", t.display()))?;
-        eprintln!("token: its SHA-256 added to {} (the server's accepted tokens)", t.display());
+        coadapt_log::logln!("token: its SHA-256 added to {} (the server's accepted tokens)", t.display());
     }
     Ok(())
 }
@@ -102,6 +102,11 @@ pub fn tls(cmd: TlsCommand) -> anyhow::Result<()> {
     }
     let c = coadapt_auth::Credentials::generate(&hosts, a.days).context("making the certificates")?;
     c.write(&a.out).with_context(|| format!("writing the certificates to {}", a.out.display()))?;
-    eprintln!("tls: a CA, a server certificate for {} and a client certificate in {} ({} days)", hosts.join(", "), a.out.display(), a.days);
+    coadapt_log::logln!(
+        "tls: a CA, a server certificate for {} and a client certificate in {} ({} days)",
+        hosts.join(", "),
+        a.out.display(),
+        a.days
+    );
     Ok(())
 }

@@ -103,7 +103,7 @@ pub fn optimize(a: OptimizeArgs) -> anyhow::Result<()> {
                 println!("{},{},{},{},{}", d.join(";"), m.best_objective, m.best_spread, m.evaluations, m.weights_version);
                 return Ok(());
             }
-            eprintln!(
+            coadapt_log::logln!(
                 "optimize: iteration {} ({} designs scored): best {} at {}",
                 m.iteration + 1,
                 m.evaluations,
@@ -165,7 +165,7 @@ pub fn score(a: ScoreArgs) -> anyhow::Result<()> {
         let gap = s.disagreement.map(|d| d.to_string()).unwrap_or_default();
         println!("{},{},{},{gap}", v.join(";"), s.objective, s.spread);
     }
-    eprintln!("score: population weights version {}, mean over {} start states", r.weights_version, r.start_states);
+    coadapt_log::logln!("score: population weights version {}, mean over {} start states", r.weights_version, r.start_states);
     Ok(())
 }
 

@@ -107,7 +107,7 @@ impl Builder {
         {
             Ok(m) => self.source.set_model(m),
             // The optimiser gets the same networks and states: it will say what is wrong.
-            Err(e) => eprintln!("learner: design service: no model for weights version {}: {e:#}", w.version),
+            Err(e) => coadapt_log::logln!("learner: design service: no model for weights version {}: {e:#}", w.version),
         }
     }
 }
@@ -210,7 +210,7 @@ pub fn start(
     writer.observe_designs(DesignsObserver(Box::new(move |r| rows.upsert(crate::serve::history_row(r.clone())))));
     let server = coadapt_design_service::serve(addr, serve_cfg, source.clone())
         .with_context(|| format!("design-service.listen: serving on {addr}"))?;
-    eprintln!(
+    coadapt_log::logln!(
         "learner: design service (coadapt.v1.DesignService, design-critic) on grpc://{} from the first design request on",
         server.local_addr()
     );

@@ -79,7 +79,7 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
         crate::security::check_plaintext_listen("--listen", want, &security)?;
         let listener = tokio::net::TcpListener::bind(want).await.with_context(|| format!("listening on {}", args.listen))?;
         let addr = listener.local_addr()?;
-        eprintln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);
+        coadapt_log::logln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);
         crate::progress::print_stdout_line(&format!("dm-env-rpc://{addr}"));
         let (stopped_tx, stopped_rx) = tokio::sync::oneshot::channel::<()>();
         if args.max_worlds == 0 || args.max_connections_per_peer == 0 || args.max_connections == 0 {
@@ -96,7 +96,7 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
         let server = tokio::spawn(served);
         wait_for_signal().await;
         let r = handle.refusals();
-        eprintln!(
+        coadapt_log::logln!(
             "env-serve: stopping (open streams get {GRACE:?} to finish); refused: {} worlds beyond --max-worlds, {} connections beyond --max-connections-per-peer, {} beyond --max-connections",
             r.worlds, r.connections_per_peer, r.connections_total
         );
@@ -106,7 +106,7 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
             Ok(Ok(r)) => r.context("serving dm_env_rpc"),
             Ok(Err(e)) => Err(anyhow::anyhow!("the server task failed: {e}")),
             Err(_) => {
-                eprintln!("env-serve: clients still connected after {GRACE:?}; closing their streams");
+                coadapt_log::logln!("env-serve: clients still connected after {GRACE:?}; closing their streams");
                 Ok(())
             }
         }

@@ -171,7 +171,7 @@ impl FleetConfig {
                     None => "plaintext",
                 };
                 let tokens = grpc.server_auth.tokens.as_ref().map_or("no tokens".to_string(), |t| format!("{} accepted token(s)", t.len()));
-                eprintln!("learner: gRPC on {} ({tls}, {tokens})", server.local_addr());
+                coadapt_log::logln!("learner: gRPC on {} ({tls}, {tokens})", server.local_addr());
                 if let Some(d) = dims {
                     server.expect_dims(d);
                 }
@@ -212,7 +212,7 @@ impl FleetConfig {
 pub fn clean_stale() {
     match coadapt_shm::cleanup_stale() {
         Ok(0) => {}
-        Ok(n) => eprintln!("cleaned up shared memory of {n} dead process(es)"),
-        Err(e) => eprintln!("warning: cleaning up stale shared memory: {e}"),
+        Ok(n) => coadapt_log::logln!("cleaned up shared memory of {n} dead process(es)"),
+        Err(e) => coadapt_log::logln!("warning: cleaning up stale shared memory: {e}"),
     }
 }

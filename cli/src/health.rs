@@ -63,9 +63,11 @@ pub fn watch(
             let now = healthy(stall);
             if now != serving {
                 if now {
-                    eprintln!("learner: making progress again: health SERVING");
+                    coadapt_log::logln!("learner: making progress again: health SERVING");
                 } else {
-                    eprintln!("learner: no progress for {stall:?} (fleet.health-stall-secs): health NOT_SERVING, for probes to restart it");
+                    coadapt_log::logln!(
+                        "learner: no progress for {stall:?} (fleet.health-stall-secs): health NOT_SERVING, for probes to restart it"
+                    );
                 }
                 switch.set_serving(now);
                 serving = now;

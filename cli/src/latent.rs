@@ -160,7 +160,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
     let mut csv =
         std::io::BufWriter::new(std::fs::OpenOptions::new().append(true).open(out.join("episodes.csv")).context("opening episodes.csv")?);
     if done.runs > 0 {
-        eprintln!("latent {}: resuming {} after its {} finished run(s)", label(&cfg), out.display(), done.runs);
+        coadapt_log::logln!("latent {}: resuming {} after its {} finished run(s)", label(&cfg), out.display(), done.runs);
     }
     let t0 = Instant::now() - std::time::Duration::from_secs_f64(done.seconds.max(0.0));
     let mut train_curves: Vec<Vec<f64>> = done.train;
@@ -181,7 +181,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
         if cfg.demonstrations > 0 {
             let ok = demonstrate(&mut agent, &mut env, cfg.demonstrations, seed, cfg.episode_steps)?;
             agent.train(&mut rng);
-            eprintln!(
+            coadapt_log::logln!(
                 "latent {}: run {}: {} demonstrations in the replay ({ok} successful), model and DDPG trained on them",
                 label(&cfg),
                 r + 1,
@@ -219,7 +219,7 @@ pub fn run(a: LatentArgs) -> anyhow::Result<()> {
             csv.flush()?;
             agent.save(&dir.join("agent.safetensors")).context("writing the checkpoint")?;
             let plan = if fleet.is_some() { "on the actors".to_string() } else { format!("{mean:.1} ms/step") };
-            eprintln!(
+            coadapt_log::logln!(
                 "latent {}: run {}/{} episode {}/{}: train {:.1} eval {:.1} model loss {loss:.4} plan {plan} ({:.0} s)",
                 label(&cfg),
                 r + 1,

@@ -104,7 +104,7 @@ pub fn build(
     source.env().reset(0, &design)?;
     let state_len = source.state().map_or(0, <[f32]>::len);
     if source.state().is_none() {
-        eprintln!(
+        coadapt_log::logln!(
             "embedding: a served robot shows no state: its {} episodes follow OU noise alone (no state-based DDPG)",
             settings.episodes
         );
@@ -158,7 +158,7 @@ pub fn build(
             }
         }
         frames.push_episode(&episode).map_err(|e| anyhow::anyhow!("frames of episode {ep}: {e}"))?;
-        eprintln!(
+        coadapt_log::logln!(
             "embedding: collection episode {}/{} return {ret:.1} ({} frames, {:.0} s)",
             ep + 1,
             settings.episodes,
@@ -189,7 +189,7 @@ pub fn build(
             log.flush()?;
         }
         if step % 200 == 0 || step == settings.steps {
-            eprintln!(
+            coadapt_log::logln!(
                 "embedding: step {step}/{}: reconstruction {:.4} pull {:.4} push {:.4} ({:.0} s)",
                 settings.steps,
                 p.reconstruction,
@@ -200,7 +200,7 @@ pub fn build(
         }
     }
     coadapt_latent::save_embedding(path, &trainer.emb, &trainer.enc, &trainer.dec)?;
-    eprintln!("embedding: saved {}", path.display());
+    coadapt_log::logln!("embedding: saved {}", path.display());
     Ok((trainer.emb, trainer.enc))
 }
 
@@ -213,10 +213,10 @@ pub fn load_or_build(
     let path = Path::new(&settings.path);
     if path.exists() {
         let (emb, enc, _) = coadapt_latent::load_embedding(path)?;
-        eprintln!("embedding: loaded {}", path.display());
+        coadapt_log::logln!("embedding: loaded {}", path.display());
         return Ok((emb, enc));
     }
-    eprintln!(
+    coadapt_log::logln!(
         "embedding: {} does not exist; building it ({} collection episodes, {} training steps)",
         path.display(),
         settings.episodes,

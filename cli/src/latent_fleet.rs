@@ -77,7 +77,7 @@ fn latency_log(path: Option<&Path>, id: u64) -> anyhow::Result<impl FnMut(&Actor
     };
     Ok(move |e: &ActorEpisode| {
         let (mean, p90) = crate::latent::latency(&e.plan_ms);
-        eprintln!(
+        coadapt_log::logln!(
             "latent actor {id}: {} episode (assignment {}): {} steps, return {:.1}, plan {mean:.1} ms/step (p90 {p90:.1}), {:.1} s",
             if e.train { "training" } else { "evaluation" },
             e.assignment,
@@ -88,7 +88,7 @@ fn latency_log(path: Option<&Path>, id: u64) -> anyhow::Result<impl FnMut(&Actor
         if let Some(f) = file.as_mut() {
             let row = writeln!(f, "{},{},{},{},{mean},{p90},{:.3}", e.assignment, e.train, e.steps, e.episode_return, e.seconds);
             if let Err(err) = row.and_then(|()| f.flush()) {
-                eprintln!("latent actor {id}: writing the latency CSV: {err}");
+                coadapt_log::logln!("latent actor {id}: writing the latency CSV: {err}");
             }
         }
     })
@@ -193,8 +193,8 @@ pub fn actor(a: LatentActorArgs) -> anyhow::Result<()> {
     let mut links = cfg.fleet.actor_links(a.id, &cfg.security)?;
     let shutdown = crate::progress::shutdown_on_ctrl_c();
     let mut log = latency_log(a.latency_csv.as_deref(), a.id)?;
-    eprintln!("latent actor {}: {} through the camera over {}", a.id, cfg.robot, cfg.fleet.transport.name());
+    coadapt_log::logln!("latent actor {}: {} through the camera over {}", a.id, cfg.robot, cfg.fleet.transport.name());
     let n = coadapt_latent::run_actor(&mut actor, source.env(), cfg.episode_steps, a.id, &mut links, &shutdown, &mut log)?;
-    eprintln!("latent actor {}: done after {n} episodes", a.id);
+    coadapt_log::logln!("latent actor {}: done after {n} episodes", a.id);
     Ok(())
 }

@@ -94,13 +94,13 @@ pub(crate) fn finished(out: &Path, cfg: &LatentConfig) -> anyhow::Result<Finishe
         let parsed: Option<Vec<f64>> = cells.iter().map(|c| c.parse::<f64>().ok()).collect();
         let Some(v) = parsed.filter(|v| v.len() == 10) else {
             // A row cut short by the crash ends the readable part.
-            eprintln!("latent: --resume: {} line {} is not a whole row; dropped with what follows", path.display(), i + 2);
+            coadapt_log::logln!("latent: --resume: {} line {} is not a whole row; dropped with what follows", path.display(), i + 2);
             break;
         };
         let v: [f64; 10] = v.try_into().unwrap_or([f64::NAN; 10]);
         let (run, ep) = (v[0] as usize, v[1] as usize);
         if run != f.runs || ep != current.len() {
-            eprintln!(
+            coadapt_log::logln!(
                 "latent: --resume: {} line {}: run {run} episode {ep} out of order; dropped with what follows",
                 path.display(),
                 i + 2

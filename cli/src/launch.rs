@@ -147,7 +147,7 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
             a.extend(["--id".into(), i.to_string()]);
             others.push(spawn(&exe, &format!("actor {i}"), &a, Some(&logs.join(format!("actor-{i}.log"))))?);
         }
-        eprintln!(
+        coadapt_log::logln!(
             "fleet {}: learner pid {}, {}; logs in {}",
             if cfg.fleet.name.is_empty() { cfg.fleet.connect.as_str() } else { cfg.fleet.name.as_str() },
             learner.child.id(),
@@ -171,7 +171,7 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
             Ok(Some(s))
                 if !s.success() && !interrupted && budgets.entry("learner".into()).or_default().allow(cfg.fleet.max_restarts, window) =>
             {
-                eprintln!(
+                coadapt_log::logln!(
                     "fleet: the learner (pid {}) ended with {}; stopping the fleet and starting it again from the newest snapshot",
                     learner.child.id(),
                     describe(s)
@@ -203,7 +203,7 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
                 continue;
             }
             if !budgets.entry(p.name.clone()).or_default().allow(cfg.fleet.max_restarts, window) {
-                eprintln!(
+                coadapt_log::logln!(
                     "fleet: {} ended with {}, its {} restart(s) in {:?} are used up (fleet.max-restarts); it stays down",
                     p.name,
                     describe(s),
@@ -213,7 +213,7 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
                 p.ended = true;
                 continue;
             }
-            eprintln!(
+            coadapt_log::logln!(
                 "fleet: {} (pid {}) ended with {}; starting it again (log {})",
                 p.name,
                 p.child.id(),
@@ -226,7 +226,7 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
             match spawn(&exe, &p.name.clone(), &p.args.clone(), p.log.as_deref()) {
                 Ok(new) => *p = new,
                 Err(e) => {
-                    eprintln!("fleet: {e:#}; {} stays down", p.name);
+                    coadapt_log::logln!("fleet: {e:#}; {} stays down", p.name);
                     p.ended = true;
                 }
             }
@@ -251,9 +251,9 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
     if cfg.fleet.transport == TransportKind::Shm {
         clean_stale();
         match coadapt_shm::fleet_services(&cfg.fleet.name) {
-            Ok(left) if !left.is_empty() => eprintln!("warning: shared memory of the fleet left behind: {left:?}"),
+            Ok(left) if !left.is_empty() => coadapt_log::logln!("warning: shared memory of the fleet left behind: {left:?}"),
             Ok(_) => {}
-            Err(e) => eprintln!("warning: listing the fleet's shared memory: {e}"),
+            Err(e) => coadapt_log::logln!("warning: listing the fleet's shared memory: {e}"),
         }
     }
     let status = status?;

@@ -7,7 +7,7 @@ fn main() -> std::process::ExitCode {
     match coadapt_cli::run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            coadapt_log::logln!("error: {e:#}");
             std::process::ExitCode::FAILURE
         }
     }

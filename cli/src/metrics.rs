@@ -220,5 +220,14 @@ pub fn render(source: &Source) -> String {
             metric(m, "coadapt_optimizer_search_seconds_total", "counter", "Seconds of all searches.", &[("", f(&c.total_seconds_bits))]);
         }
     }
+    // Every role: log lines lost because stderr could not be written (a full disk, /dev/full,
+    // a closed pipe); the process carries on without them.
+    metric(
+        &mut o,
+        "coadapt_log_lines_lost_total",
+        "counter",
+        "Log and progress lines that could not be written to stderr.",
+        &[("", coadapt_log::failed_writes() as f64)],
+    );
     o
 }

@@ -13,7 +13,7 @@ pub fn shutdown_on_ctrl_c() -> Arc<AtomicBool> {
         if f.swap(true, Ordering::SeqCst) {
             std::process::exit(130);
         }
-        eprintln!("\ninterrupted: stopping and keeping what is written (Ctrl-C again to abort)");
+        coadapt_log::logln!("\ninterrupted: stopping and keeping what is written (Ctrl-C again to abort)");
     });
     flag
 }
@@ -37,7 +37,7 @@ pub fn print_stdout_line(line: &str) {
         if e.kind() == std::io::ErrorKind::BrokenPipe {
             std::process::exit(0);
         }
-        eprintln!("error: writing to stdout: {e}");
+        coadapt_log::logln!("error: writing to stdout: {e}");
         std::process::exit(1);
     }
 }

@@ -163,6 +163,6 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             break;
         }
     }
-    eprintln!("wrote {} ({frames} frames, return {ret:.2})", args.out.display());
+    coadapt_log::logln!("wrote {} ({frames} frames, return {ret:.2})", args.out.display());
     Ok(())
 }

@@ -143,7 +143,7 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     let shutdown = shutdown_on_ctrl_c();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
-    eprintln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
+    coadapt_log::logln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
     let stop_health = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let health = match &guard {
         crate::fleet::LearnerGuard::Grpc(server) => {
@@ -188,7 +188,7 @@ pub fn actor(args: ActorArgs) -> anyhow::Result<()> {
     let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
-    eprintln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
+    coadapt_log::logln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
     roles::actor(&cfg, &spec, id, &mut links, &shutdown)
 }
 
@@ -204,6 +204,6 @@ pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
     let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let mut links = cfg.fleet.optimizer_links(&cfg.security)?;
-    eprintln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());
+    coadapt_log::logln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());
     roles::optimizer(&cfg, &spec, &mut links, &shutdown, args.state_dir.as_deref())
 }

@@ -174,7 +174,7 @@ pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>
         RunEvent::DesignStart { index, row } => {
             let pred = row.predicted_objective.map(|p| format!(", predicted objective {p:.3}")).unwrap_or_default();
             let rollouts = if row.design_rollouts > 0 { format!(", {} design rollouts", row.design_rollouts) } else { String::new() };
-            eprintln!(
+            coadapt_log::logln!(
                 "design {}/{designs_total} [{} {}] {:?}{pred}{rollouts}",
                 index + 1,
                 row.kind,
@@ -191,7 +191,7 @@ pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>
             let eta = busy / done_episodes as f64 * (total_episodes.saturating_sub(done_episodes)) as f64;
             let eval = row.eval_return.map(|r| format!(" eval {r:8.2}")).unwrap_or_default();
             let lag = if row.policy_lag > 0 { format!(" lag {}", row.policy_lag) } else { String::new() };
-            eprintln!(
+            coadapt_log::logln!(
                 "  design {}/{designs_total} episode {:>4}/{episodes_in_design} return {:8.2}{eval}  actor {}{lag}  [{} elapsed, ETA {}]",
                 row.design + 1,
                 row.episode + 1,
@@ -209,7 +209,7 @@ pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>
                 }
                 _ => String::new(),
             };
-            eprintln!(
+            coadapt_log::logln!(
                 "design {} done: best eval {}, last eval {}; {} actor(s){lag}",
                 row.index + 1,
                 f(row.best_eval_return),
@@ -223,7 +223,7 @@ pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>
             waiting_since.get_or_insert_with(Instant::now);
             let dims = prototype::describe(&prototype::named_dimensions(names, &row.design));
             let flags = if row.kind == "initial" { "[--as-built ...]" } else { "[--as-built ...|--reject]" };
-            eprintln!(
+            coadapt_log::logln!(
                 "design {}/{designs_total} [{} {}] awaits a prototype: {dims}; build it, then: {confirm} {flags}",
                 index + 1,
                 row.kind,
@@ -237,17 +237,21 @@ pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>
                 Outcome::AsBuilt(v) => format!("built as {} (requested {})", rounded(v), rounded(requested)),
                 Outcome::Rejected => "prototype rejected; asking the optimiser for its next-best design".to_string(),
             };
-            eprintln!("design {}/{designs_total}: {what}", row.index + 1);
+            coadapt_log::logln!("design {}/{designs_total}: {what}", row.index + 1);
         }
         RunEvent::AwaitingReset { design_index, episode, episodes_in_design, mode } => {
             waiting_since.get_or_insert_with(Instant::now);
             let what = if *mode == ResetMode::Eval { "the evaluation after episode" } else { "episode" };
-            eprintln!("{what} {}/{episodes_in_design} of design {} awaits a reset: {confirm} --reset", episode + 1, design_index + 1);
+            coadapt_log::logln!(
+                "{what} {}/{episodes_in_design} of design {} awaits a reset: {confirm} --reset",
+                episode + 1,
+                design_index + 1
+            );
         }
         RunEvent::Stats(_) => {}
         RunEvent::ResetConfirmed { design_index, episode, mode } => {
             resume(&mut waiting_since);
-            eprintln!("{}: reset confirmed", prototype::reset_name(*mode, *episode, *design_index));
+            coadapt_log::logln!("{}: reset confirmed", prototype::reset_name(*mode, *episode, *design_index));
         }
     }
 }
@@ -279,15 +283,15 @@ pub fn learner(
     let mut writer = if holds_run {
         crate::resume::check_compatible(&crate::resume::stored_config(dir)?, cfg)?;
         if snapshot::list(&root)?.is_empty() {
-            eprintln!("learner: {} has no snapshot yet: starting the run over (run id {run_id})", dir.display());
+            coadapt_log::logln!("learner: {} has no snapshot yet: starting the run over (run id {run_id})", dir.display());
             RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
         } else {
             let (from, manifest, state, skipped) = snapshot::load_latest(&root)?;
             for why in &skipped {
-                eprintln!("learner: skipped snapshot {why}");
+                coadapt_log::logln!("learner: skipped snapshot {why}");
             }
             let at = coadapt::resume_point(&state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
-            eprintln!(
+            coadapt_log::logln!(
                 "learner: resuming {} from {} ({}; written by run id {}), run id {run_id}",
                 dir.display(),
                 from.display(),
@@ -309,7 +313,7 @@ pub fn learner(
     let stats = std::sync::Arc::new(std::sync::Mutex::new(coadapt::Stats::default()));
     if !cfg.metrics.learner_listen.is_empty() {
         let at = crate::metrics::serve(&cfg.metrics.learner_listen, crate::metrics::Source::Learner(stats.clone()))?;
-        eprintln!("learner: metrics on http://{at}/metrics");
+        coadapt_log::logln!("learner: metrics on http://{at}/metrics");
     }
     let mut on_event = |e: &RunEvent<'_>| {
         crate::health::observe(e);
@@ -335,7 +339,12 @@ pub fn learner(
         &mut snaps,
     )?;
     if snaps.taken > 0 {
-        eprintln!("learner: {} snapshot(s) in {:.2} s, the last {:.1} MB", snaps.taken, snaps.seconds, snaps.last_bytes as f64 / 1e6);
+        coadapt_log::logln!(
+            "learner: {} snapshot(s) in {:.2} s, the last {:.1} MB",
+            snaps.taken,
+            snaps.seconds,
+            snaps.last_bytes as f64 / 1e6
+        );
     }
     Ok(outcome)
 }
@@ -347,9 +356,11 @@ pub fn actor(cfg: &RunConfig, spec: &EnvSpec, id: u64, links: &mut ActorLinks, s
         Actor::new(make_env_with(&cfg.env, &cfg.remote, &cfg.security)?, policy, PolicyKind::SquashedGaussian, cfg.seed.wrapping_add(id))?;
     let s = coadapt_actors::role::run(&mut actor, id, links, cfg.chunk_len, cfg.remote.env_retries, shutdown)
         .with_context(|| format!("actor {id}"))?;
-    eprintln!(
+    coadapt_log::logln!(
         "actor {id}: done after {} episodes, {} steps, {} episode(s) dropped on environment failures",
-        s.episodes, s.steps, s.failed_episodes
+        s.episodes,
+        s.steps,
+        s.failed_episodes
     );
     Ok(())
 }
@@ -392,19 +403,19 @@ pub fn optimizer(
     let mut opt = Optimizer::new(cfg.optimizer.clone(), ospec, sim.as_mut().map(|s| s as &mut dyn RolloutEvaluator), cfg.seed)?;
     if !cfg.metrics.optimizer_listen.is_empty() {
         let at = crate::metrics::serve(&cfg.metrics.optimizer_listen, crate::metrics::Source::Optimizer(opt.counters()))?;
-        eprintln!("optimizer: metrics on http://{at}/metrics");
+        coadapt_log::logln!("optimizer: metrics on http://{at}/metrics");
     }
     let store = match state_dir {
         Some(d) => {
             let store = StateFile::in_dir(d).with_context(|| format!("creating {}", d.display()))?;
             let (state, skipped) = store.load().with_context(|| format!("reading {}", store.path().display()))?;
             for why in &skipped {
-                eprintln!("optimizer: state: {why}");
+                coadapt_log::logln!("optimizer: state: {why}");
             }
             if let Some((s, replies)) = state {
                 let n = replies.len();
                 opt.restore(s, replies).map_err(|e| anyhow::anyhow!("{}: {e}", store.path().display()))?;
-                eprintln!("optimizer: continuing from {} ({n} replies so far)", store.path().display());
+                coadapt_log::logln!("optimizer: continuing from {} ({n} replies so far)", store.path().display());
             }
             Some(store)
         }

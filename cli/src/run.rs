@@ -238,7 +238,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
         bail!("env {}: has no design parameters to optimise", cfg.env);
     }
     for (i, d) in cfg.schedule.initial_designs.iter().enumerate() {
-        spec.design.check_finite("design", d).map_err(|e| anyhow::anyhow!("schedule.initial-designs[{i}]: {e}"))?;
+        spec.design.check("design", d).map_err(|e| anyhow::anyhow!("schedule.initial-designs[{i}]: {e}"))?;
     }
     cfg.flow.lease().map_err(anyhow::Error::msg)?;
     cfg.schedule.poll_interval().map_err(anyhow::Error::msg)?;
@@ -286,7 +286,7 @@ pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bo
             (Ok(o), Some(first)) if o.interrupted => Err(anyhow::anyhow!("{first}")),
             (Ok(o), first) => {
                 if let Some(e) = first {
-                    eprintln!("warning: {e}");
+                    coadapt_log::logln!("warning: {e}");
                 }
                 Ok(o)
             }
@@ -349,7 +349,7 @@ pub fn default_out(name: &str, seed: u64) -> PathBuf {
 /// one JSON summary line on stdout.
 pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, shutdown: &AtomicBool, start: Instant) -> anyhow::Result<()> {
     if let Err(e) = write_landscape(cfg, dir, outcome) {
-        eprintln!("warning: design landscape not written: {e:#}");
+        coadapt_log::logln!("warning: design landscape not written: {e:#}");
     }
     let interrupted = outcome.interrupted || shutdown.load(Ordering::Relaxed);
     let plots = match crate::plot::draw_run(dir) {
@@ -357,13 +357,13 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         // Stopped before anything was learned (say, Ctrl-C while the first prototype was
         // awaited): the summary still says where the run got to.
         Err(e) if interrupted => {
-            eprintln!("warning: no plots: {e:#}");
+            coadapt_log::logln!("warning: no plots: {e:#}");
             Vec::new()
         }
         Err(e) => return Err(e.context("drawing the plots")),
     };
     for p in &plots {
-        eprintln!("wrote {}", p.display());
+        coadapt_log::logln!("wrote {}", p.display());
     }
     let best = outcome.designs.iter().filter_map(|d| d.best_eval_return.map(|r| (r, d))).max_by(|a, b| a.0.total_cmp(&b.0));
     let t = outcome.time;
@@ -419,7 +419,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         bail!("{} already holds a run (designs.csv exists); choose another --out, or --resume it", dir.display());
     }
     let shutdown = shutdown_on_ctrl_c();
-    eprintln!(
+    coadapt_log::logln!(
         "coadapt run: {} on {}, {} designs ({} episodes), exploit {}, explore {}, {} actor(s) over {}, into {}",
         name,
         cfg.env,

@@ -332,7 +332,7 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
                 save_tensors(&dir.join(format!("w-iter{it}.safetensors")), &[("W".to_string(), vec![d, g.cfg.latent], g.w.clone())])?;
             }
             // Progress every iteration: on a robot an iteration takes minutes.
-            eprintln!(
+            coadapt_log::logln!(
                 "search: {} run {}/{} iteration {it}/{} ({total_rollouts} rollouts): mean policy's summed distance {cost:.2}, best rollout's return {best:.3}",
                 cfg.method,
                 r + 1,

@@ -114,10 +114,10 @@ pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
     let mut links = cfg.fleet.actor_links(a.id, &security)?;
     let shutdown = crate::progress::shutdown_on_ctrl_c();
     let name = if cfg.robot.is_empty() { "the planar robot" } else { cfg.robot.as_str() };
-    eprintln!("search actor {}: {name} over {}", a.id, cfg.fleet.transport.name());
+    coadapt_log::logln!("search actor {}: {name} over {}", a.id, cfg.fleet.transport.name());
     let steps = coadapt_core::Env::spec(&PlanarEnv::new(cfg.planar())).max_episode_steps;
     let n = coadapt_policy_search::run_actor(&mut *robot, steps, a.id, &mut links, &shutdown)?;
-    eprintln!("search actor {}: done after {n} rollouts", a.id);
+    coadapt_log::logln!("search actor {}: done after {n} rollouts", a.id);
     Ok(())
 }
 

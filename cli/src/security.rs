@@ -66,7 +66,7 @@ fn warn_if_shared(key: &str, p: &std::path::Path) {
         if let Ok(m) = std::fs::metadata(p)
             && m.permissions().mode() & 0o077 != 0
         {
-            eprintln!("warning: {key} = {}: readable by others than its owner (chmod 600 it)", p.display());
+            coadapt_log::logln!("warning: {key} = {}: readable by others than its owner (chmod 600 it)", p.display());
         }
     }
 }

@@ -99,7 +99,7 @@ pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
     let (from, manifest, mut state, skipped) =
         snapshot::load_latest(&root).with_context(|| format!("{} has no readable snapshot to serve", dir.display()))?;
     for why in &skipped {
-        eprintln!("serve: skipped snapshot {why}");
+        coadapt_log::logln!("serve: skipped snapshot {why}");
     }
     let mut fear = FearLearner::new(spec.obs_dim(), spec.act_dim(), cfg.learner.clone(), cfg.seed)?;
     fear.load_state(&mut state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
@@ -120,7 +120,7 @@ pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
     let path = dir.join("designs.csv");
     let len = std::fs::metadata(&path).with_context(|| format!("reading {}", path.display()))?.len();
     let history = run_dir::read_designs(&path, len)?.into_iter().map(history_row).collect();
-    eprintln!(
+    coadapt_log::logln!(
         "serve: {} from {} ({}), population weights version {version}, {n} start states",
         dir.display(),
         from.display(),
@@ -143,11 +143,11 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     let cfg = ServeConfig { max_score_batch: args.max_score_batch, auth, ..ServeConfig::default() };
     let server = coadapt_design_service::serve(addr, cfg, Arc::new(source)).with_context(|| format!("listening on {addr}"))?;
     let at = server.local_addr();
-    eprintln!("serve: coadapt.v1.DesignService and design-critic (Open Inference Protocol) on {at} (Ctrl-C stops)");
+    coadapt_log::logln!("serve: coadapt.v1.DesignService and design-critic (Open Inference Protocol) on {at} (Ctrl-C stops)");
     crate::progress::print_stdout_line(&format!("grpc://{at}"));
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
     rt.block_on(crate::env_serve::wait_for_signal());
-    eprintln!("serve: stopping");
+    coadapt_log::logln!("serve: stopping");
     drop(server);
     Ok(())
 }

@@ -198,7 +198,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let resolved = toml::to_string_pretty(&cfg).context("serialising the resolved config")?;
     std::fs::write(dir.join("config.toml"), resolved).with_context(|| format!("writing {}/config.toml", dir.display()))?;
     if !args.quiet {
-        eprintln!("training {} on {} for {} steps (seed {}) into {}", cfg.algo, cfg.env, cfg.steps, cfg.seed, dir.display());
+        coadapt_log::logln!("training {} on {} for {} steps (seed {}) into {}", cfg.algo, cfg.env, cfg.steps, cfg.seed, dir.display());
     }
     let shutdown = shutdown_on_ctrl_c();
     let quiet = args.quiet;
@@ -208,7 +208,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             return;
         }
         let rate = r.step as f64 / r.wall_s.max(1e-9);
-        eprintln!(
+        coadapt_log::logln!(
             "episode {:>4} | step {:>7}/{total} | return {:>9.1} | mean10 {:>9.1} | {:>6.0} steps/s | ETA {}",
             r.episode,
             r.step,

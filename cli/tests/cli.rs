@@ -178,3 +178,43 @@ fn help_explains_the_commands() {
     let s = String::from_utf8_lossy(&o.stdout);
     assert!(s.contains("episodes.csv") && s.contains("--target-return"));
 }
+
+/// Issue 29 (5): progress lines that cannot be written (stderr on a full device, as when the
+/// log lives on a full disk) never take the run down: the fleet of processes runs to the end
+/// and writes every row. Before, `eprintln!` panicked and the run exited 101.
+#[test]
+fn a_run_whose_stderr_cannot_be_written_still_runs_to_the_end() {
+    let out = tmpdir("dev-full");
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.join("run").to_str().unwrap()])
+        .stderr(full)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "exit {:?}; stdout {}", o.status, String::from_utf8_lossy(&o.stdout));
+    let summary: serde_json::Value = serde_json::from_str(String::from_utf8_lossy(&o.stdout).lines().last().unwrap()).unwrap();
+    assert_eq!(summary["interrupted"], false, "{summary}");
+    let rows = std::fs::read_to_string(out.join("run/episodes.csv")).unwrap().lines().count() - 1;
+    assert_eq!(rows, 10, "every episode of the tiny protocol");
+}
+
+/// Issue 29 (3): an initial design outside the design box is refused when the config is read,
+/// naming the key, the entry and the bounds; before, it was accepted, the actor failed on it and
+/// the run waited on its lease for ever.
+#[test]
+fn an_initial_design_outside_the_box_is_refused_at_load_naming_the_key_and_bounds() {
+    let dir = tmpdir("outside-box");
+    std::fs::create_dir_all(&dir).unwrap();
+    let tiny = std::fs::read_to_string(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml")).unwrap();
+    let bad = tiny.replace("[1.41, 0.96, 1.97, 1.73, 1.97, 1.17]", "[1.41, 0.96, 0.5, 1.73, 1.97, 1.17]");
+    assert_ne!(bad, tiny, "the tiny config's second initial design is where the test puts 0.5");
+    let cfg = dir.join("outside.toml");
+    std::fs::write(&cfg, bad).unwrap();
+    let t = std::time::Instant::now();
+    let o = coadapt(&["run", "--config", cfg.to_str().unwrap(), "--out", dir.join("run").to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("schedule.initial-designs[1]") && err.contains("design[2] = 0.5") && err.contains("[0.8, 2]"), "{err}");
+    assert!(t.elapsed() < std::time::Duration::from_secs(30), "refused at load, not after a lease: {:?}", t.elapsed());
+}

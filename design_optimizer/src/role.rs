@@ -570,7 +570,7 @@ pub fn run(
         }
         let key = crate::resume::RequestKey::of(&req, dims.design);
         if let Some(r) = opt.replies.get(&key) {
-            eprintln!("optimizer: design {} was answered before; sending the same reply", req.index);
+            coadapt_log::logln!("optimizer: design {} was answered before; sending the same reply", req.index);
             opt.counters.answered_again.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             match links.replies.send(r.reply(req.index)) {
                 Err(_) if shutdown.load(std::sync::atomic::Ordering::Relaxed) => break,
@@ -596,10 +596,10 @@ pub fn run(
             match opt.calibration(&req, &w, &reply) {
                 Ok(rows) => {
                     if let Err(e) = file.append(&rows) {
-                        eprintln!("optimizer: design {}: writing {}: {e}", req.index, file.path().display());
+                        coadapt_log::logln!("optimizer: design {}: writing {}: {e}", req.index, file.path().display());
                     }
                 }
-                Err(e) => eprintln!("optimizer: design {}: calibration scores: {e}", req.index),
+                Err(e) => coadapt_log::logln!("optimizer: design {}: calibration scores: {e}", req.index),
             }
         }
         let stored = crate::resume::StoredReply::of(&reply);

@@ -286,7 +286,7 @@ impl EpisodeRunner {
             if o.steps > self.max_steps || ended {
                 let Some(o) = out.remove(&id) else { continue };
                 if let Err(why) = self.check(&o.chunks) {
-                    eprintln!("latent fleet: episode {index} from actor {actor} refused ({why}); it goes out again");
+                    coadapt_log::logln!("latent fleet: episode {index} from actor {actor} refused ({why}); it goes out again");
                     let again = self.assignment(index, train, seed);
                     out.insert(again.id, Out { heard: Instant::now(), chunks: Vec::new(), steps: 0 });
                     self.links.assignments.send(again)?;
@@ -312,7 +312,7 @@ impl EpisodeRunner {
                     }
                 }
                 if reissued > 0 {
-                    eprintln!("latent fleet: episode {index} went out {reissued} more time(s) after {:?} of silence", self.lease);
+                    coadapt_log::logln!("latent fleet: episode {index} went out {reissued} more time(s) after {:?} of silence", self.lease);
                 }
                 return Ok(FleetEpisode { episode_return: ret, steps: o.steps, actor, seconds: started.elapsed().as_secs_f64(), reissued });
             }

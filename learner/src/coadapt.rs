@@ -298,7 +298,7 @@ pub fn run(
         }
     }
     for (i, d) in cfg.initial_designs.iter().enumerate() {
-        spec.design.check_finite("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
+        spec.design.check("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
     }
     cfg.poll_interval().map_err(CoadaptError::Config)?;
     for (name, v) in

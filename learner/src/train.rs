@@ -280,7 +280,7 @@ pub fn run(
             replay.pop_newest(len as usize);
             step -= len;
             failures += 1;
-            eprintln!("episode {} failed after {len} steps and was dropped ({failures} in a row): {e}", episode + 1);
+            coadapt_log::logln!("episode {} failed after {len} steps and was dropped ({failures} in a row): {e}", episode + 1);
             if failures > cfg.env_retries {
                 return Err(TrainError::Env(e));
             }

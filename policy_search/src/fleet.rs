@@ -133,7 +133,7 @@ pub fn run_actor(
         }
         let r = usize::try_from(a.seed).unwrap_or(usize::MAX);
         let Some(actions) = r.checked_mul(steps * d).and_then(|at| w.policy.get(at..at + steps * d)) else {
-            eprintln!(
+            coadapt_log::logln!(
                 "actor {actor_id}: assignment {} names rollout {r}, beyond the {} the iteration holds; skipped",
                 a.id,
                 w.policy.len() / (steps * d).max(1)
@@ -300,7 +300,7 @@ impl RolloutRunner for FleetRunner {
             }
             let k = chunk.rewards.len();
             if chunk.next_obs.len() != k * self.obs_dim || chunk.actions.len() != k * self.action_dim {
-                eprintln!("search: a malformed chunk of rollout {} from actor {}; it goes out again", o.rollout, chunk.actor);
+                coadapt_log::logln!("search: a malformed chunk of rollout {} from actor {}; it goes out again", o.rollout, chunk.actor);
                 o.heard = Instant::now() - self.lease - Duration::from_secs(1);
                 continue;
             }
@@ -310,7 +310,12 @@ impl RolloutRunner for FleetRunner {
             o.cost += chunk.next_obs.chunks_exact(self.obs_dim.max(1)).map(self.step_cost).sum::<f64>();
             if let Some(end) = chunk.end {
                 if o.steps != self.steps || end.length != self.steps as u64 {
-                    eprintln!("search: rollout {} ended after {} steps, expected {}; it goes out again", o.rollout, o.steps, self.steps);
+                    coadapt_log::logln!(
+                        "search: rollout {} ended after {} steps, expected {}; it goes out again",
+                        o.rollout,
+                        o.steps,
+                        self.steps
+                    );
                     (o.ret, o.cost, o.steps) = (0.0, 0.0, 0);
                     o.heard = Instant::now() - self.lease - Duration::from_secs(1);
                     continue;
@@ -319,7 +324,7 @@ impl RolloutRunner for FleetRunner {
             }
         }
         if reissued > 0 {
-            eprintln!("search: {reissued} rollout(s) of this iteration went out again after {:?} of silence", self.lease);
+            coadapt_log::logln!("search: {reissued} rollout(s) of this iteration went out again after {:?} of silence", self.lease);
         }
         Ok(results.into_iter().map(|r| r.unwrap_or((0.0, f64::NAN))).collect())
     }

@@ -531,7 +531,7 @@ mod tests {
             g.iterate(&task, &phi).unwrap();
             costs.push(cost(&g, &mut a));
         }
-        eprintln!("GrouPS (4 groups) on the planar task, summed distance of M: {before:.1} -> {costs:.1?}");
+        coadapt_log::logln!("GrouPS (4 groups) on the planar task, summed distance of M: {before:.1} -> {costs:.1?}");
         // Measured (seed 1): 184 -> 132, down at every iteration. Slower than PoWER over these 25
         // (124): whether the thesis's ordering holds is the experiment's question, not this
         // test's.

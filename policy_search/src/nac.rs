@@ -299,7 +299,7 @@ mod tests {
             }
             LinearPolicy::actions_of(&nac.policy.m, dim, &phi, &mut a);
             let after = task.evaluate(&a).1;
-            eprintln!("seed {seed}: squared action error {before:.2} -> {after:.2}");
+            coadapt_log::logln!("seed {seed}: squared action error {before:.2} -> {after:.2}");
             assert!(after < 0.15 * before, "seed {seed}: squared action error {before} -> {after}");
         }
     }

@@ -241,7 +241,7 @@ mod planar_tests {
             power.iterate(&task, &phi).unwrap();
             costs.push(cost(&power, &mut a));
         }
-        eprintln!("PoWER on the planar task, summed distance of the mean policy: {before:.1} -> {costs:.1?}");
+        coadapt_log::logln!("PoWER on the planar task, summed distance of the mean policy: {before:.1} -> {costs:.1?}");
         // Measured: 184 -> 91 (seed 1); steadily down.
         assert!(costs[39] < 0.6 * before, "{before} -> {costs:?}");
         assert!(costs[39] < costs[19] && costs[19] < costs[0], "{costs:?}");

@@ -169,7 +169,7 @@ impl Table {
             match parsed {
                 Ok(v) => out.push(v),
                 Err(e) if k + 1 == n && self.last_unterminated => {
-                    eprintln!("note: ignoring the incomplete last line of {} ({e:#})", self.name());
+                    coadapt_log::logln!("note: ignoring the incomplete last line of {} ({e:#})", self.name());
                 }
                 Err(e) => return Err(e),
             }

@@ -94,12 +94,12 @@ pub fn run(args: PlotArgs) -> anyhow::Result<()> {
             };
             let runs: Vec<(String, PathBuf)> = labels.into_iter().zip(args.runs).collect();
             compare(&runs, &out)?;
-            eprintln!("wrote {}", out.display());
+            coadapt_log::logln!("wrote {}", out.display());
         }
         None => {
             for dir in &args.runs {
                 for path in draw_run(dir)? {
-                    eprintln!("wrote {}", path.display());
+                    coadapt_log::logln!("wrote {}", path.display());
                 }
             }
         }
@@ -129,8 +129,8 @@ pub fn draw_run(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 
     let out = plots.join("learning_curves.svg");
     match &episodes {
-        None => eprintln!("skipping {}: no episodes.csv", out.display()),
-        Some(eps) if !eps.iter().any(|e| e.ret.is_some()) => eprintln!("skipping {}: no episode returns yet", out.display()),
+        None => coadapt_log::logln!("skipping {}: no episodes.csv", out.display()),
+        Some(eps) if !eps.iter().any(|e| e.ret.is_some()) => coadapt_log::logln!("skipping {}: no episode returns yet", out.display()),
         Some(eps) => {
             write_svg(&out, (900, 560), |root| learning_curves(root, eps))?;
             written.push(out);
@@ -143,14 +143,14 @@ pub fn draw_run(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         write_svg(&out, (900, 560), |root| best_return(root, &best))?;
         written.push(out);
     } else {
-        eprintln!("skipping {}: no evaluation returns yet", out.display());
+        coadapt_log::logln!("skipping {}: no evaluation returns yet", out.display());
     }
 
     let out = plots.join("landscape.svg");
     match &landscape {
-        None => eprintln!("skipping {}: no landscape.csv", out.display()),
+        None => coadapt_log::logln!("skipping {}: no landscape.csv", out.display()),
         Some(points) if !points.iter().any(|p| p.objective.is_some()) => {
-            eprintln!("skipping {}: landscape.csv has no objective values", out.display())
+            coadapt_log::logln!("skipping {}: landscape.csv has no objective values", out.display())
         }
         Some(points) => {
             let tried = landscape_designs.as_deref().unwrap_or(&[]);
@@ -178,7 +178,7 @@ pub fn compare(runs: &[(String, PathBuf)], out: &Path) -> anyhow::Result<()> {
         let best = best_per_design(designs.as_deref().unwrap_or(&[]), episodes.as_deref().unwrap_or(&[]));
         let steps = best_so_far(&best);
         if steps.is_empty() {
-            eprintln!("leaving {label} ({}) out: no evaluation returns yet", dir.display());
+            coadapt_log::logln!("leaving {label} ({}) out: no evaluation returns yet", dir.display());
         } else {
             curves.push((label.clone(), steps));
         }

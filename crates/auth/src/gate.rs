@@ -60,7 +60,7 @@ impl Gate {
         let Some(value) = metadata.get("authorization") else {
             return Err(Status::unauthenticated("authorization: missing; send `authorization: Bearer <token>`"));
         };
-        let token = value.to_str().ok().and_then(|v| v.strip_prefix("Bearer ")).map(str::trim);
+        let token = value.to_str().ok().and_then(bearer_token);
         let Some(token) = token else {
             return Err(Status::unauthenticated("authorization: not `Bearer <token>`"));
         };
@@ -73,6 +73,17 @@ impl Gate {
         }
         Ok(role)
     }
+}
+
+/// The token of an `authorization` value `Bearer <token>`; the scheme name is matched without
+/// regard to case (RFC 6750 section 2.1 via RFC 7235: `bearer`, `BEARER` are the same scheme).
+pub fn bearer_token(value: &str) -> Option<&str> {
+    let (scheme, rest) = value.trim_start().split_once(' ')?;
+    if !scheme.eq_ignore_ascii_case("bearer") {
+        return None;
+    }
+    let token = rest.trim();
+    (!token.is_empty()).then_some(token)
 }
 
 impl Interceptor for Gate {

@@ -186,7 +186,7 @@ impl LimitedIncoming {
     fn report(&mut self, what: &str) {
         if self.last_report.is_none_or(|t| t.elapsed() >= Duration::from_secs(1)) {
             self.last_report = Some(Instant::now());
-            eprintln!("{}: {what}", self.name);
+            coadapt_log::logln!("{}: {what}", self.name);
         }
     }
 }

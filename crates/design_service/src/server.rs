@@ -291,7 +291,7 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
             tokio::select! {
                 r = router.serve_with_incoming_shutdown(incoming, graceful) => {
                     if let Err(e) = r {
-                        eprintln!("coadapt design service: stopped: {e}");
+                        coadapt_log::logln!("coadapt design service: stopped: {e}");
                     }
                 }
                 () = cut => {}

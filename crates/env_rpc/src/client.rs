@@ -273,12 +273,12 @@ impl RemoteEnv {
                     self.uids = uids;
                     self.conn = Some(conn);
                     self.stats.reconnects += 1;
-                    eprintln!("{}: reconnected (world {})", self.url, self.conn.as_ref().map_or("", |c| c.world.as_str()));
+                    coadapt_log::logln!("{}: reconnected (world {})", self.url, self.conn.as_ref().map_or("", |c| c.world.as_str()));
                     return Ok(());
                 }
                 Err(e) if start.elapsed() + wait > self.opts.reconnect_for => return Err(e),
                 Err(e) => {
-                    eprintln!("{}: reconnecting in {wait:?}: {e}", self.url);
+                    coadapt_log::logln!("{}: reconnecting in {wait:?}: {e}", self.url);
                     std::thread::sleep(wait);
                     wait = (wait * 2).min(self.opts.max_backoff);
                 }
@@ -351,7 +351,7 @@ impl Env for RemoteEnv {
             match self.reset_inner(seed, design) {
                 Ok(()) => break,
                 Err(e) if e.breaks_connection() && attempt == 0 => {
-                    eprintln!("{}: {e}; reconnecting", self.url);
+                    coadapt_log::logln!("{}: {e}; reconnecting", self.url);
                 }
                 Err(e) => {
                     if matches!(e, RemoteError::Bad(..)) {

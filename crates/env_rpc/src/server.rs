@@ -485,7 +485,7 @@ impl BackgroundServer {
         };
         rt.spawn(async move {
             if let Err(e) = served.await {
-                eprintln!("env-serve: {e}");
+                coadapt_log::logln!("env-serve: {e}");
             }
         });
         Ok(Self { addr, handle, rt: Some(rt) })

@@ -167,7 +167,7 @@ pub(crate) fn cleanup_dead_nodes() -> Result<usize, TransportError> {
                 Ok(()) => cleaned += 1,
                 // Someone else is at it, or was first: not ours to count.
                 Err(NodeCleanupFailure::ResourcesAlreadyCleanedUp | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode) => {}
-                Err(e) => eprintln!("coadapt-shm: could not clean up dead node {id}: {e:?}"),
+                Err(e) => coadapt_log::logln!("coadapt-shm: could not clean up dead node {id}: {e:?}"),
             }
         }
         CallbackProgression::Continue

@@ -242,7 +242,7 @@ impl<T> Drop for QueueSender<T> {
         if local {
             // The receiver may be this very thread, once this drop has returned.
             if std::thread::Builder::new().name("shm-linger".into()).spawn(linger).is_err() {
-                eprintln!("coadapt-shm: no thread to keep {}'s last messages until they are taken; they may be lost", self.name);
+                coadapt_log::logln!("coadapt-shm: no thread to keep {}'s last messages until they are taken; they may be lost", self.name);
             }
         } else {
             linger();
@@ -319,7 +319,7 @@ impl<T: Codec> QueueReceiver<T> {
     fn acknowledge_goodbye(&self, sender: u128) {
         let ack = ipc::event(&self.node, &bye_name(&self.name, sender), 4).and_then(|ev| ipc::notifier(&ev));
         if let Err(e) = ack.and_then(|n| n.notify().map_err(|e| io("acknowledging a goodbye", e))) {
-            eprintln!("coadapt-shm: {}: {e}", self.name);
+            coadapt_log::logln!("coadapt-shm: {}: {e}", self.name);
         }
     }
 
@@ -350,7 +350,7 @@ impl<T: Codec> QueueReceiver<T> {
                 match decoded {
                     Ok(m) => return Ok(Some(m)),
                     Err(e) => {
-                        eprintln!("coadapt-shm: dropped a malformed message on {}: {e}", self.name);
+                        coadapt_log::logln!("coadapt-shm: dropped a malformed message on {}: {e}", self.name);
                         continue;
                     }
                 }

@@ -161,7 +161,7 @@ impl<T: Codec + Versioned> TopicSubscriber<T> {
         match T::decode_from(sample.payload(), &self.limits) {
             Ok(m) if self.newest.as_ref().is_none_or(|n| m.version() > n.version()) => self.newest = Some(Arc::new(m)),
             Ok(_) => {}
-            Err(e) => eprintln!("coadapt-shm: dropped a malformed message on {}: {e}", self.name),
+            Err(e) => coadapt_log::logln!("coadapt-shm: dropped a malformed message on {}: {e}", self.name),
         }
         Ok(())
     }

@@ -62,7 +62,7 @@ impl AssignmentSender {
                 if let Err(e) = pump(rx, credits, &shape)
                     && let Ok(mut f) = fail.lock()
                 {
-                    eprintln!("coadapt-shm: assignment pump of {} stopped: {e}", shape.name);
+                    coadapt_log::logln!("coadapt-shm: assignment pump of {} stopped: {e}", shape.name);
                     *f = Some(e.to_string());
                 }
             })

@@ -159,9 +159,10 @@ impl Learner<'_> {
     fn reissue_expired(&mut self, design_index: usize, design: &[f32]) -> Result<(), CoadaptError> {
         if !self.reissue {
             for p in self.pending.iter_mut().filter(|p| p.last_heard.elapsed() > self.lease) {
-                eprintln!(
+                coadapt_log::logln!(
                     "learner: assignment {} (design {design_index}) silent for {:?}; waiting for it (flow.reissue-silent-episodes = false)",
-                    p.id, self.lease
+                    p.id,
+                    self.lease
                 );
                 // Reported once per lease.
                 p.last_heard = Instant::now();
@@ -175,9 +176,10 @@ impl Learner<'_> {
             p.empties = 0;
             self.send_assignment(design_index, design, p)?;
             self.time.reissued += 1;
-            eprintln!(
+            coadapt_log::logln!(
                 "learner: assignment {old} (design {design_index}) silent for {:?}: issued again as {}",
-                self.lease, self.next_assignment
+                self.lease,
+                self.next_assignment
             );
         }
         Ok(())
@@ -221,7 +223,11 @@ impl Learner<'_> {
             };
             if let Err(e) = chunk.validate(&self.dims) {
                 let p = self.pending.swap_remove(i);
-                eprintln!("learner: a malformed chunk of assignment {} from actor {}: {e}; issuing the episode again", p.id, chunk.actor);
+                coadapt_log::logln!(
+                    "learner: a malformed chunk of assignment {} from actor {}: {e}; issuing the episode again",
+                    p.id,
+                    chunk.actor
+                );
                 self.send_assignment(design_index, design, Pending { chunks: Vec::new(), empties: 0, ..p })?;
                 continue;
             }
@@ -238,7 +244,7 @@ impl Learner<'_> {
             if chunk.first && !p.chunks.is_empty() {
                 // The actor ran the episode again from its start (the first attempt failed in
                 // its environment): what that attempt sent is forgotten.
-                eprintln!(
+                coadapt_log::logln!(
                     "learner: actor {} restarted assignment {}: dropping {} chunk(s) of its failed attempt",
                     chunk.actor,
                     p.id,
@@ -254,7 +260,7 @@ impl Learner<'_> {
                 let p = self.pending.swap_remove(i);
                 let streamed: u64 = p.chunks.iter().map(|c| c.len() as u64).sum();
                 if p.mode == EpisodeMode::Train && end.length != streamed {
-                    eprintln!(
+                    coadapt_log::logln!(
                         "learner: episode {} of design {design_index} (assignment {}, actor {}) ends with length {} after {streamed} transitions; issuing it again",
                         p.episode,
                         p.id,
@@ -265,7 +271,7 @@ impl Learner<'_> {
                     continue;
                 }
                 if let Some(why) = beyond_limits(&p.chunks, self.cfg.max_abs_observation, self.cfg.max_abs_reward) {
-                    eprintln!(
+                    coadapt_log::logln!(
                         "learner: episode {} of design {design_index} (assignment {}, actor {}) rejected: {why}; running it again",
                         p.episode,
                         p.id,
@@ -323,7 +329,9 @@ impl Learner<'_> {
         self.time.training += t.elapsed().as_secs_f64();
         if let Some(why) = trained.rolled_back {
             self.time.rollbacks += 1;
-            eprintln!("learner: {why}; rolled the networks back to before this episode's updates (learner.on-non-finite = \"roll-back\")");
+            coadapt_log::logln!(
+                "learner: {why}; rolled the networks back to before this episode's updates (learner.on-non-finite = \"roll-back\")"
+            );
         }
         self.acting_dirty = true;
         Ok(())
@@ -359,7 +367,7 @@ impl Learner<'_> {
                 )));
             }
             if sent.elapsed() > resend {
-                eprintln!("learner: no reply to design request {index} for {resend:?}; sending it again");
+                coadapt_log::logln!("learner: no reply to design request {index} for {resend:?}; sending it again");
                 self.links.design_requests.send(req.clone())?;
                 self.time.design_requests_resent += 1;
                 sent = Instant::now();
@@ -375,7 +383,7 @@ impl Learner<'_> {
                 Err(e) => break Err(e.into()),
             };
             if reply.index as usize != index {
-                eprintln!("learner: ignored a reply for design {} while waiting for {index}", reply.index);
+                coadapt_log::logln!("learner: ignored a reply for design {} while waiting for {index}", reply.index);
                 continue;
             }
             // A reply that is malformed or outside the design box (an actor could not build the
@@ -387,7 +395,7 @@ impl Learner<'_> {
                 .and_then(|()| self.spec.design.check("design", &reply.design).map_err(|e| e.to_string()))
             {
                 self.time.design_replies_refused += 1;
-                eprintln!("learner: refused the optimiser's design {index}: {e}");
+                coadapt_log::logln!("learner: refused the optimiser's design {index}: {e}");
                 continue;
             }
             break Ok(Some(reply));

@@ -156,7 +156,7 @@ impl Learner<'_> {
                 Some(d) => match d.and_then(|d| prototype::accept(&p, &d)) {
                     Ok(o) => Some(o),
                     Err(why) => {
-                        eprintln!("learner: ignored {PROTOTYPE_DECISION_FILE}: {why}");
+                        coadapt_log::logln!("learner: ignored {PROTOTYPE_DECISION_FILE}: {why}");
                         None
                     }
                 },
@@ -216,7 +216,7 @@ impl Learner<'_> {
                 Some(d) => match d.and_then(|d| prototype::accept_reset(&r, &d)) {
                     Ok(()) => Some(()),
                     Err(why) => {
-                        eprintln!("learner: ignored {RESET_DECISION_FILE}: {why}");
+                        coadapt_log::logln!("learner: ignored {RESET_DECISION_FILE}: {why}");
                         None
                     }
                 },

@@ -122,7 +122,7 @@ impl Conn {
                 pb::Role::Actor => format!("actor {}", self.actor_id),
                 _ => "optimizer".to_string(),
             };
-            eprintln!(
+            coadapt_log::logln!(
                 "coadapt-grpc: {who}: learner restarted (run id {old:016x} -> {run_id:016x}): dropping {} unacknowledged frames and weights version {}",
                 dropped.frames,
                 dropped.weights_version.unwrap_or(0)

@@ -220,7 +220,7 @@ async fn run<F: Frame>(conn: Arc<Conn>, sender: u64, shared: Arc<Shared<F>>) {
                 front
             });
             if dropped {
-                eprintln!("coadapt-grpc: the learner refused {} {seq}: {}; dropped", F::PAYLOAD, s.message());
+                coadapt_log::logln!("coadapt-grpc: the learner refused {} {seq}: {}; dropped", F::PAYLOAD, s.message());
                 shared.room.notify_all();
                 continue;
             }

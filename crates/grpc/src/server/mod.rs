@@ -268,7 +268,7 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
                     let _ = stop.wait_for(|s| *s).await;
                 };
                 if let Err(e) = router.serve_with_incoming_shutdown(incoming, graceful).await {
-                    eprintln!("coadapt-grpc: learner server stopped: {e}");
+                    coadapt_log::logln!("coadapt-grpc: learner server stopped: {e}");
                 }
             });
             rt.block_on(async move {
