@@ -121,7 +121,7 @@ def report(root, title, prefix, tables):
     bodies = bodies_of(root, prefix)
     if not runs and not bodies:
         return False
-    print(f"### {title} (`{prefix}-*`)\n")
+    print(f"#### {title} (`{prefix}-*`)\n")
     methods = ordered(runs)
     if "methods" in tables and runs:
         print("| method | seeds | quality of chosen designs | best design found | exploitation coordinates within 2 % of a bound | design rollouts per run | wall hours per run |")
