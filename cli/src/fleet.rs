@@ -156,7 +156,7 @@ impl FleetConfig {
             TransportKind::Grpc => {
                 let addr: SocketAddr =
                     self.listen.parse().with_context(|| format!("fleet.listen: {:?} is not an address like 0.0.0.0:50051", self.listen))?;
-                crate::security::check_plaintext_listen("fleet.listen", addr, security)?;
+                crate::security::check_listen("fleet.listen", addr, security)?;
                 let mut grpc = self.grpc(security)?;
                 // The id the learner's snapshots carry too; a client that sees it change drops
                 // what it holds from the older start.

@@ -40,16 +40,24 @@ pub struct SecurityConfig {
     pub insecure: bool,
 }
 
-/// Refuses to serve plaintext on `addr` unless it is loopback, TLS is configured, or the
-/// operator said `insecure`; `key` names the setting in the error.
-pub fn check_plaintext_listen(key: &str, addr: SocketAddr, cfg: &SecurityConfig) -> anyhow::Result<()> {
-    if addr.ip().is_loopback() || cfg.insecure || !cfg.tls_cert.trim().is_empty() {
+/// Refuses to serve on `addr` unless it is loopback, or TLS **and** role tokens are configured,
+/// or the operator said `insecure`; `key` names the setting in the error. TLS alone is not
+/// enough: without a tokens file every caller would pass the gate as an operator, so anyone
+/// who reaches the port could register as a role and read the run's networks.
+pub fn check_listen(key: &str, addr: SocketAddr, cfg: &SecurityConfig) -> anyhow::Result<()> {
+    let (tls, tokens) = (!cfg.tls_cert.trim().is_empty(), !cfg.tokens_file.trim().is_empty());
+    if addr.ip().is_loopback() || cfg.insecure || tls && tokens {
         return Ok(());
     }
+    let missing = match (tls, tokens) {
+        (false, false) => "no TLS (security.tls-cert, security.tls-key) and no role tokens (security.tokens-file)",
+        (false, true) => "no TLS (security.tls-cert, security.tls-key)",
+        _ => "no role tokens (security.tokens-file; `coadapt token new` makes one)",
+    };
     anyhow::bail!(
-        "{key} = {addr}: not a loopback address, and no TLS is configured (security.tls-cert, security.tls-key): anyone who \
-         reaches the port could read and write the run. Configure TLS, listen on 127.0.0.1, or set security.insecure \
-         (--insecure) on a network you trust"
+        "{key} = {addr}: not a loopback address, and {missing}: anyone who reaches the port could read and write the \
+         run. Off loopback a server needs TLS and tokens; listen on 127.0.0.1, or set security.insecure (--insecure) \
+         on a network you trust"
     )
 }
 

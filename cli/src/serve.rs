@@ -134,7 +134,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     let addr: SocketAddr =
         args.listen.parse().with_context(|| format!("--listen: {:?} is not an address like 127.0.0.1:50061", args.listen))?;
     let security = crate::security::from_args(&args.security);
-    crate::security::check_plaintext_listen("--listen", addr, &security)?;
+    crate::security::check_listen("--listen", addr, &security)?;
     let auth = security.server_auth()?;
     if args.max_score_batch == 0 {
         anyhow::bail!("--max-score-batch: 0 would refuse every request; at least 1");

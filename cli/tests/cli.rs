@@ -218,3 +218,79 @@ fn an_initial_design_outside_the_box_is_refused_at_load_naming_the_key_and_bound
     assert!(err.contains("schedule.initial-designs[1]") && err.contains("design[2] = 0.5") && err.contains("[0.8, 2]"), "{err}");
     assert!(t.elapsed() < std::time::Duration::from_secs(30), "refused at load, not after a lease: {:?}", t.elapsed());
 }
+
+/// Issue 29 (1): off loopback every server needs TLS **and** role tokens unless `--insecure`:
+/// with TLS and no tokens file, the learner's fleet endpoint, a run's live design service,
+/// `coadapt serve` and `coadapt env-serve` all refuse to start, naming the tokens file; before,
+/// they started and let every caller in as an operator. With tokens too they get past the check.
+#[test]
+fn off_loopback_every_server_needs_tls_and_tokens() {
+    let dir = tmpdir("tls-no-tokens");
+    std::fs::create_dir_all(&dir).unwrap();
+    let o = coadapt(&["tls", "new", "--out", dir.join("tls").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let tokens = dir.join("tokens");
+    let o = coadapt(&[
+        "token",
+        "new",
+        "--role",
+        "actor",
+        "--out",
+        dir.join("actor.token").to_str().unwrap(),
+        "--tokens-file",
+        tokens.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (cert, key) = (dir.join("tls/server.pem"), dir.join("tls/server-key.pem"));
+    let tls = ["--tls-cert", cert.to_str().unwrap(), "--tls-key", key.to_str().unwrap()];
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
+    let config = config.to_str().unwrap();
+    let out = dir.join("learner");
+    let servers: Vec<(&str, Vec<&str>)> = vec![
+        (
+            "fleet.listen",
+            vec!["learner", "--config", config, "--transport", "grpc", "--listen", "0.0.0.0:0", "--out", out.to_str().unwrap()],
+        ),
+        (
+            "design-service.listen",
+            vec![
+                "learner",
+                "--config",
+                config,
+                "--transport",
+                "grpc",
+                "--listen",
+                "127.0.0.1:0",
+                "--serve",
+                "0.0.0.0:0",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+        ),
+        ("--listen", vec!["env-serve", "--env", "half-cheetah", "--listen", "0.0.0.0:0"]),
+    ];
+    for (key, args) in &servers {
+        let all: Vec<&str> = args.iter().copied().chain(tls).collect();
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_coadapt")).args(&all).output().unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{key}: started with TLS and no tokens: {e}");
+        assert!(e.contains(key) && e.contains("no role tokens (security.tokens-file") && e.contains("--insecure"), "{key}: {e}");
+        assert!(!e.contains("no TLS"), "{key}: TLS was given: {e}");
+    }
+    // Without TLS either, both are named.
+    let o = coadapt(&["env-serve", "--env", "half-cheetah", "--listen", "0.0.0.0:0"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("no TLS") && e.contains("no role tokens"), "{e}");
+    // TLS and tokens: env-serve starts (stopped at once).
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["env-serve", "--env", "half-cheetah", "--listen", "0.0.0.0:0", "--tokens-file", tokens.to_str().unwrap()])
+        .args(tls)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(child.stderr.take().unwrap()), &mut line).unwrap();
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(line.contains("env-serve: serving"), "{line}");
+}

@@ -328,6 +328,13 @@ fn a_bridge_across_machines_serves_tls_to_actor_tokens_only() {
     let o = Command::new(venv().join("bin/coadapt-gym-serve")).args(["--env", "Pendulum-v1", "--host", "0.0.0.0"]).output().unwrap();
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("not a loopback address") && e.contains("--insecure"), "{e}");
+    // Nor with TLS and no tokens: every caller could drive the robot.
+    let o = Command::new(venv().join("bin/coadapt-gym-serve"))
+        .args(["--env", "Pendulum-v1", "--host", "0.0.0.0", "--tls-cert", &p("tls/server.pem"), "--tls-key", &p("tls/server-key.pem")])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("no role tokens (--tokens-file)") && !e.contains("no TLS"), "{e}");
     let server = gym_serve(&[
         "--factory",
         "coadapt_bridge.mujoco_half_cheetah:make",

@@ -150,6 +150,10 @@ fn serve_refuses_what_it_cannot_serve_safely() {
     let o = coadapt().arg("serve").arg(&run).args(["--listen", "0.0.0.0:0"]).output().unwrap();
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && e.contains("not a loopback address") && e.contains("--insecure"), "{e}");
+    // TLS alone is not enough off loopback: without tokens every caller would be an operator.
+    let o = coadapt().arg("serve").arg(&run).args(["--listen", "0.0.0.0:0", "--tls-cert", "c.pem", "--tls-key", "k.pem"]).output().unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("no role tokens (security.tokens-file") && !e.contains("no TLS"), "{e}");
     let o = coadapt().arg("serve").arg(&run).args(["--listen", "somewhere"]).output().unwrap();
     assert!(String::from_utf8_lossy(&o.stderr).contains("--listen: \"somewhere\" is not an address"));
     std::fs::remove_dir_all(run.join("snapshots")).unwrap();

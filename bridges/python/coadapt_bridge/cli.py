@@ -187,10 +187,17 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error("--tls-cert and --tls-key go together")
     from .auth import is_loopback
 
-    if not is_loopback(args.host) and args.tls_cert is None and not args.insecure:
+    if not is_loopback(args.host) and not args.insecure and (args.tls_cert is None or args.tokens_file is None):
+        missing = " and ".join(
+            what
+            for what, absent in (("no TLS (--tls-cert, --tls-key)", args.tls_cert is None),
+                                 ("no role tokens (--tokens-file)", args.tokens_file is None))
+            if absent
+        )
         p.error(
-            f"--host {args.host}: not a loopback address, and no TLS (--tls-cert, --tls-key): anyone who reaches the port "
-            "would drive the environment. Serve TLS, listen on 127.0.0.1, or pass --insecure on a network you trust"
+            f"--host {args.host}: not a loopback address, and {missing}: anyone who reaches the port would drive the "
+            "environment. Off loopback a server needs TLS and tokens; listen on 127.0.0.1, or pass --insecure on a "
+            "network you trust"
         )
     return args
 
