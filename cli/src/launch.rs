@@ -38,6 +38,8 @@ fn spawn(exe: &Path, name: &str, args: &[String], log: Option<&Path>) -> anyhow:
     // A process group of its own: a terminal's Ctrl-C reaches only the supervisor, which passes
     // it on exactly once (a second SIGINT means "abort now" to a role).
     cmd.process_group(0);
+    // Each role stops when this supervisor dies (crate::progress::stop_when_orphaned).
+    cmd.env(crate::progress::SUPERVISOR_PID_ENV, std::process::id().to_string());
     if let Some(log) = log {
         let f = File::options().create(true).append(true).open(log).with_context(|| format!("opening {}", log.display()))?;
         cmd.stdout(f.try_clone()?).stderr(f);
@@ -92,6 +94,31 @@ fn stop(p: &mut Proc, grace: Duration) {
     let _ = p.child.wait();
 }
 
+/// The shared-memory fleet of this start. Every start gets its own name
+/// (`coadapt-start-PID`): a run killed whole (SIGKILL of its process group, an OOM kill, a
+/// reboot) leaves its channels behind with dead owners, and a resume that reopened them under
+/// the old name failed ("ExceedsMaxSupportedSubscribers"); the name a previous start chose
+/// comes back from the run's config.toml, so a generated name (this form, or `coadapt-PID` of
+/// earlier versions) is replaced, never reused. A name the operator chose (to attach processes of
+/// their own) is kept, but refused while another fleet's channels of that name exist.
+pub fn shm_fleet_name(configured: &str, pid: u32) -> anyhow::Result<String> {
+    let generated = |n: &str| {
+        let digits = n.strip_prefix("coadapt-start-").or_else(|| n.strip_prefix("coadapt-"));
+        digits.is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+    };
+    if configured.is_empty() || generated(configured) {
+        return Ok(format!("coadapt-start-{pid}"));
+    }
+    match coadapt_shm::fleet_services(configured) {
+        Ok(left) if !left.is_empty() => bail!(
+            "fleet.name = {configured:?}: another fleet's shared-memory channels of that name exist ({}); stop that fleet, \
+             or leave fleet.name empty so that each start gets a name of its own",
+            left.join(", ")
+        ),
+        _ => Ok(configured.to_string()),
+    }
+}
+
 /// Launches the fleet for `cfg` into `dir` (continuing the run there with `resume`) and
 /// supervises it until the learner is done. A learner that crashes is started again with
 /// `--resume` from its newest snapshot, the other processes with it (actors hold nothing; the
@@ -101,10 +128,8 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
     let mut cfg = cfg.clone();
     match cfg.fleet.transport {
         TransportKind::Shm => {
-            if cfg.fleet.name.is_empty() {
-                cfg.fleet.name = format!("coadapt-{}", std::process::id());
-            }
             clean_stale();
+            cfg.fleet.name = shm_fleet_name(&cfg.fleet.name, std::process::id())?;
         }
         TransportKind::Grpc => {
             // A free loopback port for this fleet.

@@ -432,3 +432,70 @@ fn a_shared_memory_pod_restarted_role_by_role_resumes_to_the_rows_of_a_run_never
     assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped; {}", logs());
     assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped; {}", logs());
 }
+
+/// Issue 29 (6): a shared-memory run killed whole (SIGKILL of its process group, as an OOM
+/// killer or a closed terminal does) at a random point resumes to the rows of a run never
+/// stopped. Before, the roles (each in a process group of its own) ran on after their
+/// supervisor died, and the resume reopened their fleet (`coadapt-<old pid>`, kept in
+/// config.toml) beside them: every learner start failed with ExceedsMaxSupportedSubscribers.
+/// Now the roles stop when their supervisor dies, and every start gets a fleet of its own.
+#[test]
+fn a_shared_memory_run_killed_whole_resumes_to_the_rows_of_a_run_never_stopped() {
+    use std::os::unix::process::CommandExt;
+    let dir = tmpdir("kill-group");
+    let c = config();
+    let want = reference(&dir, &c);
+    let mut rng = kill_seed();
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let stderr = dir.join("stderr.txt");
+    let run = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "shm"])
+        .process_group(0)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&stderr).unwrap())
+        .spawn()
+        .unwrap();
+    // Early in the run (14 rows in all): a learner left running would have most of it to go.
+    let at = 2 + draw(&mut rng, 4);
+    wait_until("episode rows", &stderr, || rows(&out.join("episodes.csv")) >= at);
+    let group = run.id();
+    assert!(Command::new("kill").args(["-KILL", "--", &format!("-{group}")]).status().unwrap().success());
+    let mut run = run;
+    run.wait().unwrap();
+    // The roles (each in a process group of its own) notice that their supervisor has gone and
+    // stop; before, the learner ran on and wrote the run beside its resume.
+    let holders = |role: &str| -> Vec<u32> {
+        let needle = format!("{role}{}", out.to_str().unwrap());
+        std::fs::read_dir("/proc")
+            .unwrap()
+            .flatten()
+            .filter_map(|e| e.file_name().to_string_lossy().parse::<u32>().ok())
+            .filter(|p| {
+                let cmd = String::from_utf8_lossy(&std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default()).replace('\0', " ");
+                let stat = std::fs::read_to_string(format!("/proc/{p}/stat")).unwrap_or_default();
+                let zombie = stat.rsplit_once(')').is_some_and(|(_, r)| r.trim_start().starts_with('Z'));
+                cmd.contains(&needle) && !zombie
+            })
+            .collect()
+    };
+    // The learner (`--out RUN`) within 5 s (it checks for a stop every 100 ms; before, it ran the
+    // rest of the run, searches included), every role of the run within 30 s.
+    let t = Instant::now();
+    while !holders("--out ").is_empty() {
+        assert!(t.elapsed() < Duration::from_secs(5), "the learner outlived its killed supervisor by 5 s: {:?}", holders("--out "));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    while !holders("").is_empty() {
+        assert!(t.elapsed() < Duration::from_secs(30), "roles outlived their killed supervisor by 30 s: {:?}", holders(""));
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let stderr2 = dir.join("stderr-resume.txt");
+    let o = coadapt(&["run", "--resume", out.to_str().unwrap(), "--transport", "shm"], &stderr2).wait_with_output().unwrap();
+    let log = std::fs::read_to_string(&stderr2).unwrap_or_default();
+    assert!(o.status.success(), "killed after {at} rows: {log}");
+    assert!(!log.contains("ExceedsMaxSupportedSubscribers") && !log.contains("left behind"), "{log}");
+    let got = tables(&out);
+    assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped (killed after {at} rows); {log}");
+    assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped (killed after {at} rows); {log}");
+}
