@@ -131,9 +131,7 @@ def report(root, title, prefix, tables):
             near = sum(f["near"] for f in fs)
             coords = sum(f["coords"] for f in fs)
             hours = [s["wall_seconds"] / 3600 for _, s in runs[m].values()]
-            hours_cell = cr.mean_sd(hours) if len(hours) else "-"
-            if hours and all(h < 10 for h in hours):
-                hours_cell = (f"{statistics.mean(hours):.2f} ± {statistics.stdev(hours):.2f}" if len(hours) > 1 else f"{hours[0]:.2f}")
+            hours_cell = f"{statistics.mean(hours):.2f} ± {statistics.stdev(hours):.2f}" if len(hours) > 1 else f"{hours[0]:.2f}"
             print(f"| {m} | {len(fs)} | {cr.mean_sd([f['exploit'] for f in fs])} | {cr.mean_sd([f['best'] for f in fs])} | "
                   f"{near}/{coords} | {statistics.mean(f['rollouts'] for f in fs):.0f} | {hours_cell} |")
         print()
