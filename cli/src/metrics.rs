@@ -229,5 +229,24 @@ pub fn render(source: &Source) -> String {
         "Log and progress lines that could not be written to stderr.",
         &[("", coadapt_log::failed_writes() as f64)],
     );
+    refusals(&mut o);
     o
+}
+
+/// Every role: what this process's servers refused (the fleet, the live design service), by
+/// server, reason and peer address, from the process's refusal ledger. The learner's own
+/// reasons are the fields of `coadapt_grpc::Refusals`; the gates add `unauthenticated` and
+/// `permission_denied`, the listeners `connections_per_peer` and `connections_total`.
+fn refusals(o: &mut String) {
+    let rows = coadapt_auth::refusals::ledger().rows();
+    let _ = writeln!(
+        o,
+        "# HELP coadapt_refusals_total Calls and connections refused, by server, reason and peer address (peers past {} counted as \"other\").\n# TYPE coadapt_refusals_total counter",
+        coadapt_auth::refusals::MAX_PEERS
+    );
+    for r in rows {
+        // Label values are our own names and IP addresses: nothing to escape but to be sure.
+        let peer = r.peer.replace(['\\', '"', '\n'], "_");
+        let _ = writeln!(o, "coadapt_refusals_total{{server=\"{}\",reason=\"{}\",peer=\"{peer}\"}} {}", r.server, r.reason, r.count);
+    }
 }

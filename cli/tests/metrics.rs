@@ -105,3 +105,73 @@ fn the_grafana_dashboard_charts_only_metrics_that_exist() {
         assert!(text.contains(&format!("# TYPE {n} ")), "the dashboard charts {n}, which no /metrics has");
     }
 }
+
+/// Issue 29 (2): refused calls leave a trace. A learner with role tokens is called 30 times
+/// without a token and 3 times with a client's token (not a fleet role): `/metrics` counts
+/// them by server, reason and peer, the first refusal from the peer is logged once with its
+/// reason, and no token appears in the log.
+#[test]
+fn refused_calls_are_counted_by_reason_and_peer_and_the_first_is_logged() {
+    use coadapt_wire::pb;
+    let dir = std::env::temp_dir().join(format!("coadapt-refusals-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let tokens = dir.join("tokens");
+    let client_token = dir.join("client.token");
+    for (role, out) in [("actor", dir.join("actor.token")), ("client", client_token.clone())] {
+        let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+            .args(["token", "new", "--role", role, "--out", out.to_str().unwrap(), "--tokens-file", tokens.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let secret = std::fs::read_to_string(&client_token).unwrap().trim().to_string();
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
+    let (fp, mp) = (free_port(), free_port());
+    let log = dir.join("learner.log");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["learner", "--config", config.to_str().unwrap(), "--transport", "grpc"])
+        .args(["--listen", &format!("127.0.0.1:{fp}"), "--metrics", &format!("127.0.0.1:{mp}")])
+        .args(["--tokens-file", tokens.to_str().unwrap(), "--out", dir.join("run").to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while get(mp, "/metrics").is_none() {
+        assert!(t.elapsed() < Duration::from_secs(60), "the learner never served /metrics: {}", std::fs::read_to_string(&log).unwrap());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let codes: Vec<tonic::Code> = rt.block_on(async {
+        let mut fleet = loop {
+            match pb::fleet_client::FleetClient::connect(format!("http://127.0.0.1:{fp}")).await {
+                Ok(c) => break c,
+                Err(_) if t.elapsed() < Duration::from_secs(60) => tokio::time::sleep(Duration::from_millis(50)).await,
+                Err(e) => panic!("the fleet endpoint: {e}"),
+            }
+        };
+        let mut codes = Vec::new();
+        for i in 0..33 {
+            let mut req = tonic::Request::new(pb::Beat::default());
+            if i >= 30 {
+                req.metadata_mut().insert("authorization", format!("Bearer {secret}").parse().unwrap());
+            }
+            codes.push(fleet.heartbeat(req).await.unwrap_err().code());
+        }
+        codes
+    });
+    let body = get(mp, "/metrics").unwrap();
+    let _ = child.kill();
+    let _ = child.wait();
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(codes[..30].iter().all(|c| *c == tonic::Code::Unauthenticated), "{codes:?}");
+    assert!(codes[30..].iter().all(|c| *c == tonic::Code::PermissionDenied), "{codes:?}");
+    let v = |reason: &str| value(&body, &format!("coadapt_refusals_total{{server=\"fleet\",reason=\"{reason}\",peer=\"127.0.0.1\"}}"));
+    assert_eq!(v("unauthenticated"), Some(30.0), "{body}");
+    assert_eq!(v("permission_denied"), Some(3.0), "{body}");
+    let firsts: Vec<&str> = text.lines().filter(|l| l.contains("refused a call from 127.0.0.1")).collect();
+    assert_eq!(firsts.len(), 1, "one line for the peer's first refusal:\n{text}");
+    assert!(firsts[0].contains("unauthenticated") && firsts[0].contains("authorization: missing"), "{}", firsts[0]);
+    assert!(!text.contains(&secret), "the token was logged:\n{text}");
+}

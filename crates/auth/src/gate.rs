@@ -1,5 +1,6 @@
 //! The interceptors: a server's gate and a client's bearer token.
 
+use std::net::IpAddr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -18,6 +19,8 @@ pub struct Gate {
     tokens: Option<Arc<TokenTable>>,
     roles: &'static [Role],
     counts: Arc<GateCounts>,
+    /// The server's name in the refusal ledger and its log lines (`fleet`, `design_service`).
+    server: &'static str,
 }
 
 /// Calls a gate refused.
@@ -31,7 +34,13 @@ pub struct GateCounts {
 
 impl Gate {
     pub fn new(tokens: Option<Arc<TokenTable>>, roles: &'static [Role]) -> Self {
-        Self { tokens, roles, counts: Arc::default() }
+        Self { tokens, roles, counts: Arc::default(), server: "grpc" }
+    }
+
+    /// Names the server in the refusal ledger (see [`crate::refusals`]).
+    pub fn server(mut self, name: &'static str) -> Self {
+        self.server = name;
+        self
     }
 
     /// Shares `counts` (several services of one server counting together).
@@ -47,10 +56,22 @@ impl Gate {
 
     /// The role of a call's metadata, or the status that refuses it.
     pub fn check(&self, metadata: &tonic::metadata::MetadataMap) -> Result<Role, Status> {
+        self.check_from(metadata, None)
+    }
+
+    /// [`Gate::check`] of a call from `peer`: a refusal is counted here and in the process's
+    /// refusal ledger, by reason and peer (the first one from a peer is logged; the message
+    /// names what is wrong with the `authorization` header, never its value).
+    pub fn check_from(&self, metadata: &tonic::metadata::MetadataMap, peer: Option<IpAddr>) -> Result<Role, Status> {
         let r = self.check_uncounted(metadata);
         if let Err(s) = &r {
-            let c = if s.code() == tonic::Code::PermissionDenied { &self.counts.permission_denied } else { &self.counts.unauthenticated };
+            let (c, reason) = if s.code() == tonic::Code::PermissionDenied {
+                (&self.counts.permission_denied, "permission_denied")
+            } else {
+                (&self.counts.unauthenticated, "unauthenticated")
+            };
             c.fetch_add(1, Ordering::Relaxed);
+            crate::refusals::record(self.server, reason, peer, s.message(), crate::refusals::Notice::Log);
         }
         r
     }
@@ -88,7 +109,8 @@ pub fn bearer_token(value: &str) -> Option<&str> {
 
 impl Interceptor for Gate {
     fn call(&mut self, mut req: Request<()>) -> Result<Request<()>, Status> {
-        let role = self.check(req.metadata())?;
+        let peer = req.remote_addr().map(|a| a.ip());
+        let role = self.check_from(req.metadata(), peer)?;
         req.extensions_mut().insert(role);
         Ok(req)
     }

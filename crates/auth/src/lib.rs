@@ -10,6 +10,8 @@
 //! - `gate`: the interceptors: [`Gate`] on a server (UNAUTHENTICATED for a missing or unknown
 //!   token, PERMISSION_DENIED for a role the service does not serve; the caller's [`Role`] put
 //!   in the request's extensions for finer checks), [`Bearer`] on a client.
+//! - `refusals`: the process's ledger of refused calls and connections by server, reason and
+//!   peer (for `/metrics`), logging the first refusal per peer and a summary each minute.
 //! - `peers`: [`LimitedIncoming`], a listener that closes connections beyond a limit per remote
 //!   host and in all (tonic has no such setting), for every server that faces the network.
 //!
@@ -19,6 +21,7 @@
 mod gate;
 mod generate;
 pub mod peers;
+pub mod refusals;
 mod tls;
 mod tokens;
 

@@ -23,6 +23,8 @@ use tonic::transport::server::{Connected, TcpConnectInfo};
 /// The limits and what they refused.
 #[derive(Debug)]
 pub struct PeerLimits {
+    /// The server's name in the refusal ledger ([`crate::refusals`]).
+    server: &'static str,
     per_peer: usize,
     total: usize,
     live: Mutex<HashMap<IpAddr, usize>>,
@@ -33,8 +35,10 @@ pub struct PeerLimits {
 }
 
 impl PeerLimits {
-    pub fn new(per_peer: usize, total: usize) -> Arc<Self> {
+    /// Limits of the server named `server` in the refusal ledger (`fleet`, `env_rpc`).
+    pub fn new(server: &'static str, per_peer: usize, total: usize) -> Arc<Self> {
         Arc::new(Self {
+            server,
             per_peer: per_peer.max(1),
             total: total.max(1),
             live: Mutex::new(HashMap::new()),
@@ -168,8 +172,17 @@ impl tokio_stream::Stream for LimitedIncoming {
                         return Poll::Ready(Some(Ok(LimitedStream { inner: stream, _slot: slot })));
                     }
                     None => {
+                        // Logged (first per peer), counted and summarised by the ledger.
                         let (all, of_peer) = self.limits.open(peer.ip());
-                        self.report(&format!("closed a connection from {peer}: {of_peer} open from that host, {all} in all"));
+                        let (reason, why) = if all >= self.limits.total {
+                            ("connections_total", format!("connection closed as accepted: {all} open in all, the most this server keeps"))
+                        } else {
+                            (
+                                "connections_per_peer",
+                                format!("connection closed as accepted: {of_peer} open from this host, the most per host"),
+                            )
+                        };
+                        crate::refusals::record(self.limits.server, reason, Some(peer.ip()), &why, crate::refusals::Notice::Log);
                     }
                 },
                 Err(e) => {

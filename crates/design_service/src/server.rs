@@ -208,7 +208,7 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
         let _in = rt.enter();
         tokio::net::TcpListener::from_std(listener)?
     };
-    let limits = PeerLimits::new(cfg.max_connections_per_peer, cfg.max_connections);
+    let limits = PeerLimits::new("design_service", cfg.max_connections_per_peer, cfg.max_connections);
     let incoming = LimitedIncoming::new(listener, limits, "coadapt design service");
     let (shutdown, mut stop) = watch::channel(false);
     let shared =
@@ -216,8 +216,8 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
     let max = cfg.max_message_bytes;
     use coadapt_auth::Role;
     use tonic::service::interceptor::InterceptedService;
-    let queries = cfg.auth.gate(&[Role::Client, Role::Optimizer]);
-    let any = cfg.auth.gate(&Role::ALL).counting(queries.counts().clone());
+    let queries = cfg.auth.gate(&[Role::Client, Role::Optimizer]).server("design_service");
+    let any = cfg.auth.gate(&Role::ALL).counting(queries.counts().clone()).server("design_service");
     let design = InterceptedService::new(
         DesignServiceServer::new(Design { shared: shared.clone() }).max_decoding_message_size(max).max_encoding_message_size(max),
         queries.clone(),

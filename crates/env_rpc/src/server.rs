@@ -428,7 +428,7 @@ pub fn serve<S: std::future::Future<Output = ()> + Send>(
     shutdown: S,
 ) -> (ServerHandle, impl std::future::Future<Output = Result<(), tonic::transport::Error>> + Send + use<S>) {
     let service = EnvService::with_max_worlds(factory, limits.max_worlds);
-    let peers = coadapt_auth::PeerLimits::new(limits.max_connections_per_peer, limits.max_connections);
+    let peers = coadapt_auth::PeerLimits::new("env_rpc", limits.max_connections_per_peer, limits.max_connections);
     let handle = ServerHandle { service: service.clone(), peers: peers.clone() };
     let auth = auth.clone();
     (handle, async move { serve_service(listener, service, &auth, peers, shutdown).await })
@@ -445,7 +445,7 @@ async fn serve_service(
     if let Some(tls) = &auth.tls {
         builder = builder.tls_config(tls.config())?;
     }
-    let gate = auth.gate(&[coadapt_auth::Role::Actor]);
+    let gate = auth.gate(&[coadapt_auth::Role::Actor]).server("env_rpc");
     builder
         .http2_keepalive_interval(Some(Duration::from_secs(10)))
         .http2_keepalive_timeout(Some(Duration::from_secs(20)))

@@ -128,7 +128,10 @@ pub(crate) struct Hub {
 }
 
 impl Hub {
-    pub(crate) fn count(&self, reason: Reason, n: u64) {
+    /// Counts `n` refusals (or drops) of `reason` here and in the process's refusal ledger
+    /// (by peer, for `/metrics`); `message` is what the client was told.
+    pub(crate) fn count(&self, reason: Reason, n: u64, peer: Option<std::net::IpAddr>, message: &str) {
+        coadapt_auth::refusals::record_n("fleet", reason.label(), peer, message, reason.notice(), n);
         let Ok(mut r) = self.refusals.lock() else { return };
         let field = match reason {
             Reason::Unregistered => &mut r.unregistered,
@@ -258,7 +261,7 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
     let (force, force_rx) = tokio::sync::oneshot::channel::<()>();
     rt.spawn(prune_sessions(hub.clone(), shutdown_rx.clone()));
     let mut stop = shutdown_rx;
-    let peers = peers::PeerLimits::new(cfg.max_connections_per_peer, cfg.max_connections);
+    let peers = peers::PeerLimits::new("fleet", cfg.max_connections_per_peer, cfg.max_connections);
     let incoming = peers::LimitedIncoming::new(listener, peers.clone(), "coadapt-grpc learner");
     let thread = std::thread::Builder::new()
         .name("coadapt-grpc-learner".into())
@@ -472,7 +475,7 @@ impl Sender<Assignment> for AssignmentSender {
     fn send(&mut self, a: Assignment) -> Result<(), TransportError> {
         let pb = a.to_pb();
         let purged = self.hub.experience.issue(pb.id, pb.mode == pb::EpisodeMode::Train as i32);
-        self.hub.count(Reason::Purged, purged as u64);
+        self.hub.count(Reason::Purged, purged as u64, None, "queued before the learner issued the assignment");
         self.hub.assignments.push(pb)
     }
 }

@@ -30,6 +30,36 @@ pub(crate) enum Reason {
     PermissionDenied,
 }
 
+impl Reason {
+    /// Its name in the refusal ledger and `/metrics` (the field of [`crate::Refusals`]).
+    pub(crate) fn label(self) -> &'static str {
+        match self {
+            Reason::Unregistered => "unregistered",
+            Reason::WrongRole => "wrong_role",
+            Reason::SessionsFull => "sessions_full",
+            Reason::ForeignSender => "foreign_sender",
+            Reason::TooManySenders => "too_many_senders",
+            Reason::SeqJump => "seq_jump",
+            Reason::ForeignAssignment => "foreign_assignment",
+            Reason::BadLength => "bad_length",
+            Reason::EmptyDropped => "empty_dropped",
+            Reason::Purged => "purged",
+            Reason::OtherRun => "other_run",
+            Reason::PermissionDenied => "permission_denied",
+        }
+    }
+
+    /// Whether the first one from a peer is logged: not for what well-behaved clients cause in
+    /// the normal course (a restart's stale calls, a resend's spare empty chunks, a purge).
+    pub(crate) fn notice(self) -> coadapt_auth::refusals::Notice {
+        use coadapt_auth::refusals::Notice;
+        match self {
+            Reason::EmptyDropped | Reason::Purged | Reason::OtherRun => Notice::CountOnly,
+            _ => Notice::Log,
+        }
+    }
+}
+
 /// A frame refused: the stream ends with this status.
 #[derive(Debug)]
 pub(crate) struct Refusal {

@@ -1,6 +1,7 @@
 //! The RPC handlers of `coadapt.v1.Fleet`, and the router that serves them beside health and
 //! reflection.
 
+use std::net::IpAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -30,7 +31,7 @@ pub(super) fn router(
     rt: &tokio::runtime::Runtime,
 ) -> Result<(tonic::transport::server::Router, tonic_health::server::HealthReporter), String> {
     let cfg = hub.cfg.clone();
-    let gate = |roles| cfg.server_auth.gate(roles).counting(hub.gate_counts.clone());
+    let gate = |roles| cfg.server_auth.gate(roles).counting(hub.gate_counts.clone()).server("fleet");
     let fleet = FleetServer::new(FleetService { hub: hub.clone() })
         .max_decoding_message_size(cfg.max_message_bytes)
         .max_encoding_message_size(cfg.max_message_bytes);
@@ -109,19 +110,19 @@ fn unregistered(session: u64) -> Status {
 
 /// A call stamped with another learner start's run id: the client registers again, which tells
 /// it the current run id (and it drops what it kept of the old start).
-fn other_run(hub: &Hub, claimed: u64) -> Status {
-    hub.count(Reason::OtherRun, 1);
+fn other_run(hub: &Hub, peer: Option<IpAddr>, claimed: u64) -> Status {
     let mut s = Status::failed_precondition(format!(
         "run id {claimed:#x}: this is learner start {:#x} (the learner restarted): register again",
         hub.run_id
     ));
+    hub.count(Reason::OtherRun, 1, peer, s.message());
     s.metadata_mut().insert(REGISTER_HEADER, tonic::metadata::MetadataValue::from_static("first"));
     s
 }
 
 /// Admits what a client stamped with run id `claimed` (0: not stamped).
-fn same_run(hub: &Hub, claimed: u64) -> Result<(), Status> {
-    if claimed == 0 || claimed == hub.run_id { Ok(()) } else { Err(other_run(hub, claimed)) }
+fn same_run(hub: &Hub, peer: Option<IpAddr>, claimed: u64) -> Result<(), Status> {
+    if claimed == 0 || claimed == hub.run_id { Ok(()) } else { Err(other_run(hub, peer, claimed)) }
 }
 
 /// The run id a push stream's frames belong to, from its metadata (0: not named).
@@ -140,6 +141,11 @@ fn stamped<T>(hub: &Hub, body: T) -> Response<T> {
     r
 }
 
+/// The caller's IP address (none when the call did not come over TCP).
+fn peer_of<T>(req: &Request<T>) -> Option<IpAddr> {
+    req.remote_addr().map(|a| a.ip())
+}
+
 /// The session a push stream belongs to, from its metadata.
 fn stream_session<T>(req: &Request<T>) -> Result<u64, Status> {
     let Some(v) = req.metadata().get(SESSION_HEADER) else {
@@ -154,8 +160,8 @@ fn stream_session<T>(req: &Request<T>) -> Result<u64, Status> {
 impl FleetService {
     /// Admits a call of `session` as `role`: it must be registered with that role. Records
     /// that the session is alive.
-    fn caller(&self, session: u64, role: ClientRole) -> Result<(), Status> {
-        admit(&self.hub, session, role)
+    fn caller(&self, peer: Option<IpAddr>, session: u64, role: ClientRole) -> Result<(), Status> {
+        admit(&self.hub, peer, session, role)
     }
 
     fn told_finished(&self, session: u64) {
@@ -167,10 +173,16 @@ impl FleetService {
     }
 
     /// A long poll on `outbox` by a session of `role`: (item, seq, finished).
-    async fn poll<T: Clone>(&self, outbox: &Outbox<T>, role: ClientRole, p: &pb::Poll) -> Result<(Option<T>, u64, bool), Status> {
-        self.caller(p.session, role)?;
+    async fn poll<T: Clone>(
+        &self,
+        outbox: &Outbox<T>,
+        role: ClientRole,
+        peer: Option<IpAddr>,
+        p: &pb::Poll,
+    ) -> Result<(Option<T>, u64, bool), Status> {
+        self.caller(peer, p.session, role)?;
         // `received` numbers another start's deliveries: it must not confirm one of ours.
-        same_run(&self.hub, p.run_id)?;
+        same_run(&self.hub, peer, p.run_id)?;
         if p.leaving {
             outbox.release(p.session, p.received);
             return Ok((None, 0, false));
@@ -198,6 +210,7 @@ impl FleetService {
         inbox: Arc<Inbox<F::Item, G>>,
         session: u64,
         role: ClientRole,
+        peer: Option<IpAddr>,
         mut frames: Streaming<F>,
     ) -> Acks {
         let (tx, rx) = mpsc::channel(64);
@@ -223,7 +236,7 @@ impl FleetService {
                     }
                 };
                 // Still registered (a session forgotten mid-stream registers again).
-                if let Err(status) = admit(&hub, session, role) {
+                if let Err(status) = admit(&hub, peer, session, role) {
                     let _ = tx.send(Err(status)).await;
                     return;
                 }
@@ -263,12 +276,12 @@ impl FleetService {
                         }
                         Offer::Accepted | Offer::Duplicate => break,
                         Offer::Skipped(reason) => {
-                            hub.count(reason, 1);
+                            hub.count(reason, 1, peer, "skipped");
                             break;
                         }
                         Offer::Refused(r) => {
-                            hub.count(r.reason, 1);
                             let mut status = Status::new(r.code, format!("frame {seq}: {}", r.message));
+                            hub.count(r.reason, 1, peer, status.message());
                             if r.frame_only {
                                 status.metadata_mut().insert(REFUSED_HEADER, seq.into());
                             }
@@ -291,17 +304,18 @@ impl FleetService {
 }
 
 /// See [`FleetService::caller`].
-fn admit(hub: &Hub, session: u64, role: ClientRole) -> Result<(), Status> {
+fn admit(hub: &Hub, peer: Option<IpAddr>, session: u64, role: ClientRole) -> Result<(), Status> {
     let Ok(mut clients) = hub.clients.lock() else { return Err(Status::internal("client table lock poisoned")) };
     let Some(r) = clients.get_mut(&session) else {
         drop(clients);
-        hub.count(Reason::Unregistered, 1);
-        return Err(unregistered(session));
+        let status = unregistered(session);
+        hub.count(Reason::Unregistered, 1, peer, status.message());
+        return Err(status);
     };
     if r.role != role {
         let why = format!("role: session {session:#x} is registered as {}, not {}", role_name(r.role), role_name(role));
         drop(clients);
-        hub.count(Reason::WrongRole, 1);
+        hub.count(Reason::WrongRole, 1, peer, &why);
         return Err(Status::permission_denied(why));
     }
     r.last_seen = Instant::now();
@@ -326,8 +340,8 @@ impl FleetService {
             ClientRole::Actor => Role::Actor,
             ClientRole::Optimizer => Role::Optimizer,
         };
-        coadapt_auth::require(req, &[need], &format!("{what} {}", need.name())).map(|_| ()).inspect_err(|_| {
-            self.hub.count(Reason::PermissionDenied, 1);
+        coadapt_auth::require(req, &[need], &format!("{what} {}", need.name())).map(|_| ()).inspect_err(|s| {
+            self.hub.count(Reason::PermissionDenied, 1, peer_of(req), s.message());
         })
     }
 }
@@ -337,6 +351,7 @@ impl Fleet for FleetService {
     async fn register(&self, req: Request<pb::Hello>) -> Result<Response<pb::Welcome>, Status> {
         let role = role_of(req.get_ref().role)?;
         self.token_allows(&req, role, "register as")?;
+        let peer = peer_of(&req);
         let h = req.into_inner();
         if h.fleet != self.hub.cfg.fleet {
             return Err(Status::failed_precondition(format!("this learner serves fleet {:?}, not {:?}", self.hub.cfg.fleet, h.fleet)));
@@ -380,7 +395,7 @@ impl Fleet for FleetService {
             }
         };
         if let Some((reason, status)) = refused {
-            self.hub.count(reason, 1);
+            self.hub.count(reason, 1, peer, status.message());
             return Err(status);
         }
         Ok(Response::new(pb::Welcome {
@@ -394,9 +409,10 @@ impl Fleet for FleetService {
     async fn heartbeat(&self, req: Request<pb::Beat>) -> Result<Response<pb::BeatReply>, Status> {
         let role = role_of(req.get_ref().role)?;
         self.token_allows(&req, role, "beat as")?;
+        let peer = peer_of(&req);
         let b = req.into_inner();
-        self.caller(b.session, role)?;
-        same_run(&self.hub, b.run_id)?;
+        self.caller(peer, b.session, role)?;
+        same_run(&self.hub, peer, b.run_id)?;
         if let Ok(mut clients) = self.hub.clients.lock()
             && let Some(r) = clients.get_mut(&b.session)
         {
@@ -420,9 +436,10 @@ impl Fleet for FleetService {
     async fn push_experience(&self, req: Request<Streaming<pb::ExperienceFrame>>) -> Result<Response<Acks>, Status> {
         self.token_allows(&req, ClientRole::Actor, "push experience as")?;
         let session = stream_session(&req)?;
-        self.caller(session, ClientRole::Actor)?;
-        same_run(&self.hub, stream_run(&req)?)?;
-        Ok(Response::new(self.pump(self.hub.experience.clone(), session, ClientRole::Actor, req.into_inner())))
+        let peer = peer_of(&req);
+        self.caller(peer, session, ClientRole::Actor)?;
+        same_run(&self.hub, peer, stream_run(&req)?)?;
+        Ok(Response::new(self.pump(self.hub.experience.clone(), session, ClientRole::Actor, peer, req.into_inner())))
     }
 
     type PushDesignRepliesStream = Acks;
@@ -430,9 +447,10 @@ impl Fleet for FleetService {
     async fn push_design_replies(&self, req: Request<Streaming<pb::DesignReplyFrame>>) -> Result<Response<Acks>, Status> {
         self.token_allows(&req, ClientRole::Optimizer, "push design replies as")?;
         let session = stream_session(&req)?;
-        self.caller(session, ClientRole::Optimizer)?;
-        same_run(&self.hub, stream_run(&req)?)?;
-        Ok(Response::new(self.pump(self.hub.replies.clone(), session, ClientRole::Optimizer, req.into_inner())))
+        let peer = peer_of(&req);
+        self.caller(peer, session, ClientRole::Optimizer)?;
+        same_run(&self.hub, peer, stream_run(&req)?)?;
+        Ok(Response::new(self.pump(self.hub.replies.clone(), session, ClientRole::Optimizer, peer, req.into_inner())))
     }
 
     type WatchWeightsStream = ReceiverStream<Result<pb::WeightsUpdate, Status>>;
@@ -460,8 +478,9 @@ impl Fleet for FleetService {
 
     async fn next_assignment(&self, req: Request<pb::Poll>) -> Result<Response<pb::AssignmentDelivery>, Status> {
         self.token_allows(&req, ClientRole::Actor, "take assignments as")?;
+        let peer = peer_of(&req);
         let p = req.into_inner();
-        let (assignment, seq, finished) = self.poll(&self.hub.assignments, ClientRole::Actor, &p).await?;
+        let (assignment, seq, finished) = self.poll(&self.hub.assignments, ClientRole::Actor, peer, &p).await?;
         if let Some(a) = &assignment {
             // From now on its experience is accepted from this session only.
             self.hub.experience.deliver(a.id, p.session, a.mode == pb::EpisodeMode::Train as i32);
@@ -471,7 +490,8 @@ impl Fleet for FleetService {
 
     async fn next_design_request(&self, req: Request<pb::Poll>) -> Result<Response<pb::DesignRequestDelivery>, Status> {
         self.token_allows(&req, ClientRole::Optimizer, "take design requests as")?;
-        let (request, seq, finished) = self.poll(&self.hub.requests, ClientRole::Optimizer, &req.into_inner()).await?;
+        let peer = peer_of(&req);
+        let (request, seq, finished) = self.poll(&self.hub.requests, ClientRole::Optimizer, peer, &req.into_inner()).await?;
         Ok(stamped(&self.hub, pb::DesignRequestDelivery { request, seq, finished }))
     }
 }
