@@ -185,6 +185,18 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
 
     let mut budgets: std::collections::HashMap<String, Budget> = Default::default();
     let mut interrupted = false;
+    // A role that failed in a way a restart cannot mend (exit.rs): the fleet is stopped.
+    let mut fatal: Option<crate::exit::NotTransient> = None;
+    let not_transient = |name: &str, s: ExitStatus, why: &str| crate::exit::NotTransient {
+        code: s.code().and_then(|c| u8::try_from(c).ok()).unwrap_or(1),
+        message: format!(
+            "the {name} ended with {} because {why}; it is not started again (it would fail the same way). Its error is {}; \
+             once that is put right, `coadapt run --resume {}` continues from the newest snapshot",
+            describe(s),
+            if name == "learner" { "above".to_string() } else { format!("in {}", logs.display()) },
+            dir.display()
+        ),
+    };
     let status = loop {
         if shutdown.load(Ordering::Relaxed) && !interrupted {
             interrupted = true;
@@ -193,6 +205,10 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
             }
         }
         match learner.child.try_wait() {
+            Ok(Some(s)) if !s.success() && !interrupted && crate::exit::not_transient(s.code()).is_some() => {
+                let why = crate::exit::not_transient(s.code()).unwrap_or_default();
+                break Err(anyhow::Error::new(not_transient("learner", s, why)));
+            }
             Ok(Some(s))
                 if !s.success() && !interrupted && budgets.entry("learner".into()).or_default().allow(cfg.fleet.max_restarts, window) =>
             {
@@ -226,6 +242,19 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
             if s.success() || p.ended || interrupted {
                 p.ended = true;
                 continue;
+            }
+            if let Some(why) = crate::exit::not_transient(s.code()) {
+                // The learner is stopped as on Ctrl-C (its snapshot taken if it can be), then
+                // the run ends with this role's reason.
+                let e = not_transient(&p.name, s, why);
+                coadapt_log::logln!("fleet: {e}; stopping the fleet");
+                fatal = Some(e);
+                p.ended = true;
+                interrupted = true;
+                for q in std::iter::once(&learner).chain(others.iter()) {
+                    signal(q, Signal::SIGINT);
+                }
+                break;
             }
             if !budgets.entry(p.name.clone()).or_default().allow(cfg.fleet.max_restarts, window) {
                 coadapt_log::logln!(
@@ -280,6 +309,9 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
             Ok(_) => {}
             Err(e) => coadapt_log::logln!("warning: listing the fleet's shared memory: {e}"),
         }
+    }
+    if let Some(e) = fatal {
+        return Err(e.into());
     }
     let status = status?;
     if !status.success() {

@@ -8,7 +8,8 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             coadapt_log::logln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
+            // A full disk or a bad config: a supervisor must not start us again (exit.rs).
+            std::process::ExitCode::from(coadapt_cli::exit::code_of(&e))
         }
     }
 }

@@ -28,7 +28,8 @@ pub struct MetricsConfig {
 /// What a role's `/metrics` renders from.
 #[derive(Debug)]
 pub enum Source {
-    Learner(Arc<Mutex<Stats>>),
+    /// The learner's counters, and the free space of its run directory's disk.
+    Learner(Arc<Mutex<Stats>>, Option<Arc<crate::disk::DiskWatch>>),
     Optimizer(Arc<Counters>),
 }
 
@@ -99,7 +100,7 @@ fn metric(out: &mut String, name: &str, kind: &str, help: &str, samples: &[(&str
 pub fn render(source: &Source) -> String {
     let mut o = String::new();
     match source {
-        Source::Learner(stats) => {
+        Source::Learner(stats, disk) => {
             let s = *stats.lock().unwrap_or_else(|e| e.into_inner());
             let t = s.time;
             let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64());
@@ -190,6 +191,31 @@ pub fn render(source: &Source) -> String {
                 "Design replies refused.",
                 &[("", t.design_replies_refused as f64)],
             );
+            if let Some(d) = disk {
+                let (free, need, low) = d.reading();
+                let free = if free == u64::MAX { f64::NAN } else { free as f64 };
+                metric(
+                    m,
+                    "coadapt_learner_disk_free_bytes",
+                    "gauge",
+                    "Bytes free on the run directory's disk (NaN: unknown).",
+                    &[("", free)],
+                );
+                metric(
+                    m,
+                    "coadapt_learner_disk_needed_bytes",
+                    "gauge",
+                    "Bytes the next snapshot needs (the last one and a quarter, and 16 MiB).",
+                    &[("", need as f64)],
+                );
+                metric(
+                    m,
+                    "coadapt_learner_disk_low",
+                    "gauge",
+                    "1 while free space is below what the next snapshot needs.",
+                    &[("", f64::from(u8::from(low)))],
+                );
+            }
             metric(
                 m,
                 "coadapt_learner_seconds_total",

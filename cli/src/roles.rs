@@ -154,7 +154,11 @@ impl RolloutEvaluator for SimEvaluator {
 
 /// The progress lines of a run into `dir`: one per design start and end, one per episode with
 /// an ETA (time spent waiting for an operator left out), and what an operator is asked to do.
-pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>) + use<> {
+pub fn progress_printer(
+    cfg: &RunConfig,
+    dir: &Path,
+    disk: Option<std::sync::Arc<crate::disk::DiskWatch>>,
+) -> impl FnMut(&RunEvent<'_>) + use<> {
     let total_episodes = cfg.schedule.total_episodes();
     let designs_total = cfg.schedule.designs;
     let start = Instant::now();
@@ -191,8 +195,9 @@ pub fn progress_printer(cfg: &RunConfig, dir: &Path) -> impl FnMut(&RunEvent<'_>
             let eta = busy / done_episodes as f64 * (total_episodes.saturating_sub(done_episodes)) as f64;
             let eval = row.eval_return.map(|r| format!(" eval {r:8.2}")).unwrap_or_default();
             let lag = if row.policy_lag > 0 { format!(" lag {}", row.policy_lag) } else { String::new() };
+            let disk = disk.as_ref().map(|d| d.note()).unwrap_or_default();
             coadapt_log::logln!(
-                "  design {}/{designs_total} episode {:>4}/{episodes_in_design} return {:8.2}{eval}  actor {}{lag}  [{} elapsed, ETA {}]",
+                "  design {}/{designs_total} episode {:>4}/{episodes_in_design} return {:8.2}{eval}  actor {}{lag}  [{} elapsed, ETA {}]{disk}",
                 row.design + 1,
                 row.episode + 1,
                 row.train_return,
@@ -309,10 +314,13 @@ pub fn learner(
     // Dropped when the run returns: Watch streams end, the server stops.
     let design_service = crate::design_live::start(cfg, spec, &run_id, links, &mut writer)?;
     // The operator may answer from another directory: name the run directory in full.
-    let mut print = progress_printer(cfg, &std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()));
+    let full_dir = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    let disk = std::sync::Arc::new(crate::disk::DiskWatch::new(&full_dir));
+    let mut print = progress_printer(cfg, &full_dir, Some(disk.clone()));
     let stats = std::sync::Arc::new(std::sync::Mutex::new(coadapt::Stats::default()));
     if !cfg.metrics.learner_listen.is_empty() {
-        let at = crate::metrics::serve(&cfg.metrics.learner_listen, crate::metrics::Source::Learner(stats.clone()))?;
+        let source = crate::metrics::Source::Learner(stats.clone(), Some(disk.clone()));
+        let at = crate::metrics::serve(&cfg.metrics.learner_listen, source)?;
         coadapt_log::logln!("learner: metrics on http://{at}/metrics");
     }
     let mut on_event = |e: &RunEvent<'_>| {
@@ -321,7 +329,10 @@ pub fn learner(
             live.design_started(row);
         }
         match e {
-            RunEvent::Stats(s) => *stats.lock().unwrap_or_else(|e| e.into_inner()) = **s,
+            RunEvent::Stats(s) => {
+                disk.snapshot_taken(s.snapshot_bytes);
+                *stats.lock().unwrap_or_else(|e| e.into_inner()) = **s;
+            }
             e => print(e),
         }
     };

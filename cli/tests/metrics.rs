@@ -77,6 +77,8 @@ fn learner_and_optimizer_metrics_are_scraped_during_a_run() {
     assert!(v("coadapt_learner_snapshot_age_seconds") >= 0.0);
     assert!(v("coadapt_learner_design_request_seconds") > 0.0);
     assert_eq!(v("coadapt_learner_episodes_refused_total{reason=\"magnitude\"}"), 0.0);
+    assert!(v("coadapt_learner_disk_free_bytes") > 0.0 && v("coadapt_learner_disk_needed_bytes") >= 16.0 * 1024.0 * 1024.0);
+    assert_eq!(v("coadapt_learner_disk_low"), 0.0);
     assert!(learner.contains("# TYPE coadapt_learner_updates_total counter"), "{learner}");
     // Two designs chosen by the optimiser so far (index 2 and 3), each by a search.
     let searches = value(&optimizer, "coadapt_optimizer_searches_total").unwrap();
@@ -87,7 +89,8 @@ fn learner_and_optimizer_metrics_are_scraped_during_a_run() {
 #[test]
 fn the_grafana_dashboard_charts_only_metrics_that_exist() {
     use coadapt_cli::metrics::{Source, render};
-    let text = render(&Source::Learner(Default::default())) + &render(&Source::Optimizer(Default::default()));
+    let disk = std::sync::Arc::new(coadapt_cli::disk::DiskWatch::new(&std::env::temp_dir()));
+    let text = render(&Source::Learner(Default::default(), Some(disk))) + &render(&Source::Optimizer(Default::default()));
     let dash = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/grafana/coadapt.json")).unwrap();
     let dash: serde_json::Value = serde_json::from_str(&dash).unwrap();
     let mut names = Vec::new();

@@ -149,25 +149,57 @@ impl ScheduleConfig {
     }
 }
 
+/// Why a run stopped. The wrapped errors are part of the message and deliberately not
+/// `source()`s: an error chain printed with `{:#}` would otherwise say every cause twice
+/// ("No space left on device (os error 28): No space left on device (os error 28)").
 #[derive(Debug, thiserror::Error)]
 pub enum CoadaptError {
     #[error("config: {0}")]
     Config(String),
     #[error("transport: {0}")]
-    Transport(#[from] TransportError),
+    Transport(TransportError),
     #[error("{0}")]
     Protocol(String),
     #[error("replay: {0}")]
-    Replay(#[from] coadapt_core::ReplayError),
+    Replay(coadapt_core::ReplayError),
     /// A non-finite update (the message names the pair, the update, the design and episode).
     #[error(transparent)]
     Train(#[from] crate::fear::TrainError),
-    #[error("writing the run directory: {0}")]
-    Io(#[from] std::io::Error),
+    /// Reading or writing the run directory; the message names the file and what was done.
+    #[error("run directory: {0}")]
+    Io(std::io::Error),
     #[error("saving a checkpoint: {0}")]
-    Checkpoint(#[from] coadapt_nn::NnError),
+    Checkpoint(coadapt_nn::NnError),
     #[error("snapshot: {0}")]
-    Snapshot(#[from] SnapshotError),
+    Snapshot(SnapshotError),
+}
+
+macro_rules! from_without_source {
+    ($($variant:ident($t:ty)),*) => {$(
+        impl From<$t> for CoadaptError {
+            fn from(e: $t) -> Self {
+                Self::$variant(e)
+            }
+        }
+    )*};
+}
+from_without_source!(
+    Transport(TransportError),
+    Replay(coadapt_core::ReplayError),
+    Io(std::io::Error),
+    Checkpoint(coadapt_nn::NnError),
+    Snapshot(SnapshotError)
+);
+
+impl CoadaptError {
+    /// The I/O error underneath, if any (a full disk is told apart by its kind).
+    pub fn io_kind(&self) -> Option<std::io::ErrorKind> {
+        match self {
+            Self::Io(e) | Self::Snapshot(SnapshotError::Io(e)) => Some(e.kind()),
+            Self::Checkpoint(coadapt_nn::NnError::Write { cause, .. } | coadapt_nn::NnError::Read { cause, .. }) => Some(cause.kind()),
+            _ => None,
+        }
+    }
 }
 
 /// What the learner reports as it goes (for progress lines).

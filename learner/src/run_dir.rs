@@ -14,6 +14,8 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use crate::snapshot::named;
+
 use serde::{Deserialize, Serialize};
 
 /// The header of `designs.csv`. `design` is the design vector joined with `;`.
@@ -225,13 +227,15 @@ fn cut(path: &Path, len: u64) -> io::Result<()> {
 impl RunWriter {
     /// Creates `dir` (and `dir/checkpoints`) and both CSV files with their headers.
     pub fn create(dir: &Path) -> io::Result<Self> {
-        std::fs::create_dir_all(dir.join("checkpoints"))?;
-        let mut episodes = BufWriter::new(File::create(dir.join("episodes.csv"))?);
+        let checkpoints = dir.join("checkpoints");
+        std::fs::create_dir_all(&checkpoints).map_err(|e| named(e, "creating", &checkpoints))?;
+        let path = dir.join("episodes.csv");
+        let mut episodes = BufWriter::new(File::create(&path).map_err(|e| named(e, "creating", &path))?);
         let header = format!("{EPISODES_HEADER}\n");
-        episodes.write_all(header.as_bytes())?;
-        episodes.flush()?;
+        episodes.write_all(header.as_bytes()).and_then(|()| episodes.flush()).map_err(|e| named(e, "writing", &path))?;
         let designs_header = format!("{DESIGNS_HEADER}\n");
-        write_atomically(&dir.join("designs.csv"), &designs_header)?;
+        let path = dir.join("designs.csv");
+        write_atomically(&path, &designs_header).map_err(|e| named(e, "writing", &path))?;
         Ok(Self {
             dir: dir.to_path_buf(),
             designs_closed: designs_header.len() as u64,
@@ -259,7 +263,7 @@ impl RunWriter {
             episodes_bytes: at.episodes_bytes,
             on_designs: None,
         };
-        w.write_open_designs()?;
+        w.write_open_designs().map_err(|e| named(e, "writing", &dir.join("designs.csv")))?;
         Ok(w)
     }
 
@@ -287,8 +291,9 @@ impl RunWriter {
 
     /// Flushes `episodes.csv` to the disk (before a snapshot that records its length).
     pub fn sync(&mut self) -> io::Result<()> {
-        self.episodes.flush()?;
-        self.episodes.get_ref().sync_all()
+        let path = self.dir.join("episodes.csv");
+        self.episodes.flush().map_err(|e| named(e, "writing", &path))?;
+        self.episodes.get_ref().sync_all().map_err(|e| named(e, "syncing", &path))
     }
 
     pub fn dir(&self) -> &Path {
@@ -304,34 +309,50 @@ impl RunWriter {
     /// name, fsynced and renamed: both files or neither), and the newest pair again as
     /// `checkpoints/{population,individual}.safetensors`.
     pub fn checkpoint(&self, index: usize, fear: &crate::fear::FearLearner) -> Result<(), coadapt_nn::NnError> {
-        use crate::fear::ActingPolicy::{Individual, Population};
         let root = self.dir.join("checkpoints");
         let tmp = root.join(format!(".tmp-design-{index:03}"));
-        let dir = root.join(format!("design-{index:03}"));
-        let io = |source: io::Error| coadapt_nn::NnError::Write { path: root.display().to_string(), source };
-        if tmp.exists() {
-            std::fs::remove_dir_all(&tmp).map_err(io)?;
+        let r = self.checkpoint_via(&root, &tmp, index, fear);
+        if r.is_err() {
+            // A failure (a full disk) leaves no half-written directory to eat what space is left.
+            let _ = std::fs::remove_dir_all(&tmp);
+            for name in ["population", "individual"] {
+                let _ = std::fs::remove_file(root.join(format!("{name}.safetensors.tmp")));
+            }
         }
-        std::fs::create_dir_all(&tmp).map_err(io)?;
+        r
+    }
+
+    fn checkpoint_via(&self, root: &Path, tmp: &Path, index: usize, fear: &crate::fear::FearLearner) -> Result<(), coadapt_nn::NnError> {
+        use crate::fear::ActingPolicy::{Individual, Population};
+        let dir = root.join(format!("design-{index:03}"));
+        let io = |path: &Path| {
+            let path = path.display().to_string();
+            move |cause: io::Error| coadapt_nn::NnError::Write { path, cause }
+        };
+        if tmp.exists() {
+            std::fs::remove_dir_all(tmp).map_err(io(tmp))?;
+        }
+        std::fs::create_dir_all(tmp).map_err(io(tmp))?;
         for (name, which) in [("population", Population), ("individual", Individual)] {
             let path = tmp.join(format!("{name}.safetensors"));
             fear.agent(which).save(&path)?;
-            File::open(&path).and_then(|f| f.sync_all()).map_err(io)?;
+            File::open(&path).and_then(|f| f.sync_all()).map_err(io(&path))?;
         }
-        File::open(&tmp).and_then(|f| f.sync_all()).map_err(io)?;
+        File::open(tmp).and_then(|f| f.sync_all()).map_err(io(tmp))?;
         if dir.exists() {
             // Written before a resume went back past this design.
-            std::fs::remove_dir_all(&dir).map_err(io)?;
+            std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
         }
-        std::fs::rename(&tmp, &dir).map_err(io)?;
+        std::fs::rename(tmp, &dir).map_err(io(&dir))?;
         for name in ["population", "individual"] {
             let latest = self.checkpoint_path(name);
             let mut part = latest.clone().into_os_string();
             part.push(".tmp");
-            std::fs::copy(dir.join(format!("{name}.safetensors")), &part).map_err(io)?;
-            std::fs::rename(&part, &latest).map_err(io)?;
+            let part = PathBuf::from(part);
+            std::fs::copy(dir.join(format!("{name}.safetensors")), &part).map_err(io(&part))?;
+            std::fs::rename(&part, &latest).map_err(io(&latest))?;
         }
-        File::open(&root).and_then(|f| f.sync_all()).map_err(io)
+        File::open(root).and_then(|f| f.sync_all()).map_err(io(root))
     }
 
     /// Adds `r` to `designs.csv`, or replaces the row of the same design that is still open
@@ -346,7 +367,7 @@ impl RunWriter {
             Some(i) => self.designs_open[i] = r.clone(),
             None => self.designs_open.push(r.clone()),
         }
-        self.write_open_designs()?;
+        self.write_open_designs().map_err(|e| named(e, "writing", &self.dir.join("designs.csv")))?;
         if let Some(on) = &self.on_designs {
             (on.0)(r);
         }
@@ -376,9 +397,10 @@ impl RunWriter {
             r.actor,
             r.policy_lag
         );
-        self.episodes.write_all(line.as_bytes())?;
+        let named = |e| named(e, "appending a row to", &self.dir.join("episodes.csv"));
+        self.episodes.write_all(line.as_bytes()).map_err(named)?;
         self.episodes_bytes += line.len() as u64;
-        self.episodes.flush()
+        self.episodes.flush().map_err(named)
     }
 }
 

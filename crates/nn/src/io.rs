@@ -44,7 +44,7 @@ impl NamedNetwork {
 
 /// Writes the networks `(name, shape, params)` to one safetensors file at `path`.
 pub fn save_networks(path: &Path, nets: &[(&str, &Mlp, &[f32])]) -> Result<(), NnError> {
-    let werr = |source| NnError::Write { path: path.display().to_string(), source };
+    let werr = |cause| NnError::Write { path: path.display().to_string(), cause };
     let mut bytes: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
     let mut meta = HashMap::new();
     for (name, mlp, params) in nets {
@@ -72,7 +72,7 @@ pub fn save_networks(path: &Path, nets: &[(&str, &Mlp, &[f32])]) -> Result<(), N
 pub fn load_networks(path: &Path) -> Result<Vec<NamedNetwork>, NnError> {
     let p = path.display().to_string();
     let corrupt = |why: String| NnError::Corrupt { path: p.clone(), why };
-    let buf = std::fs::read(path).map_err(|source| NnError::Read { path: p.clone(), source })?;
+    let buf = std::fs::read(path).map_err(|cause| NnError::Read { path: p.clone(), cause })?;
     let (_, metadata) = SafeTensors::read_metadata(&buf).map_err(|e| corrupt(e.to_string()))?;
     let st = SafeTensors::deserialize(&buf).map_err(|e| corrupt(e.to_string()))?;
     let meta = metadata.metadata().clone().unwrap_or_default();

@@ -30,10 +30,12 @@ pub use optim::{Adam, AdamConfig, clamp_elementwise, polyak};
 pub enum NnError {
     #[error("invalid network shape {sizes:?}: {why}")]
     Shape { sizes: Vec<usize>, why: &'static str },
-    #[error("cannot read weights file {path}: {source}")]
-    Read { path: String, source: std::io::Error },
-    #[error("cannot write weights file {path}: {source}")]
-    Write { path: String, source: std::io::Error },
+    // `cause`, not `source`: the message holds it already, and a `source` would print it twice
+    // in an error chain (`{:#}`).
+    #[error("cannot read weights file {path}: {cause}")]
+    Read { path: String, cause: std::io::Error },
+    #[error("cannot write weights file {path}: {cause}")]
+    Write { path: String, cause: std::io::Error },
     #[error("weights file {path} is not a valid safetensors file: {why}")]
     Corrupt { path: String, why: String },
     #[error("weights file {path} has no network named `{name}` (it has: {available})")]

@@ -357,6 +357,9 @@ impl Learner<'_> {
         let resend = Duration::from_secs_f64(self.cfg.design_request_resend_secs);
         let deadline = Duration::from_secs_f64(self.cfg.design_request_timeout_secs);
         let mut sent = Instant::now();
+        // The optimiser's end of the replies closed (it died): a restarted one never saw the
+        // request, so it is sent again as soon as the new one is there, not after `resend`.
+        let mut optimiser_gone = false;
         let result = loop {
             if self.shutdown.load(Ordering::Relaxed) {
                 break Ok(None);
@@ -368,15 +371,35 @@ impl Learner<'_> {
             }
             if sent.elapsed() > resend {
                 coadapt_log::logln!("learner: no reply to design request {index} for {resend:?}; sending it again");
-                self.links.design_requests.send(req.clone())?;
-                self.time.design_requests_resent += 1;
+                match self.links.design_requests.send(req.clone()) {
+                    Ok(()) => self.time.design_requests_resent += 1,
+                    // No optimiser listening: sent when one is back (below).
+                    Err(TransportError::Closed) => optimiser_gone = true,
+                    Err(e) => break Err(e.into()),
+                }
                 sent = Instant::now();
             }
             let reply = match self.links.design_replies.recv_timeout(POLL) {
                 Ok(Some(reply)) => reply,
+                Ok(None) if optimiser_gone => {
+                    // An optimiser is back (its end of the replies is open again).
+                    match self.links.design_requests.send(req.clone()) {
+                        Ok(()) => {
+                            coadapt_log::logln!("learner: the optimiser is back; sent design request {index} to it again");
+                            self.time.design_requests_resent += 1;
+                            sent = Instant::now();
+                            optimiser_gone = false;
+                        }
+                        // Not listening for requests yet: the next poll tries again.
+                        Err(TransportError::Closed) => {}
+                        Err(e) => break Err(e.into()),
+                    }
+                    continue;
+                }
                 Ok(None) => continue,
-                // The optimiser has gone; a restarted one answers the request it finds.
+                // The optimiser has gone (over shared memory, with the request it had taken).
                 Err(TransportError::Closed) => {
+                    optimiser_gone = true;
                     std::thread::sleep(POLL);
                     continue;
                 }

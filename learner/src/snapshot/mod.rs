@@ -57,8 +57,9 @@ impl SnapshotConfig {
 
 #[derive(Debug, thiserror::Error)]
 pub enum SnapshotError {
+    // Not a `source()`: the message is all of it (see `CoadaptError`).
     #[error("{0}")]
-    Io(#[from] io::Error),
+    Io(io::Error),
     /// The files are damaged: truncated, bit flips, missing.
     #[error("damaged: {0}")]
     Corrupt(String),
@@ -67,6 +68,12 @@ pub enum SnapshotError {
     Mismatch(String),
     #[error("no usable snapshot in {dir}{}", if .why.is_empty() { String::new() } else { format!(" ({})", .why.join("; ")) })]
     None { dir: PathBuf, why: Vec<String> },
+}
+
+impl From<io::Error> for SnapshotError {
+    fn from(e: io::Error) -> Self {
+        Self::Io(e)
+    }
 }
 
 /// The snapshot format this build writes and reads.
@@ -124,8 +131,15 @@ pub fn list(root: &Path) -> io::Result<Vec<(u64, PathBuf)>> {
     Ok(out)
 }
 
+/// `e` with what was being done to `path` in front (its kind kept: a full disk stays
+/// `StorageFull`, so callers can tell it from a fault a retry could mend).
+pub fn named(e: io::Error, doing: &str, path: &Path) -> io::Error {
+    io::Error::new(e.kind(), format!("{doing} {}: {e}", path.display()))
+}
+
 /// Writes snapshot `sequence` under `root` with what `fill` puts in it, then removes all but
-/// the newest `keep`. Returns its directory.
+/// the newest `keep`. Returns its directory. A failure (a full disk, say) names the file and
+/// removes the partial snapshot: what is left is the snapshots before it, untouched.
 pub fn write(
     root: &Path,
     sequence: u64,
@@ -134,18 +148,52 @@ pub fn write(
     keep: usize,
     fill: impl FnOnce(&mut StateOut) -> io::Result<()>,
 ) -> io::Result<PathBuf> {
-    fs::create_dir_all(root)?;
     let tmp = root.join(format!(".tmp-snap-{sequence:08}"));
-    if tmp.exists() {
-        fs::remove_dir_all(&tmp)?;
+    let built = build(root, &tmp, sequence, run_id, label, fill);
+    if let Err(e) = built {
+        let removed = match fs::remove_dir_all(&tmp) {
+            Ok(()) => "the partial snapshot was removed".to_string(),
+            Err(r) if r.kind() == io::ErrorKind::NotFound => "nothing of it was left".to_string(),
+            Err(r) => format!("removing the partial snapshot {} failed too: {r}", tmp.display()),
+        };
+        return Err(io::Error::new(e.kind(), format!("snapshot {sequence} ({label}): {e}; {removed}, the snapshots before it are kept")));
     }
-    fs::create_dir(&tmp)?;
-    let mut out = StateOut::create(&tmp.join("arrays.bin"))?;
-    fill(&mut out)?;
-    let index = out.finish()?;
+    let dir = root.join(format!("snap-{sequence:08}"));
+    if dir.exists() {
+        // A snapshot of this number from before a resume that went back past it.
+        fs::remove_dir_all(&dir).map_err(|e| named(e, "removing the stale", &dir))?;
+    }
+    fs::rename(&tmp, &dir).map_err(|e| named(e, "renaming into place", &tmp))?;
+    sync_dir(root).map_err(|e| named(e, "syncing", root))?;
+    let all = list(root).map_err(|e| named(e, "listing", root))?;
+    for (_, old) in all.iter().take(all.len().saturating_sub(keep)) {
+        fs::remove_dir_all(old).map_err(|e| named(e, "removing the old snapshot", old))?;
+    }
+    Ok(dir)
+}
+
+/// The snapshot's files under `tmp`, each fsynced.
+fn build(
+    root: &Path,
+    tmp: &Path,
+    sequence: u64,
+    run_id: &str,
+    label: &str,
+    fill: impl FnOnce(&mut StateOut) -> io::Result<()>,
+) -> io::Result<()> {
+    fs::create_dir_all(root).map_err(|e| named(e, "creating", root))?;
+    if tmp.exists() {
+        fs::remove_dir_all(tmp).map_err(|e| named(e, "removing the partial snapshot", tmp))?;
+    }
+    fs::create_dir(tmp).map_err(|e| named(e, "creating", tmp))?;
+    let bin = tmp.join("arrays.bin");
+    let mut out = StateOut::create(&bin).map_err(|e| named(e, "creating", &bin))?;
+    fill(&mut out).map_err(|e| named(e, "writing", &bin))?;
+    let index = out.finish().map_err(|e| named(e, "writing", &bin))?;
     let state = serde_json::to_vec(&index).map_err(io::Error::other)?;
-    write_synced(&tmp.join("state.json"), &state)?;
-    let bin_bytes = fs::metadata(tmp.join("arrays.bin"))?.len();
+    let state_path = tmp.join("state.json");
+    write_synced(&state_path, &state).map_err(|e| named(e, "writing", &state_path))?;
+    let bin_bytes = fs::metadata(&bin).map_err(|e| named(e, "reading the size of", &bin))?.len();
     let manifest = Manifest {
         format: FORMAT,
         endian: ENDIAN.into(),
@@ -157,20 +205,10 @@ pub fn write(
             ("state.json".into(), FileEntry { bytes: state.len() as u64, crc32: Some(crc32fast::hash(&state)) }),
         ]),
     };
-    write_synced(&tmp.join("MANIFEST.json"), &serde_json::to_vec_pretty(&manifest).map_err(io::Error::other)?)?;
-    sync_dir(&tmp)?;
-    let dir = root.join(format!("snap-{sequence:08}"));
-    if dir.exists() {
-        // A snapshot of this number from before a resume that went back past it.
-        fs::remove_dir_all(&dir)?;
-    }
-    fs::rename(&tmp, &dir)?;
-    sync_dir(root)?;
-    let all = list(root)?;
-    for (_, old) in all.iter().take(all.len().saturating_sub(keep)) {
-        fs::remove_dir_all(old)?;
-    }
-    Ok(dir)
+    let manifest_path = tmp.join("MANIFEST.json");
+    write_synced(&manifest_path, &serde_json::to_vec_pretty(&manifest).map_err(io::Error::other)?)
+        .map_err(|e| named(e, "writing", &manifest_path))?;
+    sync_dir(tmp).map_err(|e| named(e, "syncing", tmp))
 }
 
 /// Reads and checks the snapshot in `dir`.

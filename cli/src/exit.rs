@@ -1,0 +1,82 @@
+//! Exit codes that tell a supervisor whether starting a process again can help. Most failures
+//! are worth a restart (a crash, a lost connection); a full disk or a bad config fails the same
+//! way every time, and restarting only hides the cause under ten copies of it. Those exit with
+//! their `sysexits.h` code, and the supervisor (`launch`) stops the fleet and says why.
+
+use std::io::ErrorKind;
+
+use coadapt_learner::coadapt::CoadaptError;
+
+/// `EX_CANTCREAT`: the disk holding the run directory is full, over quota or read-only.
+pub const DISK: u8 = 73;
+/// `EX_CONFIG`: the configuration is invalid.
+pub const CONFIG: u8 = 78;
+
+/// A failure that a restart cannot mend, with the exit code that says so.
+#[derive(Debug)]
+pub struct NotTransient {
+    pub code: u8,
+    pub message: String,
+}
+
+impl std::fmt::Display for NotTransient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for NotTransient {}
+
+/// Whether an I/O error means the disk cannot take what is written.
+pub fn is_disk_full(kind: ErrorKind) -> bool {
+    matches!(kind, ErrorKind::StorageFull | ErrorKind::QuotaExceeded | ErrorKind::ReadOnlyFilesystem)
+}
+
+/// The exit code of a process that failed with `e`: [`DISK`], [`CONFIG`], or 1 (worth a restart).
+pub fn code_of(e: &anyhow::Error) -> u8 {
+    for cause in e.chain() {
+        if let Some(n) = cause.downcast_ref::<NotTransient>() {
+            return n.code;
+        }
+        if let Some(c) = cause.downcast_ref::<CoadaptError>() {
+            if matches!(c, CoadaptError::Config(_)) {
+                return CONFIG;
+            }
+            if c.io_kind().is_some_and(is_disk_full) {
+                return DISK;
+            }
+        }
+        if let Some(io) = cause.downcast_ref::<std::io::Error>()
+            && is_disk_full(io.kind())
+        {
+            return DISK;
+        }
+    }
+    1
+}
+
+/// Why a process that exited with `code` is not started again (`None`: it may be).
+pub fn not_transient(code: Option<i32>) -> Option<&'static str> {
+    match u8::try_from(code?).ok()? {
+        DISK => Some("the disk holding the run directory is full (or over quota, or read-only)"),
+        CONFIG => Some("its configuration is invalid"),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_full_disk_anywhere_in_the_chain_is_told_apart() {
+        let full = std::io::Error::new(ErrorKind::StorageFull, "writing x/arrays.bin: No space left on device (os error 28)");
+        assert_eq!(code_of(&anyhow::Error::new(full).context("snapshot")), DISK);
+        let full = std::io::Error::from_raw_os_error(28);
+        assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Io(full)).context("learner")), DISK);
+        assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Config("schedule.x".into()))), CONFIG);
+        assert_eq!(code_of(&anyhow::anyhow!("connection refused")), 1);
+        assert_eq!(code_of(&anyhow::Error::new(std::io::Error::from(ErrorKind::ConnectionReset))), 1);
+        assert!(not_transient(Some(73)).is_some() && not_transient(Some(1)).is_none() && not_transient(None).is_none());
+    }
+}
