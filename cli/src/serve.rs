@@ -15,13 +15,21 @@ use coadapt_learner::fear::{ActingPolicy, FearLearner};
 use coadapt_learner::{coadapt, networks, run_dir, snapshot};
 
 /// Serve a run's design critic: DesignService (Info, Score, History) and the Open Inference
-/// Protocol model `design-critic` (input `design` FP32 [N, D], output `value` FP32 [N, 1]).
+/// Protocol model `design-critic` (input `design` FP32 [N, D]; outputs `value`, `spread` and
+/// `disagreement`, FP32 [N, 1] each).
 ///
 /// The values are the thesis's Eq. 5.6 with the population networks of the run's newest
 /// snapshot, averaged over a batch of `schedule.start-state-batch` start states drawn from the
 /// run's start-state buffer (the same draw every time the run is served), with the run's
 /// `optimizer.q` (Q1, min of twin, or pessimistic). Serves until Ctrl-C or SIGTERM; the address
 /// is printed on stdout as `grpc://ADDR`.
+///
+/// How far to trust a difference between two scores: the README's "Reading a score" gives the
+/// critic's calibration on the design benchmark per robot (how often the body it preferred
+/// reached the higher return once trained, and what a difference of 1 was worth in return),
+/// generated from docs/campaign/results. On 2026-11-26 (one seed per robot) its preference for
+/// a chosen body over bodies the run had trained was mostly right, over an untried body no
+/// better than a coin: use scores to decide which bodies to try, not as their returns.
 #[derive(Debug, Args)]
 pub struct ServeArgs {
     /// The run directory (of `coadapt run` or `coadapt learner`).

@@ -1,4 +1,4 @@
-//! The tables of docs/EXPERIMENTS.md that are generated from the archived runs
+//! The tables of docs/EXPERIMENTS.md (and the README) that are generated from the archived runs
 //! (docs/campaign/results) agree with the archive: `scripts/doc_tables.py` regenerates every
 //! `<!-- generated: ... -->` block and fails on any difference (issue 28: evidence anyone can
 //! check). A second test makes sure the checker can fail: a copy of the document with one digit
@@ -25,6 +25,16 @@ fn experiments_tables_agree_with_the_archive() {
     let o = check(&root().join("docs/EXPERIMENTS.md"));
     let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "docs/EXPERIMENTS.md disagrees with docs/campaign/results:\n{text}");
+    assert!(text.contains("generated blocks agree"), "unexpected output:\n{text}");
+}
+
+/// The README's calibration table (reading a score, issue 28 section 5) comes from the same
+/// archive.
+#[test]
+fn readme_tables_agree_with_the_archive() {
+    let o = check(&root().join("README.md"));
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "README.md disagrees with docs/campaign/results:\n{text}");
     assert!(text.contains("generated blocks agree"), "unexpected output:\n{text}");
 }
 
