@@ -20,22 +20,24 @@ fn check(doc: &Path) -> std::process::Output {
         .expect("running python3 scripts/doc_tables.py")
 }
 
+/// `doc` (a path from the root) agrees with the archive.
+fn agrees(doc: &str) {
+    let o = check(&root().join(doc));
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{doc} disagrees with docs/campaign/results:\n{text}");
+    assert!(text.contains("generated blocks agree"), "unexpected output:\n{text}");
+}
+
 #[test]
 fn experiments_tables_agree_with_the_archive() {
-    let o = check(&root().join("docs/EXPERIMENTS.md"));
-    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "docs/EXPERIMENTS.md disagrees with docs/campaign/results:\n{text}");
-    assert!(text.contains("generated blocks agree"), "unexpected output:\n{text}");
+    agrees("docs/EXPERIMENTS.md");
 }
 
 /// The README's calibration table (reading a score, issue 28 section 5) comes from the same
 /// archive.
 #[test]
 fn readme_tables_agree_with_the_archive() {
-    let o = check(&root().join("README.md"));
-    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "README.md disagrees with docs/campaign/results:\n{text}");
-    assert!(text.contains("generated blocks agree"), "unexpected output:\n{text}");
+    agrees("README.md");
 }
 
 #[test]
