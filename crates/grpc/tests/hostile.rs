@@ -330,6 +330,35 @@ fn only_a_session_itself_can_leave() {
     assert!(server.refusals().wrong_role >= 2);
 }
 
+/// Not an attack, a crash (issue 29): an optimiser killed while it searches holds the design
+/// request unconfirmed. The optimiser restarted in its place (a new session) gets that request
+/// at its first poll, not after the learner's resend deadline nor after the dead session is
+/// forgotten; and it gets it once.
+#[test]
+fn a_new_optimiser_gets_the_request_a_dead_one_had_taken() {
+    let (mut learner, _server, endpoint) = common::learner();
+    let req = DesignRequest {
+        index: 5,
+        kind: DesignKind::Exploit,
+        weights_version: 3,
+        start_states: vec![0.5; 3],
+        chosen: vec![1.0; 3],
+        rejected: Vec::new(),
+    };
+    learner.design_requests.send(req).expect("send");
+    let dead = Peer::new(&endpoint, 0x0DEAD, pb::Role::Optimizer, 0);
+    let got = dead.next_design_request(1000, 0, false).expect("poll");
+    assert_eq!(got.request.as_ref().map(|r| r.index), Some(5));
+    // It never polls again (killed mid-search); its successor registers and asks.
+    let t = Instant::now();
+    let next = Peer::new(&endpoint, 0x0A11CE, pb::Role::Optimizer, 0);
+    let got = next.next_design_request(5000, 0, false).expect("poll");
+    assert_eq!(got.request.as_ref().map(|r| (r.index, r.weights_version)), Some((5, 3)), "{got:?}");
+    assert!(t.elapsed() < Duration::from_secs(2), "waited {:?} for the request", t.elapsed());
+    // Confirmed by the new one (it asks for the next): the copy was one item, not two.
+    assert_eq!(next.next_design_request(300, got.seq, false).expect("poll").request, None);
+}
+
 /// Attack 6: Empty chunks (no transition, no end) reach the learner at most once per heartbeat
 /// per episode, so they cannot be used to flood it; the episode's end still passes.
 #[test]

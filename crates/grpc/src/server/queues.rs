@@ -448,6 +448,28 @@ impl<T> Outbox<T> {
 }
 
 impl<T: Clone> Outbox<T> {
+    /// A new consumer of a queue served by one consumer at a time (the design requests: one
+    /// optimiser per fleet): a copy of what the others hold unconfirmed goes to the front for
+    /// it. A consumer that was restarted gets the work its dead predecessor had taken at once,
+    /// not after the learner's resend deadline nor after the dead session is forgotten; should
+    /// the holder be alive after all, both answer and the learner takes the first answer.
+    /// Returns how many items were offered.
+    pub(crate) fn offer_held_to(&self, newcomer: u64) -> usize {
+        let Ok(mut s) = self.state.lock() else { return 0 };
+        let s = &mut *s;
+        let mut held: Vec<(u64, T)> =
+            s.consumers.iter().filter(|(c, _)| **c != newcomer).filter_map(|(_, d)| d.unconfirmed.clone().map(|x| (d.seq, x))).collect();
+        held.sort_by_key(|(seq, _)| *seq);
+        let n = held.len();
+        for (_, x) in held.into_iter().rev() {
+            s.items.push_front(x);
+        }
+        if n > 0 {
+            self.ready.notify_waiters();
+        }
+        n
+    }
+
     fn try_take(&self, consumer: u64, received: u64) -> Result<Take<T>, TransportError> {
         let mut s = self.lock()?;
         let s = &mut *s;

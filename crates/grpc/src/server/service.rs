@@ -364,6 +364,7 @@ impl Fleet for FleetService {
         if !known {
             self.hub.prune(now);
         }
+        let mut new_optimizer = false;
         let refused = {
             let Ok(mut clients) = self.hub.clients.lock() else { return Err(Status::internal("client table lock poisoned")) };
             let n = clients.len();
@@ -390,6 +391,7 @@ impl Fleet for FleetService {
                         h.session,
                         ClientRecord { role, id: h.actor_id, last_seen: now, weights_version: 0, told_finished: false, left: false },
                     );
+                    new_optimizer = role == ClientRole::Optimizer;
                     None
                 }
             }
@@ -397,6 +399,16 @@ impl Fleet for FleetService {
         if let Some((reason, status)) = refused {
             self.hub.count(reason, 1, peer, status.message());
             return Err(status);
+        }
+        if new_optimizer {
+            // A restarted optimiser: the request its dead predecessor had taken is its now
+            // (not after the learner's resend deadline, nor after that session is forgotten).
+            let offered = self.hub.requests.offer_held_to(h.session);
+            if offered > 0 {
+                coadapt_log::logln!(
+                    "coadapt-grpc: a new optimiser session; {offered} design request(s) another session had taken offered to it"
+                );
+            }
         }
         Ok(Response::new(pb::Welcome {
             fleet: self.hub.cfg.fleet.clone(),
