@@ -22,7 +22,12 @@ count. Per robot:
 4. bodies: the run's best exploitation design and its best random design, each trained from
    scratch with plain SAC (2 training seeds): the mean return of the last 10 episodes, and
    the difference paired by run seed and training seed, with the exact sign-flip test;
-5. calibration: scripts/calibration_report.py over the robot's methods.
+5. calibration: scripts/calibration_report.py over the robot's methods;
+6. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
+   the simulation baselines ordered by the simulation they spend on choosing designs: design
+   rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
+   episodes: an upper bound where an episode can end early), against the quality of the chosen
+   designs and its difference from random designs, paired by seed (section 3's dial).
 
 Pure Python (no numpy), so it runs with the system python3.
 """
@@ -112,6 +117,18 @@ def bodies_of(root, prefix):
     return out
 
 
+def rollout_steps(run):
+    """Steps of one design rollout of RUN: the screen's `steps` for a screened run (0: a whole
+    episode), else a whole episode (1,000 steps on every robot here)."""
+    import tomllib
+    cfg = tomllib.load(open(os.path.join(run, "config.toml"), "rb"))
+    opt = cfg.get("optimizer", {})
+    if opt.get("exploit") == "screened":
+        steps = opt.get("screen", {}).get("steps", 250)
+        return steps if steps > 0 else 1000
+    return 1000
+
+
 def ordered(methods):
     return [m for m in ORDER if m in methods] + sorted(m for m in methods if m not in ORDER)
 
@@ -165,6 +182,23 @@ def report(root, title, prefix, tables):
         if d:
             print(f"| FEAR's body minus the random one, paired by run and training seed | {len(seeds)} | {len(d)} | {cr.signed_sd(d)} (p {sign_flip_p(d)}) |")
         print()
+    if "dial" in tables and runs:
+        dial = [m for m in methods if m == "fear" or m.startswith("screened") or m.startswith("sim-")]
+        if dial:
+            print("| method | seeds | design rollouts per run | simulated steps per run (thousands, at most) | quality of chosen designs | minus random designs, paired |")
+            print("|---|---|---|---|---|---|")
+            rows = []
+            for m in dial:
+                steps = []
+                for seed, (f, _) in runs[m].items():
+                    steps.append(f["rollouts"] * rollout_steps(os.path.join(root, f"{prefix}-{m}-seed{seed}")))
+                seeds = sorted(set(runs[m]) & set(runs.get("random", {})))
+                d = [runs[m][x][0]["exploit"] - runs["random"][x][0]["exploit"] for x in seeds]
+                rows.append((statistics.mean(steps), m, len(runs[m]), statistics.mean(f["rollouts"] for f, _ in runs[m].values()),
+                             cr.mean_sd([f["exploit"] for f, _ in runs[m].values()]), f"{cr.signed_sd(d)} (n = {len(d)})" if d else "-"))
+            for k, m, n, r, q, d in sorted(rows):
+                print(f"| {m} | {n} | {r:.0f} | {k / 1000:.1f} | {q} | {d} |")
+            print()
     if "calibration" in tables and runs:
         names = [f"{prefix}-{m}" for m in methods]
         here = os.path.dirname(os.path.abspath(__file__))
