@@ -4,7 +4,7 @@
 # starts the bridge on 127.0.0.1:50061 (the address in configs/mujoco-half-cheetah-reduced.toml),
 # waits until it answers, runs docs/campaign/mujoco-bench.queue with scripts/campaign.sh (which
 # resumes where it stopped and archives each run as it ends), and stops the bridge at the end or
-# on Ctrl-C / SIGTERM.
+# on Ctrl-C / SIGTERM, once the runs using it have stopped (at most 2 minutes).
 #   usage: [BIN=path/to/coadapt] scripts/mujoco_lane.sh [QUEUE, default docs/campaign/mujoco-bench.queue]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,7 +22,16 @@ fi
 mkdir -p runs
 "$venv/bin/coadapt-gym-serve" --factory coadapt_bridge.mujoco_half_cheetah:make --port "$port" > runs/mujoco-bridge.log 2>&1 &
 bridge=$!
-trap 'kill "$bridge" 2>/dev/null || true' EXIT
+# The bridge goes last: a run stopping (SIGTERM: its stop snapshot) still steps the robot, and
+# without the bridge its actor fails before the learner has written the snapshot.
+stop_bridge() {
+  for _ in $(seq 1 240); do
+    pgrep -f -- "(--out|--resume) runs/campaign/mujoco-bench|--env dm-env-rpc://127.0.0.1:$port" > /dev/null || break
+    sleep 0.5
+  done
+  kill "$bridge" 2> /dev/null || true
+}
+trap stop_bridge EXIT
 trap 'exit 130' INT TERM
 for _ in $(seq 1 120); do
   if python3 -c 'import socket,sys; s=socket.socket(); s.settimeout(1); sys.exit(s.connect_ex(("127.0.0.1", int(sys.argv[1]))) != 0)' "$port"; then
