@@ -3,9 +3,8 @@
 //! way every time, and restarting only hides the cause under ten copies of it. Those exit with
 //! their `sysexits.h` code, and the supervisor (`launch`) stops the fleet and says why.
 
-use std::io::ErrorKind;
-
 use coadapt_learner::coadapt::CoadaptError;
+use coadapt_learner::disk::is_disk_full;
 
 /// `EX_CANTCREAT`: the disk holding the run directory is full, over quota or read-only.
 pub const DISK: u8 = 73;
@@ -26,11 +25,6 @@ impl std::fmt::Display for NotTransient {
 }
 
 impl std::error::Error for NotTransient {}
-
-/// Whether an I/O error means the disk cannot take what is written.
-pub fn is_disk_full(kind: ErrorKind) -> bool {
-    matches!(kind, ErrorKind::StorageFull | ErrorKind::QuotaExceeded | ErrorKind::ReadOnlyFilesystem)
-}
 
 /// The exit code of a process that failed with `e`: [`DISK`], [`CONFIG`], or 1 (worth a restart).
 pub fn code_of(e: &anyhow::Error) -> u8 {
@@ -66,6 +60,8 @@ pub fn not_transient(code: Option<i32>) -> Option<&'static str> {
 
 #[cfg(test)]
 mod tests {
+    use std::io::ErrorKind;
+
     use super::*;
 
     #[test]

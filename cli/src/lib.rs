@@ -45,7 +45,6 @@ pub mod confirm;
 pub mod credentials;
 pub mod design_client;
 pub mod design_live;
-pub mod disk;
 pub mod env_serve;
 pub mod exit;
 pub mod fleet;

@@ -29,7 +29,7 @@ pub struct MetricsConfig {
 #[derive(Debug)]
 pub enum Source {
     /// The learner's counters, and the free space of its run directory's disk.
-    Learner(Arc<Mutex<Stats>>, Option<Arc<crate::disk::DiskWatch>>),
+    Learner(Arc<Mutex<Stats>>, Option<Arc<coadapt_learner::disk::DiskWatch>>),
     Optimizer(Arc<Counters>),
 }
 

@@ -157,7 +157,7 @@ impl RolloutEvaluator for SimEvaluator {
 pub fn progress_printer(
     cfg: &RunConfig,
     dir: &Path,
-    disk: Option<std::sync::Arc<crate::disk::DiskWatch>>,
+    disk: Option<std::sync::Arc<coadapt_learner::disk::DiskWatch>>,
 ) -> impl FnMut(&RunEvent<'_>) + use<> {
     let total_episodes = cfg.schedule.total_episodes();
     let designs_total = cfg.schedule.designs;
@@ -315,7 +315,7 @@ pub fn learner(
     let design_service = crate::design_live::start(cfg, spec, &run_id, links, &mut writer)?;
     // The operator may answer from another directory: name the run directory in full.
     let full_dir = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
-    let disk = std::sync::Arc::new(crate::disk::DiskWatch::new(&full_dir));
+    let disk = std::sync::Arc::new(coadapt_learner::disk::DiskWatch::new(&full_dir, &crate::resume::snapshot_root(&full_dir)));
     let mut print = progress_printer(cfg, &full_dir, Some(disk.clone()));
     let stats = std::sync::Arc::new(std::sync::Mutex::new(coadapt::Stats::default()));
     if !cfg.metrics.learner_listen.is_empty() {

@@ -89,7 +89,8 @@ fn learner_and_optimizer_metrics_are_scraped_during_a_run() {
 #[test]
 fn the_grafana_dashboard_charts_only_metrics_that_exist() {
     use coadapt_cli::metrics::{Source, render};
-    let disk = std::sync::Arc::new(coadapt_cli::disk::DiskWatch::new(&std::env::temp_dir()));
+    let disk =
+        std::sync::Arc::new(coadapt_learner::disk::DiskWatch::new(&std::env::temp_dir(), &std::env::temp_dir().join("no-snapshots-here")));
     let text = render(&Source::Learner(Default::default(), Some(disk))) + &render(&Source::Optimizer(Default::default()));
     let dash = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/grafana/coadapt.json")).unwrap();
     let dash: serde_json::Value = serde_json::from_str(&dash).unwrap();

@@ -17,12 +17,15 @@
 //!   episodes in flight), leases that re-issue a silent actor's episode, policy lag.
 //! - [`snapshot`]: snapshots of a whole run (networks, optimisers, replay buffers, schedule)
 //!   written crash-safely and checked on reading, for resuming after any crash.
+//! - [`disk`]: free space where the run directory lives against what the next snapshot needs
+//!   (the progress line's and `/metrics`' warning before a full disk stops a run).
 //! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
 
 pub mod agent;
 pub mod coadapt;
 pub mod config;
 pub mod ddpg;
+pub mod disk;
 pub mod fear;
 pub mod flow;
 pub mod networks;

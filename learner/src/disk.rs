@@ -15,6 +15,13 @@ const MARGIN: u64 = 16 << 20;
 /// How often free space is measured at most (a `statvfs` call).
 const EVERY: Duration = Duration::from_millis(200);
 
+/// Whether an I/O error of this kind means the disk cannot take what is written (full, over
+/// quota, read-only): no retry can mend it.
+pub fn is_disk_full(kind: std::io::ErrorKind) -> bool {
+    use std::io::ErrorKind;
+    matches!(kind, ErrorKind::StorageFull | ErrorKind::QuotaExceeded | ErrorKind::ReadOnlyFilesystem)
+}
+
 /// Bytes free to an unprivileged writer on the filesystem holding `path`.
 pub fn free_bytes(path: &Path) -> std::io::Result<u64> {
     let s = nix::sys::statvfs::statvfs(path).map_err(std::io::Error::from)?;
@@ -44,13 +51,10 @@ pub struct DiskWatch {
 }
 
 impl DiskWatch {
-    /// Watches the filesystem of run directory `dir`; the newest snapshot already there (a
-    /// resumed run) gives the first estimate of what the next one needs.
-    pub fn new(dir: &Path) -> Self {
-        let newest = coadapt_learner::snapshot::list(&crate::resume::snapshot_root(dir))
-            .ok()
-            .and_then(|l| l.last().map(|(_, d)| dir_bytes(d)))
-            .unwrap_or(0);
+    /// Watches the filesystem of run directory `dir`; the newest snapshot already under
+    /// `snapshots` (a resumed run) gives the first estimate of what the next one needs.
+    pub fn new(dir: &Path, snapshots: &Path) -> Self {
+        let newest = crate::snapshot::list(snapshots).ok().and_then(|l| l.last().map(|(_, d)| dir_bytes(d))).unwrap_or(0);
         let w = Self {
             dir: dir.to_path_buf(),
             last_snapshot: AtomicU64::new(newest),
@@ -126,7 +130,7 @@ mod tests {
         let dir = std::env::temp_dir();
         let free = free_bytes(&dir).unwrap();
         assert!(free > 0 && free < u64::MAX);
-        let w = DiskWatch::new(&dir);
+        let w = DiskWatch::new(&dir, &dir.join("no-snapshots-here"));
         assert!(!w.reading().2 || free < MARGIN, "an empty run dir needs only the margin");
         // A snapshot larger than the disk's free space: low from the next reading.
         w.snapshot_taken(free);
