@@ -43,10 +43,10 @@ bin=$root/coadapt
 if [ -n "${BIN:-}" ]; then
   [ -x "$BIN" ] || { echo "campaign: BIN=$BIN is not an executable" >&2; exit 2; }
   bin=$root/bin-$(basename "$BIN")
-  cp "$BIN" "$bin.new" && mv "$bin.new" "$bin"
+  cp "$BIN" "$bin.new.$$" && mv "$bin.new.$$" "$bin"
 else
   cargo build --release -q -p coadapt
-  cp target/release/coadapt "$bin.new" && mv "$bin.new" "$bin"
+  cp target/release/coadapt "$bin.new.$$" && mv "$bin.new.$$" "$bin"
 fi
 
 archive_run() {
