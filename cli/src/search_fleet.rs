@@ -78,12 +78,12 @@ impl Fleet {
             }
         };
         let mut runner = FleetRunner::new(links, spec.max_episode_steps, spec.act_dim(), spec.obs_dim(), PlanarEnv::step_cost);
-        runner.lease = lease;
-        runner.deadline = deadline;
+        runner.set_lease(lease);
+        runner.set_deadline(deadline);
         if !children.is_empty() {
             // Actors started here that have all ended will never bring the rollouts back: say
             // so instead of waiting for the deadline.
-            runner.abort = Some(children.all_ended_check("search actor", &out.join("logs")));
+            runner.set_abort(children.all_ended_check("search actor", &out.join("logs")));
         }
         Ok(Self { runner, guard, threads, children })
     }

@@ -9,18 +9,18 @@
 //! `seed` is the rollout's index and whose `min_weights_version` is that version. An actor
 //! ([`run_actor`]) plays the rollout's actions on its robot ([`PlanarEnv`] here, any [`Env`]
 //! in general) and streams the transitions and the episode's return back. The learner side,
-//! [`FleetRunner`], is a [`RolloutRunner`]: it waits for every rollout, hands a rollout that
-//! went silent to another actor after a lease, and sums each rollout's cost from its
-//! observations.
+//! [`FleetRunner`], is a [`RolloutRunner`]: it waits for every rollout and sums each rollout's
+//! cost from its observations. Leases, reissue and exactly-once are the fleet library's
+//! ([`coadapt_fleet`]); this file says only what a rollout is.
 
-use std::collections::HashMap;
-use std::sync::Mutex;
 use std::sync::atomic::AtomicBool;
-use std::time::{Duration, Instant};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
-use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step};
+use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step, Transition};
+use coadapt_fleet::{ActorConfig, Check, DispatchConfig, Dispatcher, Done, Failure, Job, Stream, Verdict, Worker};
 use coadapt_transport::messages::{Assignment, EpisodeEnd, EpisodeMode, ExperienceChunk, Weights};
-use coadapt_transport::{ActorLinks, LearnerLinks, TransportError, newest_or_stop, next_or_stop};
+use coadapt_transport::{ActorLinks, LearnerLinks};
 
 use crate::planar::PlanarReaching;
 use crate::{EpisodicTask, RolloutError, RolloutRunner};
@@ -112,6 +112,62 @@ impl Env for PlanarEnv {
     }
 }
 
+/// Rollouts on one actor: the iteration's actions, played on its robot.
+struct Rollouts<'e> {
+    env: &'e mut dyn Env,
+    steps: usize,
+    actor_id: u64,
+    weights: Option<Arc<Weights>>,
+    prev: Vec<f32>,
+}
+
+impl Worker for Rollouts<'_> {
+    type Error = String;
+
+    fn set_weights(&mut self, weights: &Arc<Weights>) -> Result<(), String> {
+        self.weights = Some(weights.clone());
+        Ok(())
+    }
+
+    fn run(&mut self, a: &Assignment, stream: &mut Stream<'_>) -> Result<Option<EpisodeEnd>, Failure<String>> {
+        let (id, steps, d) = (self.actor_id, self.steps, self.env.spec().act_dim());
+        let Some(w) = self.weights.as_ref() else { return Err(Failure::Fatal("no weights".into())) };
+        let r = usize::try_from(a.seed).unwrap_or(usize::MAX);
+        let Some(actions) = r.checked_mul(steps * d).and_then(|at| w.policy.get(at..at + steps * d)) else {
+            coadapt_log::logln!(
+                "actor {id}: assignment {} names rollout {r}, beyond the {} the iteration holds; skipped",
+                a.id,
+                w.policy.len() / (steps * d).max(1)
+            );
+            return Ok(None);
+        };
+        let obs = self.env.reset(a.seed, &a.design).map_err(|e| Failure::Env(format!("actor {id}: reset: {e}")))?;
+        self.prev.clear();
+        self.prev.extend_from_slice(obs);
+        let (mut ret, mut length) = (0.0f32, 0u64);
+        for t in 0..steps {
+            let act = &actions[t * d..(t + 1) * d];
+            let step = self.env.step(act).map_err(|e| Failure::Env(format!("actor {id}: step {t}: {e}")))?;
+            ret += step.reward;
+            length += 1;
+            let last = step.terminated || step.truncated;
+            let sent = stream.push(&Transition {
+                obs: &self.prev,
+                action: act,
+                reward: step.reward,
+                next_obs: step.observation,
+                terminated: step.terminated,
+            });
+            self.prev.clear();
+            self.prev.extend_from_slice(step.observation);
+            if last || sent.is_break() {
+                break;
+            }
+        }
+        Ok(Some(EpisodeEnd { episode_return: ret, length }))
+    }
+}
+
 /// Runs the rollouts the learner hands out on `env` until the assignment queue closes or
 /// `shutdown` is set; returns how many it ran. Each rollout is `steps` steps (the task's: a
 /// remote robot may not say its episode length). A rollout whose weights are not the
@@ -123,74 +179,54 @@ pub fn run_actor(
     links: &mut ActorLinks,
     shutdown: &AtomicBool,
 ) -> Result<u64, RolloutError> {
-    let err = |e: TransportError| RolloutError(format!("actor {actor_id}: {e}"));
-    let (d, s) = (env.spec().act_dim(), env.spec().obs_dim());
-    let mut done = 0u64;
-    while let Some(a) = next_or_stop(links.assignments.as_mut(), shutdown).map_err(err)? {
-        let Some(w) = newest_or_stop(links.weights.as_mut(), a.min_weights_version, shutdown).map_err(err)? else { break };
-        if w.version != a.min_weights_version {
-            continue;
-        }
-        let r = usize::try_from(a.seed).unwrap_or(usize::MAX);
-        let Some(actions) = r.checked_mul(steps * d).and_then(|at| w.policy.get(at..at + steps * d)) else {
-            coadapt_log::logln!(
-                "actor {actor_id}: assignment {} names rollout {r}, beyond the {} the iteration holds; skipped",
-                a.id,
-                w.policy.len() / (steps * d).max(1)
-            );
-            continue;
-        };
-        let mut chunk = ExperienceChunk {
-            actor: actor_id,
-            assignment: a.id,
-            design_index: a.design_index,
-            weights_version: w.version,
-            first: true,
-            ..ExperienceChunk::default()
-        };
-        let mut ret = 0.0f32;
-        let obs = env.reset(a.seed, &a.design).map_err(|e| RolloutError(format!("actor {actor_id}: reset: {e}")))?;
-        let mut prev = obs.to_vec();
-        for t in 0..steps {
-            let act = &actions[t * d..(t + 1) * d];
-            let step = env.step(act).map_err(|e| RolloutError(format!("actor {actor_id}: step {t}: {e}")))?;
-            ret += step.reward;
-            chunk.obs.extend_from_slice(&prev);
-            chunk.actions.extend_from_slice(act);
-            chunk.rewards.push(step.reward);
-            chunk.next_obs.extend_from_slice(step.observation);
-            chunk.terminated.push(step.terminated);
-            prev.clear();
-            prev.extend_from_slice(step.observation);
-            debug_assert_eq!(prev.len(), s);
-            if step.terminated || step.truncated {
-                break;
-            }
-        }
-        chunk.end = Some(EpisodeEnd { episode_return: ret, length: chunk.rewards.len() as u64 });
-        match links.experience.send(chunk) {
-            Ok(()) => done += 1,
-            Err(TransportError::Closed) => break,
-            Err(e) => return Err(err(e)),
-        }
+    let mut worker = Rollouts { env, steps, actor_id, weights: None, prev: Vec::new() };
+    let cfg = ActorConfig { exact_weights: true, record_eval: true, ..ActorConfig::default() };
+    let summary = coadapt_fleet::actor::run(&mut worker, actor_id, links, &cfg, shutdown)
+        .map_err(|e| RolloutError(format!("actor {actor_id}: {e}")))?;
+    Ok(summary.episodes)
+}
+
+/// A rollout of the iteration, as the dispatcher names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Rollout(usize);
+
+impl std::fmt::Display for Rollout {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "rollout {}", self.0)
     }
-    Ok(done)
+}
+
+/// What a rollout must look like: `steps` transitions of the task's widths.
+struct RolloutCheck {
+    steps: usize,
+    action_dim: usize,
+    obs_dim: usize,
+}
+
+impl Check<Rollout> for RolloutCheck {
+    fn chunk(&mut self, c: &ExperienceChunk) -> Result<(), String> {
+        let k = c.len();
+        if c.next_obs.len() != k * self.obs_dim || c.actions.len() != k * self.action_dim {
+            return Err(format!("{k} rewards, {} observation values, {} actions", c.next_obs.len(), c.actions.len()));
+        }
+        Ok(())
+    }
+
+    fn episode(&mut self, d: &Done<Rollout>) -> Verdict {
+        if d.steps != self.steps || d.end.length != self.steps as u64 {
+            return Verdict::Again(format!("ended after {} steps, expected {}", d.steps, self.steps));
+        }
+        Verdict::Accept
+    }
 }
 
 /// The learner's side of rollouts through a fleet (see the module doc).
 pub struct FleetRunner {
-    links: Mutex<LearnerLinks>,
-    counters: Mutex<(u64, u64)>,
+    links: Mutex<(LearnerLinks, Dispatcher<Rollout>, u64)>,
     steps: usize,
     action_dim: usize,
     obs_dim: usize,
-    /// A rollout that sent nothing for this long goes out again (to whichever actor is free).
-    pub lease: Duration,
-    /// An iteration whose rollouts have not all come back by then fails.
-    pub deadline: Duration,
     step_cost: fn(&[f32]) -> f64,
-    /// Asked while waiting: `Some(why)` gives up on the iteration (every actor process gone).
-    pub abort: Option<Box<dyn Fn() -> Option<String> + Send + Sync>>,
 }
 
 impl std::fmt::Debug for FleetRunner {
@@ -201,56 +237,36 @@ impl std::fmt::Debug for FleetRunner {
 
 impl FleetRunner {
     /// Rollouts of `steps x action_dim` actions on robots with observations of `obs_dim`;
-    /// `step_cost` reads a step's cost from its observation.
+    /// `step_cost` reads a step's cost from its observation. A rollout that sent nothing for a
+    /// minute goes out again; an iteration not back within an hour fails (see the setters).
     pub fn new(links: LearnerLinks, steps: usize, action_dim: usize, obs_dim: usize, step_cost: fn(&[f32]) -> f64) -> Self {
-        Self {
-            links: Mutex::new(links),
-            counters: Mutex::new((0, 0)),
-            steps,
-            action_dim,
-            obs_dim,
+        let cfg = DispatchConfig {
             lease: Duration::from_secs(60),
-            deadline: Duration::from_secs(3600),
-            step_cost,
-            abort: None,
-        }
+            deadline: Some(Duration::from_secs(3600)),
+            max_steps: steps,
+            ..DispatchConfig::default()
+        };
+        Self { links: Mutex::new((links, Dispatcher::new("search", cfg), 0)), steps, action_dim, obs_dim, step_cost }
     }
 
-    /// The next weights version and `n` fresh assignment ids.
-    fn next(&self, n: u64) -> (u64, u64) {
-        let mut c = self.counters.lock().unwrap_or_else(|e| e.into_inner());
-        c.0 += 1;
-        let first = c.1;
-        c.1 += n;
-        (c.0, first)
+    fn dispatcher(&mut self) -> &mut Dispatcher<Rollout> {
+        &mut self.links.get_mut().unwrap_or_else(|e| e.into_inner()).1
     }
 
-    /// A fresh assignment id.
-    fn next_id(&self) -> u64 {
-        let mut c = self.counters.lock().unwrap_or_else(|e| e.into_inner());
-        c.1 += 1;
-        c.1 - 1
+    /// A rollout that sent nothing for `lease` goes out again (to whichever actor is free).
+    pub fn set_lease(&mut self, lease: Duration) {
+        self.dispatcher().cfg.lease = lease;
     }
 
-    fn assignment(&self, id: u64, version: u64, rollout: usize) -> Assignment {
-        Assignment {
-            id,
-            design_index: u32::try_from(version).unwrap_or(u32::MAX),
-            design: vec![],
-            mode: EpisodeMode::Train,
-            seed: rollout as u64,
-            min_weights_version: version,
-        }
+    /// A rollout not back `deadline` after it went out fails the iteration.
+    pub fn set_deadline(&mut self, deadline: Duration) {
+        self.dispatcher().cfg.deadline = Some(deadline);
     }
-}
 
-/// What the learner knows of one rollout while it is out.
-struct Out {
-    rollout: usize,
-    heard: Instant,
-    ret: f64,
-    cost: f64,
-    steps: usize,
+    /// Asked while waiting: `Some(why)` gives up on the iteration (every actor process gone).
+    pub fn set_abort(&mut self, abort: Box<dyn Fn() -> Option<String> + Send + Sync>) {
+        self.dispatcher().abort = Some(abort);
+    }
 }
 
 impl RolloutRunner for FleetRunner {
@@ -260,71 +276,45 @@ impl RolloutRunner for FleetRunner {
         if let Some(i) = rollouts.iter().position(|a| a.len() != per) {
             return Err(RolloutError(format!("rollout {i} has {} actions, expected {per}", rollouts[i].len())));
         }
-        let (version, first_id) = self.next(n as u64);
-        let mut links = self.links.lock().unwrap_or_else(|e| e.into_inner());
-        let io = |e: TransportError| RolloutError(e.to_string());
-        links.acting_weights.publish(Weights { version, policy: rollouts.concat(), q1: vec![], q2: vec![] }).map_err(io)?;
-        let mut out: HashMap<u64, Out> = HashMap::new();
+        let mut guard = self.links.lock().unwrap_or_else(|e| e.into_inner());
+        let (links, dispatcher, version) = &mut *guard;
+        let err = |e: coadapt_fleet::DispatchError| RolloutError(e.to_string());
+        // What a failed iteration left out is not waited for.
+        dispatcher.forget_all();
+        *version += 1;
+        let version = *version;
+        links
+            .acting_weights
+            .publish(Weights { version, policy: rollouts.concat(), q1: vec![], q2: vec![] })
+            .map_err(|e| RolloutError(e.to_string()))?;
         for r in 0..n {
-            let id = first_id + r as u64;
-            links.assignments.send(self.assignment(id, version, r)).map_err(io)?;
-            out.insert(id, Out { rollout: r, heard: Instant::now(), ret: 0.0, cost: 0.0, steps: 0 });
+            let job = Job {
+                design_index: u32::try_from(version).unwrap_or(u32::MAX),
+                design: vec![],
+                mode: EpisodeMode::Train,
+                seed: r as u64,
+                min_weights_version: version,
+            };
+            dispatcher.issue(links, job, Rollout(r)).map_err(err)?;
         }
+        let mut check = RolloutCheck { steps: self.steps, action_dim: self.action_dim, obs_dim: self.obs_dim };
         let mut results: Vec<Option<(f64, f64)>> = vec![None; n];
-        let started = Instant::now();
-        let mut reissued = 0u64;
+        let mut reissued = 0u32;
+        let never = AtomicBool::new(false);
         while results.iter().any(Option::is_none) {
-            if let Some(why) = self.abort.as_ref().and_then(|f| f()) {
-                return Err(RolloutError(why));
+            let Some(done) = dispatcher.next_done(links, &never, &mut check).map_err(err)? else { break };
+            reissued += done.reissued;
+            let (mut ret, mut cost) = (0.0f64, 0.0f64);
+            for c in &done.chunks {
+                ret += c.rewards.iter().map(|&r| f64::from(r)).sum::<f64>();
+                cost += c.next_obs.chunks_exact(self.obs_dim.max(1)).map(self.step_cost).sum::<f64>();
             }
-            if started.elapsed() > self.deadline {
-                let left = results.iter().filter(|r| r.is_none()).count();
-                return Err(RolloutError(format!("{left} of {n} rollouts not back after {:?}: are the actors running?", self.deadline)));
-            }
-            // A silent rollout goes out again under a new id (one copy out per rollout: the
-            // silent one's late chunks are ignored).
-            let silent: Vec<u64> =
-                out.iter().filter(|(_, o)| o.heard.elapsed() > self.lease && results[o.rollout].is_none()).map(|(id, _)| *id).collect();
-            for id in silent {
-                if let Some(o) = out.remove(&id) {
-                    let new_id = self.next_id();
-                    links.assignments.send(self.assignment(new_id, version, o.rollout)).map_err(io)?;
-                    out.insert(new_id, Out { rollout: o.rollout, heard: Instant::now(), ret: 0.0, cost: 0.0, steps: 0 });
-                    reissued += 1;
-                }
-            }
-            let Some(chunk) = links.experience.recv_timeout(Duration::from_millis(100)).map_err(io)? else { continue };
-            let Some(o) = out.get_mut(&chunk.assignment) else { continue };
-            if results[o.rollout].is_some() {
-                continue;
-            }
-            let k = chunk.rewards.len();
-            if chunk.next_obs.len() != k * self.obs_dim || chunk.actions.len() != k * self.action_dim {
-                coadapt_log::logln!("search: a malformed chunk of rollout {} from actor {}; it goes out again", o.rollout, chunk.actor);
-                o.heard = Instant::now() - self.lease - Duration::from_secs(1);
-                continue;
-            }
-            o.heard = Instant::now();
-            o.steps += k;
-            o.ret += chunk.rewards.iter().map(|&r| f64::from(r)).sum::<f64>();
-            o.cost += chunk.next_obs.chunks_exact(self.obs_dim.max(1)).map(self.step_cost).sum::<f64>();
-            if let Some(end) = chunk.end {
-                if o.steps != self.steps || end.length != self.steps as u64 {
-                    coadapt_log::logln!(
-                        "search: rollout {} ended after {} steps, expected {}; it goes out again",
-                        o.rollout,
-                        o.steps,
-                        self.steps
-                    );
-                    (o.ret, o.cost, o.steps) = (0.0, 0.0, 0);
-                    o.heard = Instant::now() - self.lease - Duration::from_secs(1);
-                    continue;
-                }
-                results[o.rollout] = Some((o.ret, o.cost));
+            if let Some(slot) = results.get_mut(done.tag.0) {
+                *slot = Some((ret, cost));
             }
         }
         if reissued > 0 {
-            coadapt_log::logln!("search: {reissued} rollout(s) of this iteration went out again after {:?} of silence", self.lease);
+            coadapt_log::logln!("search: {reissued} rollout(s) of this iteration went out again");
         }
         Ok(results.into_iter().map(|r| r.unwrap_or((0.0, f64::NAN))).collect())
     }

@@ -107,7 +107,7 @@ fn a_rollout_whose_actor_went_silent_goes_to_another_after_the_lease() {
         run_actor(&mut PlanarEnv::default(), 25, 1, &mut good, &stop2)
     });
     let mut runner = FleetRunner::new(learner, 25, 12, 3, PlanarEnv::step_cost);
-    runner.lease = Duration::from_millis(300);
+    runner.set_lease(Duration::from_millis(300));
     let rollouts: Vec<Vec<f32>> = (0..6).map(|k| vec![k as f32; 25 * 12]).collect();
     let got = runner.run(&rollouts).unwrap();
     let task = PlanarReaching::default();
