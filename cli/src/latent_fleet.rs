@@ -159,11 +159,11 @@ impl Fleet {
             }
         };
         let mut runner = EpisodeRunner::new(links, state, act, cfg.episode_steps);
-        runner.lease = lease;
-        runner.deadline = deadline;
+        runner.set_lease(lease);
+        runner.set_deadline(deadline);
         if !children.is_empty() {
             // Actors started here that have all ended will never bring an episode back.
-            runner.abort = Some(children.all_ended_check("latent actor", &out.join("logs")));
+            runner.set_abort(children.all_ended_check("latent actor", &out.join("logs")));
         }
         Ok(Self { runner, guard, threads, children })
     }

@@ -10,20 +10,21 @@
 //! planning) and streams the latent transitions `(z_t, a_t, r_t, z_t+1)` back, a chunk every
 //! [`CHUNK_STEPS`] steps: the encoder is frozen, so the latent state is all the learner
 //! needs, and a 60-value state is small where a frame is 12,288 values. The learner side,
-//! [`EpisodeRunner`], waits for the whole episode, hands an episode that went silent to
-//! another actor after a lease, and only then stores the transitions: a half-run episode never
-//! reaches the replay.
+//! [`EpisodeRunner`], waits for the whole episode and only then stores the transitions: a
+//! half-run episode never reaches the replay. Leases, reissue after a silent actor and
+//! exactly-once are the fleet library's ([`coadapt_fleet`]); this file says what an episode is.
 //!
 //! With the same weights and seeds a fleet's planned episodes equal the in-process agent's
 //! bit for bit (tested); OU noise is drawn by the actor from its own stream.
 
-use std::collections::HashMap;
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use coadapt_core::Env;
+use coadapt_core::{Env, Transition};
+use coadapt_fleet::{ActorConfig, Check, DispatchConfig, DispatchError, Dispatcher, Done, Failure, Job, Stream, Verdict, Worker};
 use coadapt_transport::messages::{Assignment, EpisodeEnd, EpisodeMode, ExperienceChunk, Weights};
-use coadapt_transport::{ActorLinks, LearnerLinks, TransportError, newest_or_stop, next_or_stop};
+use coadapt_transport::{ActorLinks, LearnerLinks, TransportError};
 
 use crate::{LatentActor, LatentAgent};
 
@@ -41,6 +42,15 @@ pub enum FleetError {
     Learner(String),
 }
 
+impl From<DispatchError> for FleetError {
+    fn from(e: DispatchError) -> Self {
+        match e {
+            DispatchError::Transport(t) => Self::Transport(t),
+            other => Self::Learner(other.to_string()),
+        }
+    }
+}
+
 /// One episode's planning latency on the actor (milliseconds per planned step).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ActorEpisode {
@@ -52,6 +62,65 @@ pub struct ActorEpisode {
     pub plan_ms: Vec<f64>,
     /// Wall-clock seconds of the whole episode on the actor (robot steps included).
     pub seconds: f64,
+}
+
+/// Alg. 3's episodes on one actor: the latent planner behind the robot's camera.
+struct Planner<'a> {
+    actor: &'a mut LatentActor,
+    env: &'a mut dyn Env,
+    steps: usize,
+    report: &'a mut dyn FnMut(&ActorEpisode),
+    default_design: Vec<f32>,
+    a_t: Vec<f32>,
+    frame: Vec<f32>,
+    z: Vec<f32>,
+}
+
+impl Worker for Planner<'_> {
+    type Error = String;
+
+    fn set_weights(&mut self, w: &Arc<Weights>) -> Result<(), String> {
+        self.actor.set_weights(&w.policy).map_err(|e| e.to_string())
+    }
+
+    fn run(&mut self, asg: &Assignment, stream: &mut Stream<'_>) -> Result<Option<EpisodeEnd>, Failure<String>> {
+        let Self { actor, env, steps, report, default_design, a_t, frame, z } = self;
+        let px = frame.len();
+        let train = asg.mode == EpisodeMode::Train;
+        let design = if asg.design.is_empty() { &*default_design } else { &asg.design };
+        let t0 = Instant::now();
+        let mut out = ActorEpisode { assignment: asg.id, train, ..ActorEpisode::default() };
+        let obs = env.reset(asg.seed, design).map_err(|e| Failure::Env(format!("reset: {e}")))?;
+        let Some(f) = obs.get(..px) else {
+            return Err(Failure::Fatal(format!("reset: the observation has {} values, a frame needs {px}", obs.len())));
+        };
+        frame.copy_from_slice(f);
+        z.clear();
+        z.extend_from_slice(actor.reset(frame));
+        for t in 0..*steps {
+            let start = Instant::now();
+            if actor.act(train, a_t).is_some() {
+                out.plan_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+            let s = env.step(a_t).map_err(|e| Failure::Env(format!("step {t}: {e}")))?;
+            let (r, term, trunc) = (s.reward, s.terminated, s.truncated);
+            let Some(f) = s.observation.get(..px) else {
+                return Err(Failure::Fatal(format!("step {t}: the observation has {} values, a frame needs {px}", s.observation.len())));
+            };
+            frame.copy_from_slice(f);
+            let next = actor.observe(frame);
+            let sent = stream.push(&Transition { obs: z, action: a_t, reward: r, next_obs: next, terminated: term });
+            z.copy_from_slice(next);
+            out.episode_return += r;
+            out.steps += 1;
+            if term || trunc || sent.is_break() {
+                break;
+            }
+        }
+        out.seconds = t0.elapsed().as_secs_f64();
+        report(&out);
+        Ok(Some(EpisodeEnd { episode_return: out.episode_return, length: out.steps as u64 }))
+    }
 }
 
 /// Runs the episodes the learner hands out on `env` (its observation's first
@@ -68,85 +137,19 @@ pub fn run_actor(
     shutdown: &AtomicBool,
     report: &mut dyn FnMut(&ActorEpisode),
 ) -> Result<u64, FleetError> {
-    let fail = |why: String| FleetError::Actor { actor: actor_id, why };
     let px = actor.image_len();
-    let act = env.spec().act_dim();
     if env.spec().obs_dim() < px {
-        return Err(fail(format!("the robot's observation has {} values, a frame needs {px}", env.spec().obs_dim())));
-    }
-    let default_design = env.spec().default_design.clone();
-    let mut held = None;
-    let mut done = 0u64;
-    let mut a_t = vec![0.0; act];
-    let mut frame = vec![0.0; px];
-    while let Some(asg) = next_or_stop(links.assignments.as_mut(), shutdown)? {
-        let Some(w) = newest_or_stop(links.weights.as_mut(), asg.min_weights_version, shutdown)? else { break };
-        if w.version != asg.min_weights_version {
-            continue;
-        }
-        if held != Some(w.version) {
-            actor.set_weights(&w.policy).map_err(|e| fail(e.to_string()))?;
-            held = Some(w.version);
-        }
-        let train = asg.mode == EpisodeMode::Train;
-        let design = if asg.design.is_empty() { &default_design } else { &asg.design };
-        let t0 = Instant::now();
-        let mut chunk = ExperienceChunk {
+        return Err(FleetError::Actor {
             actor: actor_id,
-            assignment: asg.id,
-            design_index: asg.design_index,
-            weights_version: w.version,
-            first: true,
-            ..ExperienceChunk::default()
-        };
-        let mut out = ActorEpisode { assignment: asg.id, train, ..ActorEpisode::default() };
-        let obs = env.reset(asg.seed, design).map_err(|e| fail(format!("reset: {e}")))?;
-        let Some(f) = obs.get(..px) else {
-            return Err(fail(format!("reset: the observation has {} values, a frame needs {px}", obs.len())));
-        };
-        frame.copy_from_slice(f);
-        let mut z = actor.reset(&frame).to_vec();
-        for t in 0..steps {
-            let start = Instant::now();
-            if actor.act(train, &mut a_t).is_some() {
-                out.plan_ms.push(start.elapsed().as_secs_f64() * 1e3);
-            }
-            let s = env.step(&a_t).map_err(|e| fail(format!("step {t}: {e}")))?;
-            let (r, term, trunc) = (s.reward, s.terminated, s.truncated);
-            let Some(f) = s.observation.get(..px) else {
-                return Err(fail(format!("step {t}: the observation has {} values, a frame needs {px}", s.observation.len())));
-            };
-            frame.copy_from_slice(f);
-            let next = actor.observe(&frame);
-            chunk.obs.extend_from_slice(&z);
-            chunk.actions.extend_from_slice(&a_t);
-            chunk.rewards.push(r);
-            chunk.next_obs.extend_from_slice(next);
-            chunk.terminated.push(term);
-            z.copy_from_slice(next);
-            out.episode_return += r;
-            out.steps += 1;
-            let last = term || trunc || t + 1 == steps;
-            if last {
-                chunk.end = Some(EpisodeEnd { episode_return: out.episode_return, length: out.steps as u64 });
-            }
-            if last || chunk.len() >= CHUNK_STEPS {
-                match links.experience.send(chunk.clone()) {
-                    Ok(()) => {}
-                    Err(TransportError::Closed) => return Ok(done),
-                    Err(e) => return Err(e.into()),
-                }
-                chunk.clear();
-            }
-            if last {
-                break;
-            }
-        }
-        out.seconds = t0.elapsed().as_secs_f64();
-        report(&out);
-        done += 1;
+            why: format!("the robot's observation has {} values, a frame needs {px}", env.spec().obs_dim()),
+        });
     }
-    Ok(done)
+    let (act, default_design) = (env.spec().act_dim(), env.spec().default_design.clone());
+    let mut worker = Planner { actor, env, steps, report, default_design, a_t: vec![0.0; act], frame: vec![0.0; px], z: Vec::new() };
+    let cfg = ActorConfig { chunk_len: CHUNK_STEPS, exact_weights: true, record_eval: true, env_retries: 0 };
+    let summary = coadapt_fleet::actor::run(&mut worker, actor_id, links, &cfg, shutdown)
+        .map_err(|e| FleetError::Actor { actor: actor_id, why: e.to_string() })?;
+    Ok(summary.episodes)
 }
 
 /// How one fleet episode went, as the learner saw it.
@@ -162,28 +165,55 @@ pub struct FleetEpisode {
     pub reissued: u32,
 }
 
-/// One copy of an episode that is out.
-struct Out {
-    heard: Instant,
-    chunks: Vec<ExperienceChunk>,
-    steps: usize,
+/// An episode of the run, as the dispatcher names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Episode(u32);
+
+impl std::fmt::Display for Episode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "episode {}", self.0)
+    }
+}
+
+/// What an episode must look like: latent states and actions of the agent's widths, acted with
+/// the weights just published.
+struct LatentCheck {
+    state_len: usize,
+    act: usize,
+    version: u64,
+}
+
+impl Check<Episode> for LatentCheck {
+    fn chunk(&mut self, c: &ExperienceChunk) -> Result<(), String> {
+        let (n, s, a) = (c.len(), self.state_len, self.act);
+        if c.obs.len() != n * s || c.next_obs.len() != n * s || c.actions.len() != n * a || c.terminated.len() != n {
+            return Err(format!("{n} rewards, {} state values, {} actions", c.obs.len(), c.actions.len()));
+        }
+        if c.weights_version != self.version {
+            return Err(format!("acted with weights {}, not {}", c.weights_version, self.version));
+        }
+        Ok(())
+    }
+
+    fn episode(&mut self, d: &Done<Episode>) -> Verdict {
+        if d.chunks.first().is_none_or(|c| !c.first) {
+            return Verdict::Again("its first chunk is not marked first".into());
+        }
+        if d.end.length != d.steps as u64 || d.steps == 0 {
+            return Verdict::Again(format!("{} steps, the end says {}", d.steps, d.end.length));
+        }
+        Verdict::Accept
+    }
 }
 
 /// The learner's side of Alg. 3 through a fleet (see the module doc).
 pub struct EpisodeRunner {
     links: LearnerLinks,
+    dispatcher: Dispatcher<Episode>,
     version: u64,
-    next_id: u64,
     state_len: usize,
     act: usize,
-    max_steps: usize,
     weights: Vec<f32>,
-    /// An episode that sent nothing for this long goes out again (to whichever actor is free).
-    pub lease: Duration,
-    /// An episode that has not come back by then fails.
-    pub deadline: Duration,
-    /// Asked while waiting: `Some(why)` gives up (every actor process gone).
-    pub abort: Option<Box<dyn Fn() -> Option<String> + Send>>,
 }
 
 impl std::fmt::Debug for EpisodeRunner {
@@ -194,56 +224,31 @@ impl std::fmt::Debug for EpisodeRunner {
 
 impl EpisodeRunner {
     /// Episodes of at most `max_steps` steps on latent states of `state_len` values and
-    /// `act` actions.
+    /// `act` actions. An episode that sent nothing for two minutes goes out again; one not
+    /// back within an hour fails (see the setters).
     pub fn new(links: LearnerLinks, state_len: usize, act: usize, max_steps: usize) -> Self {
-        Self {
-            links,
-            version: 0,
-            next_id: 0,
-            state_len,
-            act,
-            max_steps,
-            weights: Vec::new(),
+        let cfg = DispatchConfig {
             lease: Duration::from_secs(120),
-            deadline: Duration::from_secs(3600),
-            abort: None,
-        }
+            deadline: Some(Duration::from_secs(3600)),
+            max_steps,
+            ..DispatchConfig::default()
+        };
+        Self { links, dispatcher: Dispatcher::new("latent fleet", cfg), version: 0, state_len, act, weights: Vec::new() }
     }
 
-    fn assignment(&mut self, index: u32, train: bool, seed: u64) -> Assignment {
-        self.next_id += 1;
-        Assignment {
-            id: self.next_id,
-            design_index: index,
-            design: vec![],
-            mode: if train { EpisodeMode::Train } else { EpisodeMode::Eval },
-            seed,
-            min_weights_version: self.version,
-        }
+    /// An episode that sent nothing for `lease` goes out again (to whichever actor is free).
+    pub fn set_lease(&mut self, lease: Duration) {
+        self.dispatcher.cfg.lease = lease;
     }
 
-    /// Whether `chunks` form one whole, well-shaped episode of the current version.
-    fn check(&self, chunks: &[ExperienceChunk]) -> Result<(), String> {
-        let (s, a) = (self.state_len, self.act);
-        let mut steps = 0;
-        for (i, c) in chunks.iter().enumerate() {
-            let n = c.len();
-            if c.obs.len() != n * s || c.next_obs.len() != n * s || c.actions.len() != n * a || c.terminated.len() != n {
-                return Err(format!("chunk {i} is malformed ({n} rewards, {} state values, {} actions)", c.obs.len(), c.actions.len()));
-            }
-            if c.first != (i == 0) {
-                return Err(format!("chunk {i}: first = {}", c.first));
-            }
-            if c.weights_version != self.version {
-                return Err(format!("chunk {i} acted with weights {}, not {}", c.weights_version, self.version));
-            }
-            steps += n;
-        }
-        let end = chunks.last().and_then(|c| c.end).ok_or("no end")?;
-        if end.length != steps as u64 || steps == 0 || steps > self.max_steps {
-            return Err(format!("{steps} steps, the end says {} (at most {})", end.length, self.max_steps));
-        }
-        Ok(())
+    /// An episode not back `deadline` after it went out fails.
+    pub fn set_deadline(&mut self, deadline: Duration) {
+        self.dispatcher.cfg.deadline = Some(deadline);
+    }
+
+    /// Asked while waiting: `Some(why)` gives up (every actor process gone).
+    pub fn set_abort(&mut self, abort: Box<dyn Fn() -> Option<String> + Send + Sync>) {
+        self.dispatcher.abort = Some(abort);
     }
 
     /// Runs one episode of `agent`'s current networks on an actor: exploring and stored in the
@@ -253,69 +258,31 @@ impl EpisodeRunner {
         self.version += 1;
         let w = Weights { version: self.version, policy: std::mem::take(&mut self.weights), q1: vec![], q2: vec![] };
         self.links.acting_weights.publish(w)?;
-        let first = self.assignment(index, train, seed);
-        let started = Instant::now();
-        let mut out: HashMap<u64, Out> = HashMap::new();
-        out.insert(first.id, Out { heard: Instant::now(), chunks: Vec::new(), steps: 0 });
-        self.links.assignments.send(first)?;
-        let mut reissued = 0u32;
-        loop {
-            if let Some(why) = self.abort.as_ref().and_then(|f| f()) {
-                return Err(FleetError::Learner(why));
-            }
-            if started.elapsed() > self.deadline {
-                return Err(FleetError::Learner(format!("episode {index} not back after {:?}: are the actors running?", self.deadline)));
-            }
-            // A silent copy goes out again under a new id; its late chunks are ignored.
-            let silent: Vec<u64> = out.iter().filter(|(_, o)| o.heard.elapsed() > self.lease).map(|(id, _)| *id).collect();
-            for id in silent {
-                out.remove(&id);
-                let again = self.assignment(index, train, seed);
-                out.insert(again.id, Out { heard: Instant::now(), chunks: Vec::new(), steps: 0 });
-                self.links.assignments.send(again)?;
-                reissued += 1;
-            }
-            let Some(chunk) = self.links.experience.recv_timeout(Duration::from_millis(100))? else { continue };
-            let id = chunk.assignment;
-            let Some(o) = out.get_mut(&id) else { continue };
-            o.heard = Instant::now();
-            o.steps += chunk.len();
-            let actor = chunk.actor;
-            let ended = chunk.end.is_some();
-            o.chunks.push(chunk);
-            if o.steps > self.max_steps || ended {
-                let Some(o) = out.remove(&id) else { continue };
-                if let Err(why) = self.check(&o.chunks) {
-                    coadapt_log::logln!("latent fleet: episode {index} from actor {actor} refused ({why}); it goes out again");
-                    let again = self.assignment(index, train, seed);
-                    out.insert(again.id, Out { heard: Instant::now(), chunks: Vec::new(), steps: 0 });
-                    self.links.assignments.send(again)?;
-                    reissued += 1;
-                    continue;
+        let mode = if train { EpisodeMode::Train } else { EpisodeMode::Eval };
+        let job = Job { design_index: index, design: vec![], mode, seed, min_weights_version: self.version };
+        // What a failed episode left out is not waited for.
+        self.dispatcher.forget_all();
+        self.dispatcher.issue(&mut self.links, job, Episode(index))?;
+        let mut check = LatentCheck { state_len: self.state_len, act: self.act, version: self.version };
+        let never = AtomicBool::new(false);
+        let Some(done) = self.dispatcher.next_done(&mut self.links, &never, &mut check)? else {
+            return Err(FleetError::Learner(format!("episode {index}: stopped")));
+        };
+        let (s, a) = (self.state_len, self.act);
+        let mut ret = 0.0f32;
+        for c in &done.chunks {
+            for i in 0..c.len() {
+                ret += c.rewards[i];
+                if train {
+                    agent
+                        .store(&c.obs[i * s..(i + 1) * s], &c.actions[i * a..(i + 1) * a], c.rewards[i], &c.next_obs[i * s..(i + 1) * s], c.terminated[i])
+                        .map_err(|e| FleetError::Learner(format!("storing episode {index}: {e}")))?;
                 }
-                let (s, a) = (self.state_len, self.act);
-                let mut ret = 0.0f32;
-                for c in &o.chunks {
-                    for i in 0..c.len() {
-                        ret += c.rewards[i];
-                        if train {
-                            agent
-                                .store(
-                                    &c.obs[i * s..(i + 1) * s],
-                                    &c.actions[i * a..(i + 1) * a],
-                                    c.rewards[i],
-                                    &c.next_obs[i * s..(i + 1) * s],
-                                    c.terminated[i],
-                                )
-                                .map_err(|e| FleetError::Learner(format!("storing episode {index}: {e}")))?;
-                        }
-                    }
-                }
-                if reissued > 0 {
-                    coadapt_log::logln!("latent fleet: episode {index} went out {reissued} more time(s) after {:?} of silence", self.lease);
-                }
-                return Ok(FleetEpisode { episode_return: ret, steps: o.steps, actor, seconds: started.elapsed().as_secs_f64(), reissued });
             }
         }
+        if done.reissued > 0 {
+            coadapt_log::logln!("latent fleet: episode {index} went out {} more time(s)", done.reissued);
+        }
+        Ok(FleetEpisode { episode_return: ret, steps: done.steps, actor: done.actor, seconds: done.seconds, reissued: done.reissued })
     }
 }

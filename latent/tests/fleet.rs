@@ -243,7 +243,7 @@ fn a_silent_actors_episode_is_taken_over() {
         }
     });
     let mut runner = EpisodeRunner::new(learner, 12, 1, STEPS);
-    runner.lease = Duration::from_millis(300);
+    runner.set_lease(Duration::from_millis(300));
     let mut ag = agent(&cfg);
     // The healthy actor starts only after the hung one holds the assignment.
     let runner_thread = std::thread::spawn(move || {
