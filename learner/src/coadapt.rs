@@ -34,6 +34,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use coadapt_core::EnvSpec;
+use coadapt_fleet::{DispatchConfig, Dispatcher};
 use coadapt_transport::messages::Dims;
 use coadapt_transport::{DesignKind, EpisodeMode, LearnerLinks, TransportError};
 use serde::{Deserialize, Serialize};
@@ -357,14 +358,19 @@ pub fn run(
         republish: false,
         acting_which: None,
         population_version: 0,
-        next_assignment: 0,
         seed,
-        lease,
-        silence: (t > 0.0).then(|| Duration::from_secs_f64(t)),
-        reissue: flow.reissue_silent_episodes,
+        fleet: Dispatcher::new(
+            "learner",
+            DispatchConfig {
+                lease,
+                reissue: flow.reissue_silent_episodes,
+                silence: (t > 0.0).then(|| Duration::from_secs_f64(t)),
+                deadline: None,
+                max_steps: spec.max_episode_steps,
+            },
+        ),
         rejected_in_a_row: 0,
         last_request_seconds: 0.0,
-        pending: Vec::new(),
         time: LearnerTime::default(),
         dir: &dir,
         rejected: Vec::new(),
@@ -406,7 +412,7 @@ pub fn run(
         let mut awaiting_eval: Vec<(Completed, u64)> = Vec::new();
         let mut interrupted = false;
         'episodes: while written < n {
-            while l.pending.len() < in_flight && issued < n {
+            while l.fleet.outstanding() < in_flight && issued < n {
                 if !l.reset_before(index, issued, n, ResetMode::Train, on_event)? {
                     interrupted = true;
                     break 'episodes;
@@ -414,7 +420,7 @@ pub fn run(
                 l.issue(index, &design, issued, base + issued as u64, EpisodeMode::Train)?;
                 issued += 1;
             }
-            let Some(c) = l.next_completed(index, &design)? else {
+            let Some(c) = l.next_completed()? else {
                 interrupted = true;
                 break;
             };
@@ -466,7 +472,7 @@ pub fn run(
             since_snapshot += 1;
             // Nothing out with an actor: the state is whole. A snapshot every `every-episodes`
             // and, on shutdown, one now (the design's end takes its own).
-            let quiet = l.pending.is_empty() && awaiting_eval.is_empty();
+            let quiet = l.fleet.outstanding() == 0 && awaiting_eval.is_empty();
             let stopping = shutdown.load(Ordering::Relaxed);
             let every = snaps.cfg.every_episodes;
             if quiet && written < n && (stopping || every > 0 && since_snapshot >= every) {
@@ -482,7 +488,7 @@ pub fn run(
             }
         }
         // An interrupted design drops what is still out; the actors' late chunks are ignored.
-        l.pending.clear();
+        l.fleet.forget_all();
         out.design(&row)?;
         out.checkpoint(index, &l.fear)?;
         on_event(&RunEvent::DesignEnd { row: &row });
@@ -499,5 +505,6 @@ pub fn run(
         }
     }
     let interrupted = stopped || p.rows.len() < cfg.designs;
-    Ok(RunOutcome { learner: l.fear, designs: p.rows, rejected: l.rejected, interrupted, time: l.time })
+    let time = l.time();
+    Ok(RunOutcome { learner: l.fear, designs: p.rows, rejected: l.rejected, interrupted, time })
 }

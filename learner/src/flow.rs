@@ -17,7 +17,7 @@
 //! whose actor has sent nothing for `assignment-lease-secs` is issued again (same seed) to
 //! whichever actor asks next.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use coadapt_transport::{EpisodeEnd, EpisodeMode, ExperienceChunk};
 use serde::{Deserialize, Serialize};
@@ -74,25 +74,6 @@ impl FlowConfig {
             _ => Err(format!("flow.assignment-lease-secs: {t} is not a positive number of seconds")),
         }
     }
-}
-
-/// An episode handed to the actors and not yet back.
-#[derive(Debug)]
-pub struct Pending {
-    pub id: u64,
-    /// Episode within its design.
-    pub episode: usize,
-    /// Training episodes of the run before this one (seeds derive from it).
-    pub global: u64,
-    pub mode: EpisodeMode,
-    pub seed: u64,
-    pub min_weights_version: u64,
-    pub chunks: Vec<ExperienceChunk>,
-    pub last_heard: Instant,
-    /// Chunks with neither transitions nor an end received: keep-alives (an evaluation
-    /// episode sends only these), which refresh the lease only up to a bound, so an actor
-    /// cannot hold an episode for ever by sending nothing.
-    pub empties: u64,
 }
 
 /// An episode whose last chunk has arrived.

@@ -197,6 +197,13 @@ impl<T: Display> Dispatcher<T> {
         self.next_id = last;
     }
 
+    /// Starts every lease again (the learner itself was busy, e.g. waiting for an operator:
+    /// the actors were not silent).
+    pub fn renew_leases(&mut self) {
+        let now = Instant::now();
+        self.out.iter_mut().for_each(|o| o.heard = now);
+    }
+
     /// Forgets every job out (their late chunks will be ignored).
     pub fn forget_all(&mut self) {
         self.out.clear();

@@ -6,12 +6,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use coadapt_core::{EnvSpec, Transition};
+use coadapt_fleet::{Check, DispatchError, Dispatcher, Done, Job, Verdict};
 use coadapt_transport::messages::Dims;
-use coadapt_transport::{Assignment, DesignKind, DesignRequest, EpisodeMode, LearnerLinks, TransportError, Validate, Weights};
+use coadapt_transport::{DesignKind, DesignRequest, EpisodeMode, LearnerLinks, TransportError, Validate, Weights};
 
 use super::{CoadaptError, ScheduleConfig};
 use crate::fear::{ActingPolicy, FearLearner};
-use crate::flow::{Completed, LearnerTime, Pending};
+use crate::flow::{Completed, LearnerTime};
 use crate::run_dir::DesignRow;
 
 pub(super) fn mix(seed: u64, i: u64) -> u64 {
@@ -26,10 +27,6 @@ pub(super) const POLL: Duration = Duration::from_millis(100);
 /// are wrong.
 const MAX_REJECTED_IN_A_ROW: u32 = 10;
 
-fn chunk_actor(chunks: &[coadapt_transport::ExperienceChunk]) -> u64 {
-    chunks.last().map_or(0, |c| c.actor)
-}
-
 /// The first observation or reward of an episode beyond the configured magnitudes (0: no
 /// limit), named.
 fn beyond_limits(chunks: &[coadapt_transport::ExperienceChunk], max_obs: f32, max_rew: f32) -> Option<String> {
@@ -39,6 +36,66 @@ fn beyond_limits(chunks: &[coadapt_transport::ExperienceChunk], max_obs: f32, ma
     chunks.iter().find_map(|c| {
         find("obs", &c.obs, max_obs).or_else(|| find("next_obs", &c.next_obs, max_obs)).or_else(|| find("rewards", &c.rewards, max_rew))
     })
+}
+
+/// An episode of the run, as the fleet's dispatcher names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct EpisodeTag {
+    pub(super) design: usize,
+    /// Episode within its design.
+    pub(super) episode: usize,
+    /// Training episodes of the run before this one (seeds derive from it).
+    pub(super) global: u64,
+}
+
+impl std::fmt::Display for EpisodeTag {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "episode {} of design {}", self.episode, self.design)
+    }
+}
+
+/// What the co-adaptation checks of the experience that comes back: chunks of the robot's
+/// widths, training episodes whose length matches what was streamed, and magnitudes within the
+/// configured limits (a sensor glitch is run again; ten in a row stop the run).
+struct EpisodeCheck<'c> {
+    dims: &'c Dims,
+    max_obs: f32,
+    max_rew: f32,
+    rejected_in_a_row: &'c mut u32,
+    rejected: &'c mut u64,
+}
+
+impl Check<EpisodeTag> for EpisodeCheck<'_> {
+    fn chunk(&mut self, c: &coadapt_transport::ExperienceChunk) -> Result<(), String> {
+        c.validate(self.dims).map_err(|e| e.to_string())
+    }
+
+    fn episode(&mut self, d: &Done<EpisodeTag>) -> Verdict {
+        if d.job.mode == EpisodeMode::Train && d.end.length != d.steps as u64 {
+            return Verdict::Again(format!("ends with length {} after {} transitions", d.end.length, d.steps));
+        }
+        if let Some(why) = beyond_limits(&d.chunks, self.max_obs, self.max_rew) {
+            *self.rejected += 1;
+            *self.rejected_in_a_row += 1;
+            if *self.rejected_in_a_row > MAX_REJECTED_IN_A_ROW {
+                return Verdict::Fail(format!(
+                    "{MAX_REJECTED_IN_A_ROW} episodes in a row rejected (the last: {why}): schedule.max-abs-observation or max-abs-reward is tighter than the robot's normal range"
+                ));
+            }
+            return Verdict::Again(format!("rejected: {why}"));
+        }
+        *self.rejected_in_a_row = 0;
+        Verdict::Accept
+    }
+}
+
+impl From<DispatchError> for CoadaptError {
+    fn from(e: DispatchError) -> Self {
+        match e {
+            DispatchError::Transport(t) => Self::Transport(t),
+            other => Self::Protocol(other.to_string()),
+        }
+    }
 }
 
 pub(super) struct Learner<'a> {
@@ -55,18 +112,14 @@ pub(super) struct Learner<'a> {
     pub(super) republish: bool,
     pub(super) acting_which: Option<ActingPolicy>,
     pub(super) population_version: u64,
-    pub(super) next_assignment: u64,
     pub(super) seed: u64,
-    pub(super) lease: Duration,
-    /// No message at all for this long fails the run (every actor gone); `None`: never.
-    pub(super) silence: Option<Duration>,
-    /// Issue a silent episode again (false: wait for it, reporting the silence).
-    pub(super) reissue: bool,
+    /// The episodes out with the actors: leases, reissue, restarts (`coadapt_fleet`).
+    pub(super) fleet: Dispatcher<EpisodeTag>,
     /// Episodes rejected for magnitudes since the last accepted one.
     pub(super) rejected_in_a_row: u32,
     /// Seconds the last design request took.
     pub(super) last_request_seconds: f64,
-    pub(super) pending: Vec<Pending>,
+    /// The learner's own times and counts; [`Learner::time`] adds the fleet's.
     pub(super) time: LearnerTime,
     /// The run directory (the operator's files live there).
     pub(super) dir: &'a Path,
@@ -75,6 +128,16 @@ pub(super) struct Learner<'a> {
 }
 
 impl Learner<'_> {
+    /// Where the learner's time went, the fleet's waits and reissues included.
+    pub(super) fn time(&self) -> LearnerTime {
+        let (mut t, f) = (self.time, self.fleet.stats);
+        t.waiting += f.waiting;
+        t.sending += f.sending;
+        t.reissued += f.reissued;
+        t.restarted += f.restarted;
+        t
+    }
+
     /// Publishes the acting policy if it changed; returns the version actors must act with.
     fn publish_acting(&mut self) -> Result<u64, CoadaptError> {
         let which = self.fear.acting();
@@ -119,192 +182,33 @@ impl Learner<'_> {
     ) -> Result<(), CoadaptError> {
         let version = self.publish_acting()?;
         let seed = mix(self.seed, 2 * global + u64::from(mode == EpisodeMode::Eval));
-        self.send_assignment(
-            design_index,
-            design,
-            Pending {
-                id: 0,
-                episode,
-                global,
-                mode,
-                seed,
-                min_weights_version: version,
-                chunks: Vec::new(),
-                last_heard: Instant::now(),
-                empties: 0,
-            },
-        )
-    }
-
-    fn send_assignment(&mut self, design_index: usize, design: &[f32], mut p: Pending) -> Result<(), CoadaptError> {
-        let t = Instant::now();
-        self.next_assignment += 1;
-        p.id = self.next_assignment;
-        p.last_heard = Instant::now();
-        let a = Assignment {
-            id: p.id,
-            design_index: design_index as u32,
-            design: design.to_vec(),
-            mode: p.mode,
-            seed: p.seed,
-            min_weights_version: p.min_weights_version,
-        };
-        self.links.assignments.send(a)?;
-        self.pending.push(p);
-        self.time.sending += t.elapsed().as_secs_f64();
-        Ok(())
-    }
-
-    /// Issues again every episode whose actor has fallen silent.
-    fn reissue_expired(&mut self, design_index: usize, design: &[f32]) -> Result<(), CoadaptError> {
-        if !self.reissue {
-            for p in self.pending.iter_mut().filter(|p| p.last_heard.elapsed() > self.lease) {
-                coadapt_log::logln!(
-                    "learner: assignment {} (design {design_index}) silent for {:?}; waiting for it (flow.reissue-silent-episodes = false)",
-                    p.id,
-                    self.lease
-                );
-                // Reported once per lease.
-                p.last_heard = Instant::now();
-            }
-            return Ok(());
-        }
-        while let Some(i) = self.pending.iter().position(|p| p.last_heard.elapsed() > self.lease) {
-            let mut p = self.pending.swap_remove(i);
-            let old = p.id;
-            p.chunks.clear();
-            p.empties = 0;
-            self.send_assignment(design_index, design, p)?;
-            self.time.reissued += 1;
-            coadapt_log::logln!(
-                "learner: assignment {old} (design {design_index}) silent for {:?}: issued again as {}",
-                self.lease,
-                self.next_assignment
-            );
-        }
+        let job = Job { design_index: design_index as u32, design: design.to_vec(), mode, seed, min_weights_version: version };
+        self.fleet.issue(self.links, job, EpisodeTag { design: design_index, episode, global })?;
         Ok(())
     }
 
     /// Waits for the next episode to come back; `None` on shutdown.
-    pub(super) fn next_completed(&mut self, design_index: usize, design: &[f32]) -> Result<Option<Completed>, CoadaptError> {
-        let mut heard = Instant::now();
-        loop {
-            if self.shutdown.load(Ordering::Relaxed) {
-                return Ok(None);
-            }
-            // Every time round, not only when the queue is quiet: with many actors it rarely is.
-            self.reissue_expired(design_index, design)?;
-            let t = Instant::now();
-            let got = match self.links.experience.recv_timeout(POLL) {
-                Ok(got) => got,
-                // Every actor has gone for now; restarted or new ones may join.
-                Err(TransportError::Closed) => {
-                    std::thread::sleep(POLL);
-                    None
-                }
-                Err(e) => return Err(e.into()),
-            };
-            self.time.waiting += t.elapsed().as_secs_f64();
-            let Some(chunk) = got else {
-                if let Some(silence) = self.silence
-                    && heard.elapsed() > silence
-                {
-                    return Err(CoadaptError::Protocol(format!(
-                        "no actor has sent anything for {silence:?} ({} episodes outstanding): are the actors running?",
-                        self.pending.len()
-                    )));
-                }
-                continue;
-            };
-            heard = Instant::now();
-            let Some(i) = self.pending.iter().position(|p| p.id == chunk.assignment) else {
-                // A late chunk of an episode already issued again elsewhere.
-                continue;
-            };
-            if let Err(e) = chunk.validate(&self.dims) {
-                let p = self.pending.swap_remove(i);
-                coadapt_log::logln!(
-                    "learner: a malformed chunk of assignment {} from actor {}: {e}; issuing the episode again",
-                    p.id,
-                    chunk.actor
-                );
-                self.send_assignment(design_index, design, Pending { chunks: Vec::new(), empties: 0, ..p })?;
-                continue;
-            }
-            let p = &mut self.pending[i];
-            let progress = !chunk.is_empty() || chunk.end.is_some();
-            // Keep-alives refresh the lease at most once per step of an episode.
-            if progress || p.empties < self.spec.max_episode_steps as u64 {
-                p.last_heard = Instant::now();
-            }
-            if !progress {
-                p.empties += 1;
-            }
-            let end = chunk.end;
-            if chunk.first && !p.chunks.is_empty() {
-                // The actor ran the episode again from its start (the first attempt failed in
-                // its environment): what that attempt sent is forgotten.
-                coadapt_log::logln!(
-                    "learner: actor {} restarted assignment {}: dropping {} chunk(s) of its failed attempt",
-                    chunk.actor,
-                    p.id,
-                    p.chunks.len()
-                );
-                p.chunks.clear();
-                self.time.restarted += 1;
-            }
-            if !chunk.is_empty() || chunk.end.is_some() {
-                p.chunks.push(chunk);
-            }
-            if let Some(end) = end {
-                let p = self.pending.swap_remove(i);
-                let streamed: u64 = p.chunks.iter().map(|c| c.len() as u64).sum();
-                if p.mode == EpisodeMode::Train && end.length != streamed {
-                    coadapt_log::logln!(
-                        "learner: episode {} of design {design_index} (assignment {}, actor {}) ends with length {} after {streamed} transitions; issuing it again",
-                        p.episode,
-                        p.id,
-                        chunk_actor(&p.chunks),
-                        end.length
-                    );
-                    self.send_assignment(design_index, design, Pending { chunks: Vec::new(), empties: 0, ..p })?;
-                    continue;
-                }
-                if let Some(why) = beyond_limits(&p.chunks, self.cfg.max_abs_observation, self.cfg.max_abs_reward) {
-                    coadapt_log::logln!(
-                        "learner: episode {} of design {design_index} (assignment {}, actor {}) rejected: {why}; running it again",
-                        p.episode,
-                        p.id,
-                        chunk_actor(&p.chunks)
-                    );
-                    self.time.episodes_rejected += 1;
-                    self.rejected_in_a_row += 1;
-                    if self.rejected_in_a_row > MAX_REJECTED_IN_A_ROW {
-                        return Err(CoadaptError::Protocol(format!(
-                            "{MAX_REJECTED_IN_A_ROW} episodes in a row rejected (the last: {why}): schedule.max-abs-observation or max-abs-reward is tighter than the robot's normal range"
-                        )));
-                    }
-                    self.send_assignment(design_index, design, Pending { chunks: Vec::new(), empties: 0, ..p })?;
-                    continue;
-                }
-                self.rejected_in_a_row = 0;
-                let last = p.chunks.last();
-                let actor = last.map_or(0, |c| c.actor);
-                let weights_version = p.chunks.iter().map(|c| c.weights_version).min().unwrap_or(p.min_weights_version);
-                let policy_lag = self.acting_version.saturating_sub(weights_version);
-                self.time.max_policy_lag = self.time.max_policy_lag.max(policy_lag);
-                return Ok(Some(Completed {
-                    episode: p.episode,
-                    global: p.global,
-                    mode: p.mode,
-                    chunks: p.chunks,
-                    end,
-                    actor,
-                    weights_version,
-                    policy_lag,
-                }));
-            }
-        }
+    pub(super) fn next_completed(&mut self) -> Result<Option<Completed>, CoadaptError> {
+        let mut check = EpisodeCheck {
+            dims: &self.dims,
+            max_obs: self.cfg.max_abs_observation,
+            max_rew: self.cfg.max_abs_reward,
+            rejected_in_a_row: &mut self.rejected_in_a_row,
+            rejected: &mut self.time.episodes_rejected,
+        };
+        let Some(d) = self.fleet.next_done(self.links, self.shutdown, &mut check)? else { return Ok(None) };
+        let policy_lag = self.acting_version.saturating_sub(d.weights_version);
+        self.time.max_policy_lag = self.time.max_policy_lag.max(policy_lag);
+        Ok(Some(Completed {
+            episode: d.tag.episode,
+            global: d.tag.global,
+            mode: d.job.mode,
+            chunks: d.chunks,
+            end: d.end,
+            actor: d.actor,
+            weights_version: d.weights_version,
+            policy_lag,
+        }))
     }
 
     /// Puts a finished training episode into the replay buffers and trains on it.

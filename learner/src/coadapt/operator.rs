@@ -225,9 +225,7 @@ impl Learner<'_> {
         self.time.waiting_for_reset += t.elapsed().as_secs_f64();
         // Episodes already out (async flow) kept their actors busy, not silent: their leases
         // start again.
-        for p in &mut self.pending {
-            p.last_heard = Instant::now();
-        }
+        self.fleet.renew_leases();
         let confirmed = got?.is_some();
         r.status = if confirmed { Status::Confirmed } else { Status::Interrupted };
         prototype::write_json(&path, &r)?;

@@ -136,8 +136,8 @@ impl Learner<'_> {
         p.acting_which = self.acting_which;
         p.acting_dirty = self.acting_dirty;
         p.population_version = self.population_version;
-        p.next_assignment = self.next_assignment;
-        p.time = self.time;
+        p.next_assignment = self.fleet.last_id();
+        p.time = self.time();
     }
 
     /// Restores the counters of `p` (the acting weights are published again under their
@@ -148,7 +148,8 @@ impl Learner<'_> {
         self.acting_dirty = p.acting_dirty;
         self.republish = true;
         self.population_version = p.population_version;
-        self.next_assignment = p.next_assignment;
+        self.fleet.set_last_id(p.next_assignment);
+        self.fleet.stats = coadapt_fleet::DispatchStats::default();
         self.time = p.time;
     }
 
@@ -180,7 +181,7 @@ impl Learner<'_> {
             design,
             episodes,
             steps,
-            time: self.time,
+            time: self.time(),
             replay_population: self.fear.population_transitions(),
             replay_species: self.fear.species_transitions(),
             start_states: self.fear.start_states(),
