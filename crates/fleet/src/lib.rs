@@ -10,10 +10,14 @@
 //!   streams each episode back in chunks; an experiment supplies only its [`Worker`] (what one
 //!   episode is).
 //!
+//! - [`conformance`]: what the fleet must do over every transport, as functions the tests call
+//!   with in-process, shared-memory and gRPC links.
+//!
 //! The experiment's own checks (shapes, magnitudes, the episode's length) plug into the
 //! dispatcher as a [`Check`]; everything else is the same for every family.
 
 pub mod actor;
+pub mod conformance;
 pub mod dispatch;
 
 pub use actor::{ActorConfig, ActorLoopError, ActorSummary, Failure, Stream, Worker};
