@@ -7,8 +7,8 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use coadapt_core::Env;
-use coadapt_fleet::{ActorConfig, ActorLoopError, Failure, Stream, Worker};
 pub use coadapt_fleet::ActorSummary;
+use coadapt_fleet::{ActorConfig, ActorLoopError, Failure, Stream, Worker};
 use coadapt_transport::{ActorLinks, Assignment, EpisodeEnd, EpisodeMode, TransportError, Weights};
 
 use crate::{Actor, ActorError};

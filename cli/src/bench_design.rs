@@ -104,7 +104,7 @@ fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> anyh
     let mut cfg = ServeConfig { max_busy_share: share, ..ServeConfig::default() };
     if let Some(dir) = tls {
         let f = |n: &str| dir.join(n).display().to_string();
-        cfg.auth = crate::security::SecurityConfig { tls_cert: f("server.pem"), tls_key: f("server-key.pem"), ..Default::default() }
+        cfg.auth = coadapt_fleet::SecurityConfig { tls_cert: f("server.pem"), tls_key: f("server-key.pem"), ..Default::default() }
             .server_auth()?;
     }
     let source = StaticSource { model: Arc::new(m), history: Vec::<HistoryRow>::new() };
@@ -115,7 +115,7 @@ async fn client(
     addr: std::net::SocketAddr,
     tls: Option<&std::path::Path>,
 ) -> anyhow::Result<DesignServiceClient<coadapt_auth::AuthChannel>> {
-    let mut sec = crate::security::SecurityConfig::default();
+    let mut sec = coadapt_fleet::SecurityConfig::default();
     if let Some(dir) = tls {
         sec.tls_ca = dir.join("ca.pem").display().to_string();
         sec.tls_server_name = "localhost".into();

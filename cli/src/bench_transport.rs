@@ -19,7 +19,7 @@ use clap::{Args, ValueEnum};
 use coadapt_transport::{ExperienceChunk, Weights};
 
 use crate::bench::emit;
-use crate::fleet::{FleetConfig, TransportKind};
+use coadapt_fleet::{FleetConfig, TransportKind};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum Peer {
@@ -62,10 +62,10 @@ pub struct TransportArgs {
 static TLS_DIR: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
 
 /// The benchmark's TLS settings (none without `--tls`).
-fn security() -> crate::security::SecurityConfig {
-    let Some(dir) = TLS_DIR.get() else { return crate::security::SecurityConfig::default() };
+fn security() -> coadapt_fleet::SecurityConfig {
+    let Some(dir) = TLS_DIR.get() else { return coadapt_fleet::SecurityConfig::default() };
     let f = |n: &str| dir.join(n).display().to_string();
-    crate::security::SecurityConfig {
+    coadapt_fleet::SecurityConfig {
         tls_cert: f("server.pem"),
         tls_key: f("server-key.pem"),
         tls_ca: f("ca.pem"),
@@ -139,7 +139,7 @@ pub fn run(a: &TransportArgs) -> anyhow::Result<()> {
 /// The learner side of one figure: its links, and how peers reach it.
 struct Learner {
     links: coadapt_transport::LearnerLinks,
-    _guard: crate::fleet::LearnerGuard,
+    _guard: coadapt_fleet::LearnerGuard,
     fleet: String,
     connect: String,
 }
@@ -149,8 +149,8 @@ fn learner(kind: TransportKind, tag: &str) -> anyhow::Result<Learner> {
     let cfg = fleet_config(kind, &fleet, "");
     let (links, guard) = cfg.learner_links(None, None, &security())?;
     let connect = match &guard {
-        crate::fleet::LearnerGuard::Grpc(s) => format!("http://{}", s.local_addr()),
-        crate::fleet::LearnerGuard::None => String::new(),
+        coadapt_fleet::LearnerGuard::Grpc(s) => format!("http://{}", s.local_addr()),
+        coadapt_fleet::LearnerGuard::None => String::new(),
     };
     Ok(Learner { links, _guard: guard, fleet, connect })
 }

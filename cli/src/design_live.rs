@@ -190,7 +190,7 @@ pub fn start(
     }
     let addr: SocketAddr =
         listen.parse().with_context(|| format!("design-service.listen: {listen:?} is not an address like 127.0.0.1:50061"))?;
-    crate::security::check_listen("design-service.listen", addr, &cfg.security)?;
+    coadapt_fleet::check_listen("design-service.listen", addr, &cfg.security)?;
     let mut serve_cfg = cfg.design_service.serve_config()?;
     serve_cfg.auth = cfg.security.server_auth()?;
     let history = writer.read_designs().context("reading designs.csv for the design service")?;

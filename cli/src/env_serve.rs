@@ -76,7 +76,7 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
     rt.block_on(async move {
         let want: std::net::SocketAddr =
             args.listen.parse().with_context(|| format!("--listen: {:?} is not an address like 127.0.0.1:50051", args.listen))?;
-        crate::security::check_listen("--listen", want, &security)?;
+        coadapt_fleet::check_listen("--listen", want, &security)?;
         let listener = tokio::net::TcpListener::bind(want).await.with_context(|| format!("listening on {}", args.listen))?;
         let addr = listener.local_addr()?;
         coadapt_log::logln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);

@@ -6,31 +6,23 @@
 use coadapt_learner::coadapt::CoadaptError;
 use coadapt_learner::disk::is_disk_full;
 
-/// `EX_CANTCREAT`: the disk holding the run directory is full, over quota or read-only.
-pub const DISK: u8 = 73;
-/// `EX_CONFIG`: the configuration is invalid.
-pub const CONFIG: u8 = 78;
-
-/// A failure that a restart cannot mend, with the exit code that says so.
-#[derive(Debug)]
-pub struct NotTransient {
-    pub code: u8,
-    pub message: String,
-}
-
-impl std::fmt::Display for NotTransient {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.message)
-    }
-}
-
-impl std::error::Error for NotTransient {}
+use coadapt_fleet::SetupError;
+use coadapt_fleet::supervise::SuperviseError;
+pub use coadapt_fleet::supervise::exit::{CONFIG, DISK, not_transient};
 
 /// The exit code of a process that failed with `e`: [`DISK`], [`CONFIG`], or 1 (worth a restart).
 pub fn code_of(e: &anyhow::Error) -> u8 {
     for cause in e.chain() {
-        if let Some(n) = cause.downcast_ref::<NotTransient>() {
-            return n.code;
+        if let Some(SuperviseError::NotTransient { code, .. }) = cause.downcast_ref::<SuperviseError>() {
+            return *code;
+        }
+        if let Some(s) = cause.downcast_ref::<SetupError>() {
+            if matches!(s, SetupError::Config(_)) {
+                return CONFIG;
+            }
+            if s.io_kind().is_some_and(is_disk_full) {
+                return DISK;
+            }
         }
         if let Some(c) = cause.downcast_ref::<CoadaptError>() {
             if matches!(c, CoadaptError::Config(_)) {
@@ -47,15 +39,6 @@ pub fn code_of(e: &anyhow::Error) -> u8 {
         }
     }
     1
-}
-
-/// Why a process that exited with `code` is not started again (`None`: it may be).
-pub fn not_transient(code: Option<i32>) -> Option<&'static str> {
-    match u8::try_from(code?).ok()? {
-        DISK => Some("the disk holding the run directory is full (or over quota, or read-only)"),
-        CONFIG => Some("its configuration is invalid"),
-        _ => None,
-    }
 }
 
 #[cfg(test)]

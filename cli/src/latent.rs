@@ -30,7 +30,7 @@ use crate::latent_embed::{FrameSource, load_or_build};
 pub(crate) fn camera_env(cfg: &LatentConfig) -> anyhow::Result<FrameSource> {
     let image = 3 * cfg.camera.side * cfg.camera.side;
     if coadapt_env_rpc::is_remote(&cfg.robot) {
-        let env = crate::roles::make_env_with(&cfg.robot, &cfg.remote, &cfg.security).with_context(|| format!("robot = {}", cfg.robot))?;
+        let env = coadapt_fleet::make_env_with(&cfg.robot, &cfg.remote, &cfg.security).with_context(|| format!("robot = {}", cfg.robot))?;
         let got = env.spec().state_dim;
         if got != image {
             anyhow::bail!(

@@ -56,9 +56,9 @@ pub struct LatentConfig {
     /// The frozen embedding: where it is, how it is built when it is not there yet.
     pub embedding: EmbeddingSettings,
     /// Deadlines and retries of a dm_env_rpc robot.
-    pub remote: crate::roles::RemoteEnvConfig,
+    pub remote: coadapt_fleet::RemoteEnvConfig,
     /// TLS and token of a dm_env_rpc robot's server (and of the fleet's gRPC).
-    pub security: crate::security::SecurityConfig,
+    pub security: coadapt_fleet::SecurityConfig,
     /// Where the episodes run: 0 in this process; N > 0 on N actors over `fleet.transport`,
     /// each planning where its robot is (`coadapt latent-actor`): the learner publishes the
     /// networks before every episode, the latent transitions come back.
@@ -72,7 +72,7 @@ pub struct LatentConfig {
     pub episode_deadline_secs: f64,
     /// How the learner and its actors talk (`transport`, `name`, `listen`, `connect`, ...:
     /// as `coadapt run`'s `[fleet]`; in-process threads by default).
-    pub fleet: crate::fleet::FleetConfig,
+    pub fleet: coadapt_fleet::FleetConfig,
 }
 
 impl Default for LatentConfig {
@@ -87,16 +87,16 @@ impl Default for LatentConfig {
             demonstrations: 0,
             agent: AgentConfig::default(),
             embedding: EmbeddingSettings::default(),
-            remote: crate::roles::RemoteEnvConfig::default(),
-            security: crate::security::SecurityConfig::default(),
+            remote: coadapt_fleet::RemoteEnvConfig::default(),
+            security: coadapt_fleet::SecurityConfig::default(),
             actors: 0,
             start_actors: true,
             episode_lease_secs: 120.0,
             episode_deadline_secs: 3600.0,
-            fleet: crate::fleet::FleetConfig {
-                transport: crate::fleet::TransportKind::InProcess,
+            fleet: coadapt_fleet::FleetConfig {
+                transport: coadapt_fleet::TransportKind::InProcess,
                 listen: "127.0.0.1:0".into(),
-                ..crate::fleet::FleetConfig::default()
+                ..coadapt_fleet::FleetConfig::default()
             },
         }
     }
@@ -147,7 +147,7 @@ pub struct LatentArgs {
     pub actors: Option<usize>,
     /// Override fleet.transport: in-process (threads), shm or grpc.
     #[arg(long, value_enum)]
-    pub transport: Option<crate::fleet::TransportKind>,
+    pub transport: Option<coadapt_fleet::TransportKind>,
     /// Go on with the stopped run in --out: its finished runs are kept, the first unfinished
     /// one starts again (a run is deterministic given its seed). The config must be the run's.
     #[arg(long)]

@@ -14,9 +14,9 @@ use anyhow::Context;
 use clap::Args;
 use coadapt_latent::{ActorEpisode, Embedding, EpisodeRunner, FleetError, LatentActor};
 
-use crate::actor_procs::Children;
-use crate::fleet::{LearnerGuard, TransportKind};
 use crate::latent::{LatentConfig, camera_env};
+use coadapt_fleet::procs::Children;
+use coadapt_fleet::{LearnerGuard, TransportKind};
 
 /// `coadapt latent-actor`: runs the episodes a `coadapt latent` learner hands out on this
 /// machine's robot, planning every step here.
@@ -146,7 +146,7 @@ impl Fleet {
             }
             _ => {
                 let extra = |i: usize| vec!["--latency-csv".into(), csv(i).into_os_string()];
-                let procs = crate::actor_procs::ProcessFleet {
+                let procs = coadapt_fleet::procs::ProcessFleet {
                     role: "latent",
                     subcommand: "latent-actor",
                     actors: cfg.actors,
@@ -173,7 +173,7 @@ impl Fleet {
         let Self { runner, guard, threads, children } = self;
         drop(runner);
         drop(guard);
-        crate::actor_procs::join_threads("latent", threads);
+        coadapt_fleet::procs::join_threads("latent", threads);
         children.finish();
     }
 }
@@ -186,7 +186,7 @@ pub fn actor(a: LatentActorArgs) -> anyhow::Result<()> {
     if let Some(r) = &a.robot {
         cfg.robot = r.clone();
     }
-    cfg.security = cfg.security.clone().with_args(&a.security);
+    cfg.security = crate::security::with_args(cfg.security.clone(), &a.security);
     let mut source = camera_env(&cfg)?;
     let act = source.env().spec().act_dim();
     let mut actor = latent_actor(&cfg, act, a.id)?;

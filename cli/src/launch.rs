@@ -1,98 +1,19 @@
 //! `coadapt run` as a local fleet: the learner, the design optimiser and N actors as separate
-//! processes of this binary (`coadapt learner|optimizer|actor`), supervised: a crashed actor or
-//! optimiser is started again (the learner re-issues the episode it had), Ctrl-C or SIGTERM is
-//! passed on once to every process, and when the learner is done the others are given a few
-//! seconds to leave before they are stopped. Shared memory left by killed processes is cleaned
-//! up when the fleet starts and when it ends.
+//! processes of this binary (`coadapt learner|optimizer|actor`), supervised by the fleet library
+//! ([`coadapt_fleet::supervise`]): a crashed actor or optimiser is started again (the learner
+//! re-issues the episode it had), Ctrl-C or SIGTERM is passed on once to every process, and when
+//! the learner is done the others are given a few seconds to leave before they are stopped.
+//! Shared memory left by killed processes is cleaned up when the fleet starts and when it ends.
 
-use std::fs::File;
-use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::Path;
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
 
 use anyhow::{Context, bail};
-use nix::sys::signal::{Signal, kill};
-use nix::unistd::Pid;
+use coadapt_fleet::supervise::{Plan, Role, supervise};
+use coadapt_fleet::{TransportKind, clean_stale};
 
-use crate::fleet::{TransportKind, clean_stale};
 use crate::run::RunConfig;
-
-/// How long the other processes get to leave after the learner is done.
-const GRACE: Duration = Duration::from_secs(10);
-
-struct Proc {
-    name: String,
-    args: Vec<String>,
-    log: Option<std::path::PathBuf>,
-    child: Child,
-    started: Instant,
-    /// The process has ended for good (finished, or could not be started again).
-    ended: bool,
-}
-
-fn spawn(exe: &Path, name: &str, args: &[String], log: Option<&Path>) -> anyhow::Result<Proc> {
-    let mut cmd = Command::new(exe);
-    cmd.args(args).stdin(Stdio::null());
-    // A process group of its own: a terminal's Ctrl-C reaches only the supervisor, which passes
-    // it on exactly once (a second SIGINT means "abort now" to a role).
-    cmd.process_group(0);
-    // Each role stops when this supervisor dies (crate::progress::stop_when_orphaned).
-    cmd.env(crate::progress::SUPERVISOR_PID_ENV, std::process::id().to_string());
-    if let Some(log) = log {
-        let f = File::options().create(true).append(true).open(log).with_context(|| format!("opening {}", log.display()))?;
-        cmd.stdout(f.try_clone()?).stderr(f);
-    }
-    let child = cmd.spawn().with_context(|| format!("starting {name}"))?;
-    Ok(Proc { name: name.into(), args: args.to_vec(), log: log.map(Path::to_path_buf), child, started: Instant::now(), ended: false })
-}
-
-fn signal(p: &Proc, sig: Signal) {
-    if let Ok(pid) = i32::try_from(p.child.id()) {
-        // The process may have exited already; nothing to do then.
-        let _ = kill(Pid::from_raw(pid), sig);
-    }
-}
-
-fn describe(s: ExitStatus) -> String {
-    match (s.code(), s.signal()) {
-        (Some(c), _) => format!("exit code {c}"),
-        (None, Some(sig)) => format!("signal {sig}"),
-        _ => "unknown status".into(),
-    }
-}
-
-/// Restart times of one process, for the windowed budget.
-#[derive(Default)]
-struct Budget {
-    restarts: Vec<Instant>,
-}
-
-impl Budget {
-    /// Records a restart if the budget allows one more within the window.
-    fn allow(&mut self, max: usize, window: Duration) -> bool {
-        self.restarts.retain(|t| t.elapsed() < window);
-        if self.restarts.len() >= max {
-            return false;
-        }
-        self.restarts.push(Instant::now());
-        true
-    }
-}
-
-/// Stops `p` (SIGTERM, then SIGKILL after `grace`) and reaps it.
-fn stop(p: &mut Proc, grace: Duration) {
-    if matches!(p.child.try_wait(), Ok(None)) {
-        signal(p, Signal::SIGTERM);
-        let until = Instant::now() + grace;
-        while matches!(p.child.try_wait(), Ok(None)) && Instant::now() < until {
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        let _ = p.child.kill();
-    }
-    let _ = p.child.wait();
-}
 
 /// The shared-memory fleet of this start. Every start gets its own name
 /// (`coadapt-start-PID`): a run killed whole (SIGKILL of its process group, an OOM kill, a
@@ -159,150 +80,32 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
     let mut opt_args = vec!["optimizer".to_string()];
     opt_args.extend(common.iter().cloned());
     opt_args.extend(["--state-dir".into(), crate::resume::optimizer_state_dir(dir).display().to_string()]);
-    let start_fleet = |resume: bool| -> anyhow::Result<(Proc, Vec<Proc>)> {
-        let mut args = learner_args.clone();
-        if resume {
-            args.push("--resume".into());
-        }
-        let learner = spawn(&exe, "learner", &args, None)?;
-        let mut others = vec![spawn(&exe, "optimizer", &opt_args, Some(&logs.join("optimizer.log")))?];
-        for i in 0..cfg.actors {
-            let mut a = vec!["actor".to_string()];
-            a.extend(common.iter().cloned());
-            a.extend(["--id".into(), i.to_string()]);
-            others.push(spawn(&exe, &format!("actor {i}"), &a, Some(&logs.join(format!("actor-{i}.log"))))?);
-        }
-        coadapt_log::logln!(
-            "fleet {}: learner pid {}, {}; logs in {}",
-            if cfg.fleet.name.is_empty() { cfg.fleet.connect.as_str() } else { cfg.fleet.name.as_str() },
-            learner.child.id(),
-            others.iter().map(|p| format!("{} pid {}", p.name, p.child.id())).collect::<Vec<_>>().join(", "),
-            logs.display()
-        );
-        Ok((learner, others))
-    };
-    let (mut learner, mut others) = start_fleet(resume)?;
-
-    let mut budgets: std::collections::HashMap<String, Budget> = Default::default();
-    let mut interrupted = false;
-    // A role that failed in a way a restart cannot mend (exit.rs): the fleet is stopped.
-    let mut fatal: Option<crate::exit::NotTransient> = None;
-    let not_transient = |name: &str, s: ExitStatus, why: &str| crate::exit::NotTransient {
-        code: s.code().and_then(|c| u8::try_from(c).ok()).unwrap_or(1),
-        message: format!(
-            "the {name} ended with {} because {why}; it is not started again (it would fail the same way). Its error is {}; \
-             once that is put right, `coadapt run --resume {}` continues from the newest snapshot",
-            describe(s),
-            if name == "learner" { "above".to_string() } else { format!("in {}", logs.display()) },
-            dir.display()
-        ),
-    };
-    let status = loop {
-        if shutdown.load(Ordering::Relaxed) && !interrupted {
-            interrupted = true;
-            for p in std::iter::once(&learner).chain(&others) {
-                signal(p, Signal::SIGINT);
-            }
-        }
-        match learner.child.try_wait() {
-            Ok(Some(s)) if !s.success() && !interrupted && crate::exit::not_transient(s.code()).is_some() => {
-                let why = crate::exit::not_transient(s.code()).unwrap_or_default();
-                break Err(anyhow::Error::new(not_transient("learner", s, why)));
-            }
-            Ok(Some(s))
-                if !s.success() && !interrupted && budgets.entry("learner".into()).or_default().allow(cfg.fleet.max_restarts, window) =>
-            {
-                coadapt_log::logln!(
-                    "fleet: the learner (pid {}) ended with {}; stopping the fleet and starting it again from the newest snapshot",
-                    learner.child.id(),
-                    describe(s)
-                );
-                for p in others.iter_mut() {
-                    stop(p, Duration::from_secs(2));
-                }
-                if cfg.fleet.transport == TransportKind::Shm {
-                    clean_stale();
-                }
-                std::thread::sleep(Duration::from_millis(500));
-                match start_fleet(true) {
-                    Ok((l, o)) => (learner, others) = (l, o),
-                    Err(e) => break Err(e.context("starting the fleet again")),
-                }
-                continue;
-            }
-            Ok(Some(s)) => break Ok(s),
-            Ok(None) => {}
-            Err(e) => break Err(anyhow::Error::new(e).context("watching the learner")),
-        }
-        for p in others.iter_mut() {
-            let Ok(Some(s)) = p.child.try_wait() else { continue };
-            // A role that ends well has seen the learner finish; one that fails while the
-            // learner still runs has crashed: start it again, after a pause if it failed
-            // straight away.
-            if s.success() || p.ended || interrupted {
-                p.ended = true;
-                continue;
-            }
-            if let Some(why) = crate::exit::not_transient(s.code()) {
-                // The learner is stopped as on Ctrl-C (its snapshot taken if it can be), then
-                // the run ends with this role's reason.
-                let e = not_transient(&p.name, s, why);
-                coadapt_log::logln!("fleet: {e}; stopping the fleet");
-                fatal = Some(e);
-                p.ended = true;
-                interrupted = true;
-                for q in std::iter::once(&learner).chain(others.iter()) {
-                    signal(q, Signal::SIGINT);
-                }
-                break;
-            }
-            if !budgets.entry(p.name.clone()).or_default().allow(cfg.fleet.max_restarts, window) {
-                coadapt_log::logln!(
-                    "fleet: {} ended with {}, its {} restart(s) in {:?} are used up (fleet.max-restarts); it stays down",
-                    p.name,
-                    describe(s),
-                    cfg.fleet.max_restarts,
-                    window
-                );
-                p.ended = true;
-                continue;
-            }
-            coadapt_log::logln!(
-                "fleet: {} (pid {}) ended with {}; starting it again (log {})",
-                p.name,
-                p.child.id(),
-                describe(s),
-                p.log.as_ref().map_or("-".into(), |l| l.display().to_string())
-            );
-            if p.started.elapsed() < Duration::from_secs(2) {
-                std::thread::sleep(Duration::from_secs(1));
-            }
-            match spawn(&exe, &p.name.clone(), &p.args.clone(), p.log.as_deref()) {
-                Ok(new) => *p = new,
-                Err(e) => {
-                    coadapt_log::logln!("fleet: {e:#}; {} stays down", p.name);
-                    p.ended = true;
-                }
-            }
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    };
-    if status.is_err() {
-        others.push(learner);
+    let mut others = vec![Role { name: "optimizer".into(), args: opt_args, log: Some(logs.join("optimizer.log")) }];
+    for i in 0..cfg.actors {
+        let mut a = vec!["actor".to_string()];
+        a.extend(common.iter().cloned());
+        a.extend(["--id".into(), i.to_string()]);
+        others.push(Role { name: format!("actor {i}"), args: a, log: Some(logs.join(format!("actor-{i}.log"))) });
     }
-    let until = Instant::now() + GRACE;
-    for p in others.iter_mut() {
-        while matches!(p.child.try_wait(), Ok(None)) && Instant::now() < until {
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        if matches!(p.child.try_wait(), Ok(None)) {
-            signal(p, Signal::SIGTERM);
-            std::thread::sleep(Duration::from_millis(200));
-            let _ = p.child.kill();
-            let _ = p.child.wait();
-        }
-    }
-    if cfg.fleet.transport == TransportKind::Shm {
+    let shm = cfg.fleet.transport == TransportKind::Shm;
+    let plan = Plan {
+        exe,
+        learner: Role { name: "learner".into(), args: learner_args, log: None },
+        resume_arg: "--resume".into(),
+        others,
+        max_restarts: cfg.fleet.max_restarts,
+        window,
+        name: if cfg.fleet.name.is_empty() { cfg.fleet.connect.clone() } else { cfg.fleet.name.clone() },
+        logs: logs.clone(),
+        resume_hint: format!("coadapt run --resume {}", dir.display()),
+        before_restart: Box::new(move || {
+            if shm {
+                clean_stale();
+            }
+        }),
+    };
+    let result = supervise(&plan, shutdown, resume);
+    if shm {
         clean_stale();
         match coadapt_shm::fleet_services(&cfg.fleet.name) {
             Ok(left) if !left.is_empty() => coadapt_log::logln!("warning: shared memory of the fleet left behind: {left:?}"),
@@ -310,12 +113,5 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
             Err(e) => coadapt_log::logln!("warning: listing the fleet's shared memory: {e}"),
         }
     }
-    if let Some(e) = fatal {
-        return Err(e.into());
-    }
-    let status = status?;
-    if !status.success() {
-        bail!("the learner ended with {} (its output is above; actor and optimiser logs in {})", describe(status), logs.display());
-    }
-    Ok(())
+    Ok(result?)
 }

@@ -47,7 +47,6 @@ pub mod design_client;
 pub mod design_live;
 pub mod env_serve;
 pub mod exit;
-pub mod fleet;
 pub mod health;
 pub mod latent;
 pub mod latent_config;

@@ -15,36 +15,8 @@ pub fn shutdown_on_ctrl_c() -> Arc<AtomicBool> {
         }
         coadapt_log::logln!("\ninterrupted: stopping and keeping what is written (Ctrl-C again to abort)");
     });
-    stop_when_orphaned(&flag);
+    coadapt_fleet::supervise::stop_when_orphaned(&flag);
     flag
-}
-
-/// The variable through which a supervisor (`coadapt run`'s local fleet) gives the roles it
-/// starts its pid.
-pub const SUPERVISOR_PID_ENV: &str = "COADAPT_SUPERVISOR_PID";
-
-/// A role started by a supervisor stops (as on Ctrl-C: snapshot kept) when the supervisor dies.
-/// Each role has a process group of its own, so a SIGKILL of the supervisor's group (an OOM
-/// killer, a closed terminal) used to leave the roles running on: a learner still writing the
-/// run that `--resume` then started again beside it. Polled from a thread (`getppid` changes
-/// when the parent dies); no unsafe `pre_exec`.
-fn stop_when_orphaned(flag: &Arc<AtomicBool>) {
-    let Some(supervisor) = std::env::var(SUPERVISOR_PID_ENV).ok().and_then(|v| v.parse::<i32>().ok()) else { return };
-    if nix::unistd::getppid().as_raw() != supervisor {
-        return; // not (or no longer) the supervisor's child: a role started by hand
-    }
-    let f = flag.clone();
-    let _ = std::thread::Builder::new().name("orphan-watch".into()).spawn(move || {
-        loop {
-            std::thread::sleep(std::time::Duration::from_millis(250));
-            if nix::unistd::getppid().as_raw() != supervisor {
-                if !f.swap(true, Ordering::SeqCst) {
-                    coadapt_log::logln!("the supervisor (pid {supervisor}) has gone: stopping and keeping what is written");
-                }
-                return;
-            }
-        }
-    });
 }
 
 /// `1h02m`, `3m07s`, `12s`.

@@ -84,22 +84,3 @@ pub fn snapshot_root(dir: &Path) -> PathBuf {
 pub fn optimizer_state_dir(dir: &Path) -> PathBuf {
     dir.join("optimizer")
 }
-
-/// This process's learner start id (16 hex digits, never zero): the same for the snapshots it
-/// writes and for the gRPC server it serves (whose clients drop what they hold from an older
-/// start when it changes).
-pub fn run_id() -> u64 {
-    static ID: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
-    *ID.get_or_init(|| {
-        let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
-        let mut z = t ^ (u64::from(std::process::id()) << 40);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (z ^ (z >> 31)).max(1)
-    })
-}
-
-/// [`run_id`] as text.
-pub fn new_run_id() -> String {
-    format!("{:016x}", run_id())
-}

@@ -9,10 +9,10 @@ use anyhow::bail;
 use clap::Args;
 use coadapt_transport::messages::Dims;
 
-use crate::fleet::TransportKind;
 use crate::progress::shutdown_on_ctrl_c;
 use crate::roles;
 use crate::run::{RunArgs, RunConfig, check, finish, resolve, resolve_initial_designs};
+use coadapt_fleet::TransportKind;
 
 /// What every role takes.
 #[derive(Debug, Args)]
@@ -57,8 +57,8 @@ impl RoleArgs {
         if let Some(f) = &self.fleet {
             cfg.fleet.name = f.clone();
         }
-        cfg.security = cfg.security.clone().with_args(&self.security);
-        let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+        cfg.security = crate::security::with_args(cfg.security.clone(), &self.security);
+        let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
         resolve_initial_designs(&mut cfg, &spec);
         check(&cfg, &spec)?;
         Ok((cfg, name))
@@ -139,20 +139,20 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
         None if args.resume => bail!("--resume needs --out RUN_DIR"),
         None => crate::run::default_out(&name, cfg.seed),
     };
-    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
     coadapt_log::logln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
     let stop_health = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let health = match &guard {
-        crate::fleet::LearnerGuard::Grpc(server) => {
+        coadapt_fleet::LearnerGuard::Grpc(server) => {
             let stall = Duration::try_from_secs_f64(cfg.fleet.health_stall_secs).ok().filter(|d| !d.is_zero()).ok_or_else(|| {
                 anyhow::anyhow!("fleet.health-stall-secs: {} is not a positive number of seconds", cfg.fleet.health_stall_secs)
             })?;
             Some(crate::health::watch(server.health(), stall, stop_health.clone())?)
         }
-        crate::fleet::LearnerGuard::None => None,
+        coadapt_fleet::LearnerGuard::None => None,
     };
     let start = Instant::now();
     let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown, args.resume);
@@ -185,7 +185,7 @@ pub fn actor(args: ActorArgs) -> anyhow::Result<()> {
         cfg.fleet.connect = c;
     }
     let id = args.id.unwrap_or_else(default_id);
-    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
     coadapt_log::logln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
@@ -201,7 +201,7 @@ pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
     if let Some(c) = args.connect {
         cfg.fleet.connect = c;
     }
-    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
     let mut links = cfg.fleet.optimizer_links(&cfg.security)?;
     coadapt_log::logln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());

@@ -5,14 +5,14 @@
 use std::ops::ControlFlow;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::Context;
 use coadapt_actors::{Actor, PolicyKind};
 use coadapt_core::{Env, EnvSpec};
 use coadapt_design_optimizer::resume::StateFile;
 use coadapt_design_optimizer::role::{self as optimizer, Optimizer, OptimizerSpec, RolloutEvaluator};
-use coadapt_env_rpc::{RemoteEnv, RemoteOptions};
+use coadapt_fleet::make_env_with;
 use coadapt_learner::coadapt::{self, RunEvent};
 use coadapt_learner::networks;
 use coadapt_learner::prototype::{self, Outcome, ResetMode};
@@ -22,73 +22,6 @@ use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 
 use crate::progress::duration;
 use crate::run::RunConfig;
-use serde::{Deserialize, Serialize};
-
-/// Remote environments (`env = "dm-env-rpc://HOST:PORT"`): deadlines and retries.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
-pub struct RemoteEnvConfig {
-    /// Seconds to connect to the environment server and open the stream.
-    pub connect_timeout_secs: f64,
-    /// Seconds to wait for the answer to any request (one step of a real robot included).
-    pub request_timeout_secs: f64,
-    /// Seconds a reset keeps reconnecting (waits doubling from 0.1 s) before the episode fails.
-    pub reconnect_secs: f64,
-    /// The longest wait between reconnection attempts, in seconds.
-    pub max_backoff_secs: f64,
-    /// Episodes in a row an actor may lose to its environment (each dropped and run again)
-    /// before the actor stops: in one process that stops the run; in a fleet the supervisor
-    /// starts the actor again, up to `fleet.max-restarts`.
-    pub env_retries: u32,
-}
-
-impl Default for RemoteEnvConfig {
-    fn default() -> Self {
-        let o = RemoteOptions::default();
-        Self {
-            connect_timeout_secs: o.connect_timeout.as_secs_f64(),
-            request_timeout_secs: o.request_timeout.as_secs_f64(),
-            reconnect_secs: o.reconnect_for.as_secs_f64(),
-            max_backoff_secs: o.max_backoff.as_secs_f64(),
-            env_retries: 5,
-        }
-    }
-}
-
-impl RemoteEnvConfig {
-    /// The client's options (with `security`'s TLS and token), refusing durations that are
-    /// not positive numbers of seconds.
-    pub fn options(&self, security: &crate::security::SecurityConfig) -> anyhow::Result<RemoteOptions> {
-        let secs = |field: &str, v: f64| {
-            if v.is_finite() && v > 0.0 && v < 1e9 {
-                Ok(Duration::from_secs_f64(v))
-            } else {
-                Err(anyhow::anyhow!("remote.{field}: {v} is not a positive number of seconds"))
-            }
-        };
-        Ok(RemoteOptions {
-            connect_timeout: secs("connect-timeout-secs", self.connect_timeout_secs)?,
-            request_timeout: secs("request-timeout-secs", self.request_timeout_secs)?,
-            reconnect_for: secs("reconnect-secs", self.reconnect_secs)?,
-            max_backoff: secs("max-backoff-secs", self.max_backoff_secs)?,
-            auth: security.client_auth()?,
-            ..RemoteOptions::default()
-        })
-    }
-}
-
-/// The environment `name`: a built-in robot, or `dm-env-rpc://HOST:PORT` for a remote one.
-pub fn make_env_with(name: &str, remote: &RemoteEnvConfig, security: &crate::security::SecurityConfig) -> anyhow::Result<Box<dyn Env>> {
-    if coadapt_env_rpc::is_remote(name) {
-        return Ok(Box::new(RemoteEnv::connect(name, remote.options(security)?)?));
-    }
-    coadapt_robots::make(name).map_err(|e| anyhow::anyhow!("{e}; or dm-env-rpc://HOST:PORT for a remote environment"))
-}
-
-/// [`make_env_with`] with the default remote settings.
-pub fn make_env(name: &str) -> anyhow::Result<Box<dyn Env>> {
-    make_env_with(name, &RemoteEnvConfig::default(), &crate::security::SecurityConfig::default())
-}
 
 /// Simulation rollouts for the baselines: one deterministic episode of the population policy
 /// per design from its reset seed, fitness the mean per-step reward; designs are shared out
@@ -277,7 +210,7 @@ pub fn learner(
     shutdown: &AtomicBool,
     resume: bool,
 ) -> anyhow::Result<coadapt::RunOutcome> {
-    let run_id = crate::resume::new_run_id();
+    let run_id = coadapt_fleet::new_run_id();
     let root = crate::resume::snapshot_root(dir);
     let mut snaps =
         coadapt::Snapshots { cfg: cfg.snapshot.clone(), root: Some(root.clone()), run_id: run_id.clone(), ..Default::default() };

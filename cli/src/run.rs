@@ -20,9 +20,9 @@ use coadapt_learner::flow::{FlowConfig, FlowMode};
 use coadapt_transport::in_process;
 use serde::{Deserialize, Serialize};
 
-use crate::fleet::{FleetConfig, TransportKind};
 use crate::progress::{print_stdout_line, shutdown_on_ctrl_c};
 use crate::roles;
+use coadapt_fleet::{FleetConfig, TransportKind};
 
 /// The reference protocol on HalfCheetah, used when no `--config` is given.
 pub const DEFAULT_CONFIG: &str = include_str!("../../configs/half-cheetah-reference.toml");
@@ -54,7 +54,7 @@ pub struct RunConfig {
     pub learner: FearLearnerConfig,
     pub optimizer: OptimizerConfig,
     /// Deadlines and retries of a remote environment.
-    pub remote: crate::roles::RemoteEnvConfig,
+    pub remote: coadapt_fleet::RemoteEnvConfig,
     /// Snapshots of the whole run for `--resume` (`every-episodes`, `keep`).
     pub snapshot: coadapt_learner::snapshot::SnapshotConfig,
     /// Prometheus `/metrics` of the learner and the optimiser (`learner-listen`,
@@ -65,7 +65,7 @@ pub struct RunConfig {
     pub design_service: crate::design_live::DesignServiceConfig,
     /// TLS and tokens of every gRPC endpoint (`tls-cert`, `tls-key`, `tls-ca`, `tokens-file`,
     /// `token-file`, `insecure`, ...).
-    pub security: crate::security::SecurityConfig,
+    pub security: coadapt_fleet::SecurityConfig,
 }
 
 impl Default for RunConfig {
@@ -83,11 +83,11 @@ impl Default for RunConfig {
             fleet: FleetConfig::default(),
             learner: FearLearnerConfig::default(),
             optimizer: OptimizerConfig::default(),
-            remote: crate::roles::RemoteEnvConfig::default(),
+            remote: coadapt_fleet::RemoteEnvConfig::default(),
             snapshot: coadapt_learner::snapshot::SnapshotConfig::default(),
             metrics: crate::metrics::MetricsConfig::default(),
             design_service: crate::design_live::DesignServiceConfig::default(),
-            security: crate::security::SecurityConfig::default(),
+            security: coadapt_fleet::SecurityConfig::default(),
         }
     }
 }
@@ -252,7 +252,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> anyhow::Result<()> {
 /// Runs the co-adaptation described by `cfg` into `dir`, every role a thread of this process
 /// over the in-process transport.
 pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> anyhow::Result<coadapt::RunOutcome> {
-    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     check(cfg, &spec)?;
     let (mut learner_links, actor_links, mut optimizer_links) = in_process::fleet(cfg.actors);
     std::thread::scope(|s| -> anyhow::Result<coadapt::RunOutcome> {
@@ -304,7 +304,7 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
     if n == 0 || outcome.designs.is_empty() {
         return Ok(());
     }
-    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let dim = spec.design_dim();
     let designs: Vec<f32> = outcome.designs.iter().flat_map(|d| d.design.clone()).collect();
     let pca = Pca2::fit(&designs, dim)?;
@@ -404,7 +404,7 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
 /// `coadapt run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let (mut cfg, name) = resolve(&args)?;
-    let spec = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     resolve_initial_designs(&mut cfg, &spec);
     check(&cfg, &spec)?;
     let resume = args.resume.is_some();

@@ -22,7 +22,7 @@ use coadapt_policy_search::{
 };
 use serde::{Deserialize, Serialize};
 
-use crate::fleet::{FleetConfig, TransportKind};
+use coadapt_fleet::{FleetConfig, TransportKind};
 
 /// `coadapt search`'s config (TOML, kebab-case; every key has a default).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -75,13 +75,13 @@ pub struct SearchConfig {
     /// the `[fleet]` table of a run config).
     pub fleet: FleetConfig,
     /// TLS and tokens of a gRPC fleet (the `[security]` table of a run config).
-    pub security: crate::security::SecurityConfig,
+    pub security: coadapt_fleet::SecurityConfig,
     /// The robot the actors step: empty for the built-in planar robot, or
     /// `dm-env-rpc://HOST:PORT` for one served over dm_env_rpc (`coadapt env-serve --env
     /// planar`, or a real robot's server with the planar task's shape).
     pub robot: String,
     /// Deadlines and retries of a dm_env_rpc robot.
-    pub remote: crate::roles::RemoteEnvConfig,
+    pub remote: coadapt_fleet::RemoteEnvConfig,
 }
 
 impl SearchConfig {
@@ -114,9 +114,9 @@ impl Default for SearchConfig {
             rollout_lease_secs: 60.0,
             iteration_deadline_secs: 3600.0,
             fleet: FleetConfig { transport: TransportKind::InProcess, listen: "127.0.0.1:0".into(), ..FleetConfig::default() },
-            security: crate::security::SecurityConfig::default(),
+            security: coadapt_fleet::SecurityConfig::default(),
             robot: String::new(),
-            remote: crate::roles::RemoteEnvConfig::default(),
+            remote: coadapt_fleet::RemoteEnvConfig::default(),
         }
     }
 }
@@ -204,7 +204,7 @@ fn resolve(a: &SearchArgs) -> anyhow::Result<SearchConfig> {
     if let Some(t) = a.transport {
         cfg.fleet.transport = t;
     }
-    cfg.security = cfg.security.clone().with_args(&a.security);
+    cfg.security = crate::security::with_args(cfg.security.clone(), &a.security);
     for (key, v) in [("rollout-lease-secs", cfg.rollout_lease_secs), ("iteration-deadline-secs", cfg.iteration_deadline_secs)] {
         if !(v > 0.0 && v.is_finite()) {
             anyhow::bail!("{key} = {v}: a positive number of seconds");

@@ -7,9 +7,9 @@ use anyhow::Context;
 use clap::Args;
 use coadapt_policy_search::{FleetRunner, PlanarEnv};
 
-use crate::actor_procs::Children;
-use crate::fleet::{LearnerGuard, TransportKind};
 use crate::search::SearchConfig;
+use coadapt_fleet::procs::Children;
+use coadapt_fleet::{LearnerGuard, TransportKind};
 
 /// `coadapt search-actor`: runs the rollouts a search hands out on this machine's robot.
 #[derive(Debug, Args)]
@@ -65,7 +65,7 @@ impl Fleet {
                 (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
             }
             _ => {
-                let procs = crate::actor_procs::ProcessFleet {
+                let procs = coadapt_fleet::procs::ProcessFleet {
                     role: "search",
                     subcommand: "search-actor",
                     actors: cfg.actors,
@@ -93,7 +93,7 @@ impl Fleet {
         let Self { runner, guard, threads, children } = self;
         drop(runner);
         drop(guard);
-        crate::actor_procs::join_threads("search", threads);
+        coadapt_fleet::procs::join_threads("search", threads);
         children.finish();
     }
 }
@@ -109,7 +109,7 @@ pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
     if let Some(r) = &a.robot {
         cfg.robot = r.clone();
     }
-    let security = cfg.security.clone().with_args(&a.security);
+    let security = crate::security::with_args(cfg.security.clone(), &a.security);
     let mut robot = robot(&cfg, &security)?;
     let mut links = cfg.fleet.actor_links(a.id, &security)?;
     let shutdown = crate::progress::shutdown_on_ctrl_c();
@@ -123,7 +123,7 @@ pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
 
 /// The robot an actor steps: the built-in planar one, or `cfg.robot` over dm_env_rpc (which
 /// must have the planar task's shape: 12 actions, a 3-value observation, no design).
-fn robot(cfg: &SearchConfig, security: &crate::security::SecurityConfig) -> anyhow::Result<Box<dyn coadapt_core::Env>> {
+fn robot(cfg: &SearchConfig, security: &coadapt_fleet::SecurityConfig) -> anyhow::Result<Box<dyn coadapt_core::Env>> {
     if cfg.robot.is_empty() {
         return Ok(Box::new(PlanarEnv::new(cfg.planar())));
     }

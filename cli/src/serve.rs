@@ -101,7 +101,7 @@ pub fn history_row(r: run_dir::DesignRow) -> HistoryRow {
 /// The model and history of the run in `dir`.
 pub fn load(dir: &Path) -> anyhow::Result<StaticSource> {
     let cfg = crate::resume::stored_config(dir)?;
-    let env = crate::roles::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?;
+    let env = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?;
     let spec = env.spec();
     let root = crate::resume::snapshot_root(dir);
     let (from, manifest, mut state, skipped) =
@@ -142,7 +142,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     let addr: SocketAddr =
         args.listen.parse().with_context(|| format!("--listen: {:?} is not an address like 127.0.0.1:50061", args.listen))?;
     let security = crate::security::from_args(&args.security);
-    crate::security::check_listen("--listen", addr, &security)?;
+    coadapt_fleet::check_listen("--listen", addr, &security)?;
     let auth = security.server_auth()?;
     if args.max_score_batch == 0 {
         anyhow::bail!("--max-score-batch: 0 would refuse every request; at least 1");

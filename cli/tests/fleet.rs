@@ -9,9 +9,9 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use coadapt_cli::fleet::TransportKind;
 use coadapt_cli::roles;
 use coadapt_cli::run::{RunConfig, resolve_initial_designs};
+use coadapt_fleet::TransportKind;
 use coadapt_learner::flow::FlowMode;
 use coadapt_transport::in_process;
 

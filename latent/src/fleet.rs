@@ -275,7 +275,13 @@ impl EpisodeRunner {
                 ret += c.rewards[i];
                 if train {
                     agent
-                        .store(&c.obs[i * s..(i + 1) * s], &c.actions[i * a..(i + 1) * a], c.rewards[i], &c.next_obs[i * s..(i + 1) * s], c.terminated[i])
+                        .store(
+                            &c.obs[i * s..(i + 1) * s],
+                            &c.actions[i * a..(i + 1) * a],
+                            c.rewards[i],
+                            &c.next_obs[i * s..(i + 1) * s],
+                            c.terminated[i],
+                        )
                         .map_err(|e| FleetError::Learner(format!("storing episode {index}: {e}")))?;
                 }
             }

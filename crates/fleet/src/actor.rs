@@ -15,7 +15,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use coadapt_core::Transition;
-use coadapt_transport::{ActorLinks, Assignment, EpisodeEnd, EpisodeMode, ExperienceChunk, Sender, TransportError, Weights, newest_or_stop, next_or_stop};
+use coadapt_transport::{
+    ActorLinks, Assignment, EpisodeEnd, EpisodeMode, ExperienceChunk, Sender, TransportError, Weights, newest_or_stop, next_or_stop,
+};
 
 /// How an actor streams its episodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,7 +97,14 @@ impl std::fmt::Debug for Stream<'_> {
 }
 
 impl<'a> Stream<'a> {
-    fn new(tx: &'a mut dyn Sender<ExperienceChunk>, actor: u64, a: &Assignment, weights_version: u64, record: bool, chunk_len: usize) -> Self {
+    fn new(
+        tx: &'a mut dyn Sender<ExperienceChunk>,
+        actor: u64,
+        a: &Assignment,
+        weights_version: u64,
+        record: bool,
+        chunk_len: usize,
+    ) -> Self {
         let chunk = ExperienceChunk {
             actor,
             assignment: a.id,

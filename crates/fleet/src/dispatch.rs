@@ -173,7 +173,11 @@ pub struct Dispatcher<T> {
 
 impl<T> std::fmt::Debug for Dispatcher<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Dispatcher").field("name", &self.name).field("out", &self.out.len()).field("next_id", &self.next_id).finish_non_exhaustive()
+        f.debug_struct("Dispatcher")
+            .field("name", &self.name)
+            .field("out", &self.out.len())
+            .field("next_id", &self.next_id)
+            .finish_non_exhaustive()
     }
 }
 

@@ -1,15 +1,17 @@
-//! Which transport the roles talk over, and each role's links for it.
+//! Which transport the roles talk over (`[fleet]`), and each role's links for it.
 
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use anyhow::Context;
 use coadapt_transport::messages::Dims;
 use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 use serde::{Deserialize, Serialize};
 
+use crate::{SecurityConfig, SetupError, check_listen};
+
 /// How the roles talk.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum TransportKind {
     /// Separate processes on one machine over iceoryx2 shared memory.
@@ -103,22 +105,24 @@ impl std::fmt::Debug for LearnerGuard {
 }
 
 impl FleetConfig {
-    fn shm(&self) -> anyhow::Result<coadapt_shm::ShmConfig> {
+    fn shm(&self) -> Result<coadapt_shm::ShmConfig, SetupError> {
         if self.name.is_empty() {
-            anyhow::bail!("fleet.name: a shared-memory fleet needs a name shared by all its processes (or --fleet NAME)");
+            return Err(SetupError::Config(
+                "fleet.name: a shared-memory fleet needs a name shared by all its processes (or --fleet NAME)".into(),
+            ));
         }
         Ok(coadapt_shm::ShmConfig { fleet: self.name.clone(), max_actors: self.max_actors, ..coadapt_shm::ShmConfig::default() })
     }
 
-    fn grpc(&self, security: &crate::security::SecurityConfig) -> anyhow::Result<coadapt_grpc::GrpcConfig> {
+    fn grpc(&self, security: &SecurityConfig) -> Result<coadapt_grpc::GrpcConfig, SetupError> {
         let t = self.rpc_timeout_secs;
         let rpc_timeout = Duration::try_from_secs_f64(t)
             .ok()
             .filter(|d| !d.is_zero())
-            .ok_or_else(|| anyhow::anyhow!("fleet.rpc-timeout-secs: {t} is not a positive number of seconds"))?;
+            .ok_or_else(|| SetupError::Config(format!("fleet.rpc-timeout-secs: {t} is not a positive number of seconds")))?;
         for (name, v) in [("max-connections-per-peer", self.max_connections_per_peer), ("max-connections", self.max_connections)] {
             if v == 0 {
-                anyhow::bail!("fleet.{name}: 0 would refuse every connection; at least 1");
+                return Err(SetupError::Config(format!("fleet.{name}: 0 would refuse every connection; at least 1")));
             }
         }
         let mut cfg = coadapt_grpc::GrpcConfig {
@@ -144,27 +148,31 @@ impl FleetConfig {
         &self,
         dims: Option<Dims>,
         max_episode_steps: Option<usize>,
-        security: &crate::security::SecurityConfig,
-    ) -> anyhow::Result<(LearnerLinks, LearnerGuard)> {
+        security: &SecurityConfig,
+    ) -> Result<(LearnerLinks, LearnerGuard), SetupError> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
                 clean_stale();
-                let links = coadapt_shm::learner_links(&cfg).with_context(|| format!("opening shared-memory fleet {}", cfg.fleet))?;
+                let links = coadapt_shm::learner_links(&cfg)
+                    .map_err(SetupError::transport(format!("opening shared-memory fleet {}", cfg.fleet)))?;
                 Ok((links, LearnerGuard::None))
             }
             TransportKind::Grpc => {
-                let addr: SocketAddr =
-                    self.listen.parse().with_context(|| format!("fleet.listen: {:?} is not an address like 0.0.0.0:50051", self.listen))?;
-                crate::security::check_listen("fleet.listen", addr, security)?;
+                let addr: SocketAddr = self
+                    .listen
+                    .parse()
+                    .map_err(|_| SetupError::Config(format!("fleet.listen: {:?} is not an address like 0.0.0.0:50051", self.listen)))?;
+                check_listen("fleet.listen", addr, security)?;
                 let mut grpc = self.grpc(security)?;
                 // The id the learner's snapshots carry too; a client that sees it change drops
                 // what it holds from the older start.
-                grpc.run_id = Some(crate::resume::run_id());
+                grpc.run_id = Some(crate::run_id());
                 if let Some(n) = max_episode_steps {
                     grpc.max_episode_steps = n as u64;
                 }
-                let (links, server) = coadapt_grpc::serve_learner(addr, &grpc).with_context(|| format!("serving gRPC on {addr}"))?;
+                let (links, server) =
+                    coadapt_grpc::serve_learner(addr, &grpc).map_err(SetupError::transport(format!("serving gRPC on {addr}")))?;
                 let tls = match &grpc.server_auth.tls {
                     Some(t) if t.mutual() => "TLS, client certificates required",
                     Some(_) => "TLS",
@@ -177,33 +185,33 @@ impl FleetConfig {
                 }
                 Ok((links, LearnerGuard::Grpc(server)))
             }
-            TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
+            TransportKind::InProcess => Err(SetupError::Config("fleet.transport: in-process works only inside `coadapt run`".into())),
         }
     }
 
-    pub fn actor_links(&self, id: u64, security: &crate::security::SecurityConfig) -> anyhow::Result<ActorLinks> {
+    pub fn actor_links(&self, id: u64, security: &SecurityConfig) -> Result<ActorLinks, SetupError> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
                 clean_stale();
-                coadapt_shm::actor_links(&cfg, id).with_context(|| format!("joining shared-memory fleet {}", cfg.fleet))
+                coadapt_shm::actor_links(&cfg, id).map_err(SetupError::transport(format!("joining shared-memory fleet {}", cfg.fleet)))
             }
             TransportKind::Grpc => coadapt_grpc::actor_links(&self.connect, id, &self.grpc(security)?)
-                .with_context(|| format!("connecting to {}", self.connect)),
-            TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
+                .map_err(SetupError::transport(format!("connecting to {}", self.connect))),
+            TransportKind::InProcess => Err(SetupError::Config("fleet.transport: in-process works only inside `coadapt run`".into())),
         }
     }
 
-    pub fn optimizer_links(&self, security: &crate::security::SecurityConfig) -> anyhow::Result<OptimizerLinks> {
+    pub fn optimizer_links(&self, security: &SecurityConfig) -> Result<OptimizerLinks, SetupError> {
         match self.transport {
             TransportKind::Shm => {
                 let cfg = self.shm()?;
                 clean_stale();
-                coadapt_shm::optimizer_links(&cfg).with_context(|| format!("joining shared-memory fleet {}", cfg.fleet))
+                coadapt_shm::optimizer_links(&cfg).map_err(SetupError::transport(format!("joining shared-memory fleet {}", cfg.fleet)))
             }
             TransportKind::Grpc => coadapt_grpc::optimizer_links(&self.connect, &self.grpc(security)?)
-                .with_context(|| format!("connecting to {}", self.connect)),
-            TransportKind::InProcess => anyhow::bail!("fleet.transport: in-process works only inside `coadapt run`"),
+                .map_err(SetupError::transport(format!("connecting to {}", self.connect))),
+            TransportKind::InProcess => Err(SetupError::Config("fleet.transport: in-process works only inside `coadapt run`".into())),
         }
     }
 }
@@ -215,4 +223,23 @@ pub fn clean_stale() {
         Ok(n) => coadapt_log::logln!("cleaned up shared memory of {n} dead process(es)"),
         Err(e) => coadapt_log::logln!("warning: cleaning up stale shared memory: {e}"),
     }
+}
+
+/// This process's learner start id (16 hex digits, never zero): the same for the snapshots it
+/// writes and for the gRPC server it serves (whose clients drop what they hold from an older
+/// start when it changes).
+pub fn run_id() -> u64 {
+    static ID: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    *ID.get_or_init(|| {
+        let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+        let mut z = t ^ (u64::from(std::process::id()) << 40);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        (z ^ (z >> 31)).max(1)
+    })
+}
+
+/// [`run_id`] as text.
+pub fn new_run_id() -> String {
+    format!("{:016x}", run_id())
 }
