@@ -11,7 +11,7 @@ use tokio::sync::mpsc;
 use tonic::Status;
 
 use crate::model::DesignModel;
-use crate::server::Shared;
+use crate::shared::Shared;
 
 /// A checked request: the search's box over the free coordinates, and the fixed ones.
 #[derive(Debug)]
@@ -117,7 +117,7 @@ impl Search {
             let t = std::time::Instant::now();
             m.score(&full, scores, &mut spread, &mut ws);
             // The busy share holds for searches too: rest in proportion after each batch.
-            std::thread::sleep(crate::server::rest_after(busy_share, t.elapsed()));
+            std::thread::sleep(crate::shared::rest_after(busy_share, t.elapsed()));
         };
         let mut best = Vec::new();
         let progress = |p: &coadapt_design_optimizer::swarm::Progress<'_>| {

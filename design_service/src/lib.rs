@@ -1,4 +1,5 @@
-//! Design queries for clients in any language: `coadapt.v1.DesignService`
+//! Design queries for clients in any language (standing above the design optimiser, whose
+//! objective and searches it serves): `coadapt.v1.DesignService`
 //! (`proto/coadapt/v1/design.proto`) and the design critic as the Open Inference Protocol model
 //! `design-critic` (`inference.GRPCInferenceService`, `proto/inference/grpc_predict_v2.proto`),
 //! so Triton's and KServe's clients work unchanged.
@@ -13,6 +14,8 @@
 //!   5.9's grid; `watch`: the design stream); `inference`: the Open Inference Protocol handlers.
 //!   Both validate every request before use and answer a malformed one with
 //!   `INVALID_ARGUMENT` naming the field.
+//! - `shared`: what every handler holds (the model source, [`ServeConfig`], the bounded pool of
+//!   computations) and the checks of a design.
 //! - `server`: [`serve`], one tonic server for both, with health per service and reflection
 //!   (v1 and v1alpha), connections per peer limited as on the fleet's port, and every
 //!   computation on a bounded pool of blocking threads ([`ServeConfig::max_concurrent`]) so
@@ -25,6 +28,7 @@ mod live;
 mod model;
 mod optimize;
 mod server;
+mod shared;
 mod watch;
 
 pub use live::LiveSource;

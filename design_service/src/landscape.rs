@@ -8,7 +8,7 @@ use coadapt_wire::pb;
 use tonic::Status;
 
 use crate::model::DesignModel;
-use crate::server::Shared;
+use crate::shared::Shared;
 
 /// Grid points per side when the request says 0.
 pub(crate) const DEFAULT_GRID: usize = 21;

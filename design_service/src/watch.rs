@@ -7,7 +7,7 @@ use tokio::sync::{broadcast, mpsc};
 use tonic::Status;
 
 use crate::model::{DesignEvent, HistoryRow};
-use crate::server::Shared;
+use crate::shared::Shared;
 
 /// Messages a slow watcher may have unread before the stream waits for it.
 const BUFFER: usize = 64;

@@ -11,7 +11,7 @@ use coadapt_wire::inference::grpc_inference_service_server::GrpcInferenceService
 use tonic::{Request, Response, Status};
 
 use crate::MODEL_NAME;
-use crate::server::Shared;
+use crate::shared::Shared;
 
 #[derive(Debug)]
 pub(crate) struct Inference {
@@ -128,7 +128,7 @@ fn designs_of(req: &oip::ModelInferRequest, m: &crate::DesignModel, max: usize) 
         (bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect(), true)
     };
     for (k, row) in values.chunks_exact(dim).enumerate() {
-        crate::server::check_design(row, m, &format!("inputs[0] row {k}"))?;
+        crate::shared::check_design(row, m, &format!("inputs[0] row {k}"))?;
     }
     Ok((values, raw))
 }

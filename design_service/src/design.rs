@@ -8,7 +8,7 @@ use coadapt_wire::pb::design_service_server::DesignService;
 use tonic::{Request, Response, Status};
 
 use crate::model::HistoryRow;
-use crate::server::Shared;
+use crate::shared::Shared;
 
 #[derive(Debug)]
 pub(crate) struct Design {
@@ -28,7 +28,7 @@ fn designs_of(req: &pb::ScoreRequest, model: &crate::DesignModel, max: usize) ->
     let dim = model.design_dim();
     let mut flat = Vec::with_capacity(n * dim);
     for (i, d) in req.designs.iter().enumerate() {
-        crate::server::check_design(&d.values, model, &format!("designs[{i}].values"))?;
+        crate::shared::check_design(&d.values, model, &format!("designs[{i}].values"))?;
         flat.extend_from_slice(&d.values);
     }
     Ok(flat)
