@@ -15,7 +15,6 @@ use crate::model::ModelSource;
 pub use crate::shared::ServeConfig;
 use crate::shared::Shared;
 
-
 /// How long a stopping server waits for its clients to close their connections.
 const STOP_GRACE: Duration = Duration::from_secs(1);
 

@@ -7,8 +7,8 @@
 //! action_dim`: the sampled parameters already multiplied out with the time features, which is
 //! all an episodic policy is; a few kB, no network), then one assignment per rollout whose
 //! `seed` is the rollout's index and whose `min_weights_version` is that version. An actor
-//! ([`run_actor`]) plays the rollout's actions on its robot ([`PlanarEnv`] here, any [`Env`]
-//! in general) and streams the transitions and the episode's return back. The learner side,
+//! ([`run_actor`]) plays the rollout's actions on its robot ([`PlanarEnv`](coadapt_robots::bimanual::PlanarEnv)
+//! here, any [`Env`] in general) and streams the transitions and the episode's return back. The learner side,
 //! [`FleetRunner`], is a [`RolloutRunner`]: it waits for every rollout and sums each rollout's
 //! cost from its observations. Leases, reissue and exactly-once are the fleet library's
 //! ([`coadapt_fleet`]); this file says only what a rollout is.
@@ -17,100 +17,12 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step, Transition};
+use coadapt_core::{Env, Transition};
 use coadapt_fleet::{ActorConfig, Check, DispatchConfig, Dispatcher, Done, Failure, Job, Stream, Verdict, Worker};
 use coadapt_transport::messages::{Assignment, EpisodeEnd, EpisodeMode, ExperienceChunk, Weights};
 use coadapt_transport::{ActorLinks, LearnerLinks};
 
-use crate::planar::PlanarReaching;
 use crate::{EpisodicTask, RolloutError, RolloutRunner};
-
-/// The planar robot's joint-angle limit (action units: degrees by default); beyond it actions
-/// are clipped, as every robot clips.
-pub const MAX_ANGLE: f32 = 720.0;
-
-/// The planar benchmark as a robot an actor steps: the action is the twelve joint angles
-/// (degrees), the observation `[step / steps, distance of the left end effector to its goal,
-/// distance of the right one]` after the step, the reward Eq. 2.31's term of the step. No
-/// design (its body is fixed). The same kinematics as [`PlanarReaching`], so a rollout's return
-/// through a fleet equals its in-process return (up to the f32 rewards).
-#[derive(Debug)]
-pub struct PlanarEnv {
-    task: PlanarReaching,
-    spec: EnvSpec,
-    t: Option<usize>,
-    obs: [f32; 3],
-}
-
-impl Default for PlanarEnv {
-    fn default() -> Self {
-        Self::new(PlanarReaching::default())
-    }
-}
-
-impl PlanarEnv {
-    /// The robot of `task` (its geometry and units).
-    pub fn new(task: PlanarReaching) -> Self {
-        let steps = task.steps();
-        // Two turns each way: wide enough that the searches never reach it (their angles stay
-        // within tens of units), narrow enough that a robot server mapping [-1, 1] onto it
-        // (dm_env_rpc's coadapt profile) keeps f32 precision (4e-5 units).
-        let action = BoxSpace::new(vec![-MAX_ANGLE; 12], vec![MAX_ANGLE; 12]).unwrap_or_else(|_| unreachable!("a valid box"));
-        let design = BoxSpace::new(vec![], vec![]).unwrap_or_else(|_| unreachable!("a valid box"));
-        let spec = EnvSpec {
-            name: "planar".into(),
-            state_dim: 3,
-            action,
-            design,
-            design_names: vec![],
-            default_design: vec![],
-            max_episode_steps: steps,
-        };
-        Self { task, spec, t: None, obs: [0.0; 3] }
-    }
-
-    /// Each step's cost from its observation: the summed end-effector distance.
-    pub fn step_cost(obs: &[f32]) -> f64 {
-        obs.get(1..3).map_or(f64::NAN, |d| f64::from(d[0]) + f64::from(d[1]))
-    }
-}
-
-impl Env for PlanarEnv {
-    fn spec(&self) -> &EnvSpec {
-        &self.spec
-    }
-
-    fn reset(&mut self, _seed: u64, design: &[f32]) -> Result<&[f32], EnvError> {
-        self.spec.design.check("design", design).map_err(EnvError::Design)?;
-        // Before the first step: both arms straight up, measured against the first goals.
-        let d = self.task.distances(&[0.0; 12]);
-        self.obs = [0.0, d[0].0 as f32, d[0].1 as f32];
-        self.t = Some(0);
-        Ok(&self.obs)
-    }
-
-    fn step(&mut self, action: &[f32]) -> Result<Step<'_>, EnvError> {
-        let t = self.t.ok_or(EnvError::NotRunning)?;
-        if action.len() != 12 {
-            return Err(EnvError::Action(coadapt_core::SpaceError::Dim { what: "action", expected: 12, got: action.len() }));
-        }
-        if let Some(index) = action.iter().position(|a| !a.is_finite()) {
-            return Err(EnvError::Action(coadapt_core::SpaceError::NonFinite { what: "action", index, value: action[index] }));
-        }
-        let mut a = [0.0f32; 12];
-        a.iter_mut().zip(action).for_each(|(c, v)| *c = v.clamp(-MAX_ANGLE, MAX_ANGLE));
-        let action = &a;
-        let steps = self.task.steps();
-        let (gl, gr) = self.task.goals(t);
-        let (l, r) = (self.task.end_effector(&action[..6]), self.task.end_effector(&action[6..12]));
-        let dl = ((l[0] - gl[0]).powi(2) + (l[1] - gl[1]).powi(2)).sqrt();
-        let dr = ((r[0] - gr[0]).powi(2) + (r[1] - gr[1]).powi(2)).sqrt();
-        self.obs = [(t + 1) as f32 / steps as f32, dl as f32, dr as f32];
-        let done = t + 1 >= steps;
-        self.t = if done { None } else { Some(t + 1) };
-        Ok(Step { observation: &self.obs, reward: ((-dl).exp() + (-dr).exp()) as f32, terminated: false, truncated: done })
-    }
-}
 
 /// Rollouts on one actor: the iteration's actions, played on its robot.
 struct Rollouts<'e> {

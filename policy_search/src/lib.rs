@@ -5,7 +5,8 @@
 //! # Layout
 //! - `features`: normalised Gaussian RBF features of time, [`TimeFeatures`] (the thesis's 11
 //!   features of width 3 for 25 steps, 8 for 15).
-//! - `planar`: the bimanual planar reaching benchmark of ch. 2.4.1, [`PlanarReaching`]: two
+//! - `planar`: the bimanual planar reaching benchmark of ch. 2.4.1 as an episodic task
+//!   ([`PlanarReaching`], whose kinematics live in `coadapt_robots::bimanual`): two
 //!   planar 6-joint arms on a shared base, 12 joint angles per step, 25 steps, reward Eq. 2.31
 //!   and the summed end-effector distance the thesis plots. The text leaves the arms and the goal
 //!   paths open; the choices are documented there and fixed.
@@ -23,7 +24,8 @@
 //!
 //! - `fleet`: rollouts through a fleet of actors over the co-adaptation's transports:
 //!   [`FleetRunner`] (the learner's side, a [`RolloutRunner`]), [`run_actor`], and
-//!   [`PlanarEnv`], the planar benchmark as a robot an actor steps.
+//!   [`PlanarEnv`] (from `coadapt_robots::bimanual`), the planar benchmark as a robot an actor
+//!   steps.
 
 mod alpha;
 mod features;
@@ -37,8 +39,9 @@ mod policy;
 mod power;
 
 pub use alpha::LogLinearAlpha;
+pub use coadapt_robots::bimanual::PlanarEnv;
 pub use features::TimeFeatures;
-pub use fleet::{FleetRunner, PlanarEnv, run_actor};
+pub use fleet::{FleetRunner, run_actor};
 pub use groups::{Groups, GroupsConfig, Sample};
 pub use nac::{Nac, NacConfig, natural_gradient};
 pub use planar::{ArmGeometry, PlanarReaching};

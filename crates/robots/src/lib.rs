@@ -13,10 +13,14 @@
 //!   and base-motor range offsets per leg pair as the design.
 //! - [`reach`]: a three-joint arm reaching a target by small joint deltas, rewarded only on
 //!   success (20 steps): the stand-in for the thesis's Baxter peg insertion (ch. 4), from pixels.
+//! - [`bimanual`]: the bimanual planar reaching benchmark of ch. 2 (two six-joint arms following
+//!   goal paths; no design), its kinematics and [`bimanual::PlanarEnv`], the robot an actor steps
+//!   for policy search through a fleet.
 //! - [`bench`](mod@bench): env steps per second under random actions.
 //! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
 
 pub mod bench;
+pub mod bimanual;
 pub mod daisy;
 mod draw;
 pub mod half_cheetah;
