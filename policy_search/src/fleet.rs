@@ -22,7 +22,7 @@ use coadapt_fleet::{ActorConfig, Check, DispatchConfig, Dispatcher, Done, Failur
 use coadapt_transport::messages::{Assignment, EpisodeEnd, EpisodeMode, ExperienceChunk, Weights};
 use coadapt_transport::{ActorLinks, LearnerLinks};
 
-use crate::{EpisodicTask, RolloutError, RolloutRunner};
+use crate::{RolloutError, RolloutRunner};
 
 /// Rollouts on one actor: the iteration's actions, played on its robot.
 struct Rollouts<'e> {
