@@ -148,7 +148,7 @@ fn sim(a: &SimArgs) -> anyhow::Result<()> {
 
 pub(crate) fn emit(bench: &str, config: &str, value: f64, unit: &str) {
     let line = json!({"bench": bench, "config": config, "value": (value * 1000.0).round() / 1000.0, "unit": unit, "impl": "coadapt"});
-    crate::progress::print_stdout_line(&line.to_string());
+    coadapt_log::print_stdout_line(&line.to_string());
 }
 
 /// Calls `f` repeatedly for about `seconds` after a short warm-up; returns calls per second.

@@ -305,13 +305,13 @@ pub fn run(a: &ConvBenchArgs) -> anyhow::Result<()> {
                 s.forward();
                 std::hint::black_box(&s.acts);
             });
-            crate::progress::print_stdout_line(&line("conv_forward", &config, n, &ms, flops).to_string());
+            coadapt_log::print_stdout_line(&line("conv_forward", &config, n, &ms, flops).to_string());
             let ms = time_ms(a.repetitions, a.warmup, || {
                 s.forward();
                 s.backward();
                 std::hint::black_box((&s.grads, &s.d));
             });
-            crate::progress::print_stdout_line(&line("conv_forward_backward", &config, n, &ms, 3.0 * flops).to_string());
+            coadapt_log::print_stdout_line(&line("conv_forward_backward", &config, n, &ms, 3.0 * flops).to_string());
         }
     }
     Ok(())

@@ -115,7 +115,7 @@ pub fn run(a: &GroupsBenchArgs) -> anyhow::Result<()> {
         "repetitions": a.repetitions,
         "dtype": "f64",
     });
-    crate::progress::print_stdout_line(&line.to_string());
+    coadapt_log::print_stdout_line(&line.to_string());
     Ok(())
 }
 

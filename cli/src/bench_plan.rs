@@ -170,7 +170,7 @@ pub fn run(a: &PlanBenchArgs) -> anyhow::Result<()> {
             "objective_grad_us_median": round(percentile(&eval_us, 0.5)),
             "threads": 1,
         });
-        crate::progress::print_stdout_line(&line.to_string());
+        coadapt_log::print_stdout_line(&line.to_string());
     }
     Ok(())
 }

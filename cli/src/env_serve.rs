@@ -80,7 +80,7 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
         let listener = tokio::net::TcpListener::bind(want).await.with_context(|| format!("listening on {}", args.listen))?;
         let addr = listener.local_addr()?;
         coadapt_log::logln!("env-serve: serving {} over dm_env_rpc on {addr} (Ctrl-C stops)", args.env);
-        crate::progress::print_stdout_line(&format!("dm-env-rpc://{addr}"));
+        coadapt_log::print_stdout_line(&format!("dm-env-rpc://{addr}"));
         let (stopped_tx, stopped_rx) = tokio::sync::oneshot::channel::<()>();
         if args.max_worlds == 0 || args.max_connections_per_peer == 0 || args.max_connections == 0 {
             anyhow::bail!("--max-worlds, --max-connections-per-peer and --max-connections must be at least 1");

@@ -20,7 +20,7 @@ use coadapt_learner::run_dir::RunWriter;
 use coadapt_learner::snapshot;
 use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 
-use crate::progress::duration;
+use coadapt_log::duration;
 use crate::run::RunConfig;
 
 /// Simulation rollouts for the baselines: one deterministic episode of the population policy

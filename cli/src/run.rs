@@ -20,7 +20,8 @@ use coadapt_learner::flow::{FlowConfig, FlowMode};
 use coadapt_transport::in_process;
 use serde::{Deserialize, Serialize};
 
-use crate::progress::{print_stdout_line, shutdown_on_ctrl_c};
+use crate::progress::shutdown_on_ctrl_c;
+use coadapt_log::print_stdout_line;
 use crate::roles;
 use coadapt_fleet::{FleetConfig, TransportKind};
 

@@ -370,7 +370,7 @@ pub fn run(a: SearchArgs) -> anyhow::Result<()> {
     let sd = (last.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (last.len().max(2) - 1) as f64).sqrt();
     let summary = serde_json::json!({"method": cfg.method, "runs": cfg.runs, "iterations": cfg.iterations,
         "final_mean_policy_cost_mean": mean, "final_mean_policy_cost_sd": sd, "out": out.display().to_string()});
-    crate::progress::print_stdout_line(&summary.to_string());
+    coadapt_log::print_stdout_line(&summary.to_string());
     Ok(())
 }
 

@@ -152,7 +152,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     let server = coadapt_design_service::serve(addr, cfg, Arc::new(source)).with_context(|| format!("listening on {addr}"))?;
     let at = server.local_addr();
     coadapt_log::logln!("serve: coadapt.v1.DesignService and design-critic (Open Inference Protocol) on {at} (Ctrl-C stops)");
-    crate::progress::print_stdout_line(&format!("grpc://{at}"));
+    coadapt_log::print_stdout_line(&format!("grpc://{at}"));
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
     rt.block_on(crate::env_serve::wait_for_signal());
     coadapt_log::logln!("serve: stopping");

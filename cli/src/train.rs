@@ -7,7 +7,8 @@ use clap::{Args, ValueEnum};
 use coadapt_learner::train::{self, TrainConfig, UpdateSchedule};
 use coadapt_learner::{Algo, Exploration};
 
-use crate::progress::{duration, shutdown_on_ctrl_c};
+use crate::progress::shutdown_on_ctrl_c;
+use coadapt_log::duration;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum ExplorationArg {
@@ -219,6 +220,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         );
     })
     .with_context(|| format!("training {} on {}", cfg.algo, cfg.env))?;
-    crate::progress::print_stdout_line(&serde_json::to_string(&summary).context("serialising the summary")?);
+    coadapt_log::print_stdout_line(&serde_json::to_string(&summary).context("serialising the summary")?);
     Ok(())
 }
