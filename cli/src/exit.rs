@@ -4,38 +4,25 @@
 //! their `sysexits.h` code, and the supervisor (`launch`) stops the fleet and says why.
 
 use coadapt_learner::coadapt::CoadaptError;
-use coadapt_learner::disk::is_disk_full;
 
 use coadapt_fleet::SetupError;
 use coadapt_fleet::supervise::SuperviseError;
+use coadapt_fleet::supervise::exit::ExitCode;
 pub use coadapt_fleet::supervise::exit::{CONFIG, DISK, not_transient};
 
-/// The exit code of a process that failed with `e`: [`DISK`], [`CONFIG`], or 1 (worth a restart).
+/// The exit code of a process that failed with `e`: [`DISK`], [`CONFIG`], or 1 (worth a
+/// restart). Each library's error says which of its failures a restart cannot mend
+/// ([`ExitCode`]); the first such cause in the chain decides.
 pub fn code_of(e: &anyhow::Error) -> u8 {
     for cause in e.chain() {
-        if let Some(SuperviseError::NotTransient { code, .. }) = cause.downcast_ref::<SuperviseError>() {
-            return *code;
-        }
-        if let Some(s) = cause.downcast_ref::<SetupError>() {
-            if matches!(s, SetupError::Config(_)) {
-                return CONFIG;
-            }
-            if s.io_kind().is_some_and(is_disk_full) {
-                return DISK;
-            }
-        }
-        if let Some(c) = cause.downcast_ref::<CoadaptError>() {
-            if matches!(c, CoadaptError::Config(_)) {
-                return CONFIG;
-            }
-            if c.io_kind().is_some_and(is_disk_full) {
-                return DISK;
-            }
-        }
-        if let Some(io) = cause.downcast_ref::<std::io::Error>()
-            && is_disk_full(io.kind())
-        {
-            return DISK;
+        let code = cause
+            .downcast_ref::<SuperviseError>()
+            .and_then(ExitCode::exit_code)
+            .or_else(|| cause.downcast_ref::<SetupError>().and_then(ExitCode::exit_code))
+            .or_else(|| cause.downcast_ref::<CoadaptError>().and_then(ExitCode::exit_code))
+            .or_else(|| cause.downcast_ref::<std::io::Error>().and_then(ExitCode::exit_code));
+        if let Some(code) = code {
+            return code;
         }
     }
     1

@@ -20,8 +20,8 @@ use coadapt_learner::run_dir::RunWriter;
 use coadapt_learner::snapshot;
 use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 
-use coadapt_log::duration;
 use crate::run::RunConfig;
+use coadapt_log::duration;
 
 /// Simulation rollouts for the baselines: one deterministic episode of the population policy
 /// per design from its reset seed, fitness the mean per-step reward; designs are shared out

@@ -21,9 +21,9 @@ use coadapt_transport::in_process;
 use serde::{Deserialize, Serialize};
 
 use crate::progress::shutdown_on_ctrl_c;
-use coadapt_log::print_stdout_line;
 use crate::roles;
 use coadapt_fleet::{FleetConfig, TransportKind};
+use coadapt_log::print_stdout_line;
 
 /// The reference protocol on HalfCheetah, used when no `--config` is given.
 pub const DEFAULT_CONFIG: &str = include_str!("../../configs/half-cheetah-reference.toml");

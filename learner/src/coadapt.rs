@@ -203,6 +203,17 @@ impl CoadaptError {
     }
 }
 
+impl coadapt_fleet::supervise::exit::ExitCode for CoadaptError {
+    fn exit_code(&self) -> Option<u8> {
+        use coadapt_fleet::supervise::exit::{CONFIG, DISK, is_disk_full};
+        match self {
+            Self::Config(_) => Some(CONFIG),
+            e if e.io_kind().is_some_and(is_disk_full) => Some(DISK),
+            _ => None,
+        }
+    }
+}
+
 /// What the learner reports as it goes (for progress lines).
 #[derive(Clone, Debug)]
 pub enum RunEvent<'a> {

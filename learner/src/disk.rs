@@ -15,12 +15,7 @@ const MARGIN: u64 = 16 << 20;
 /// How often free space is measured at most (a `statvfs` call).
 const EVERY: Duration = Duration::from_millis(200);
 
-/// Whether an I/O error of this kind means the disk cannot take what is written (full, over
-/// quota, read-only): no retry can mend it.
-pub fn is_disk_full(kind: std::io::ErrorKind) -> bool {
-    use std::io::ErrorKind;
-    matches!(kind, ErrorKind::StorageFull | ErrorKind::QuotaExceeded | ErrorKind::ReadOnlyFilesystem)
-}
+pub use coadapt_fleet::supervise::exit::is_disk_full;
 
 /// Bytes free to an unprivileged writer on the filesystem holding `path`.
 pub fn free_bytes(path: &Path) -> std::io::Result<u64> {

@@ -29,6 +29,36 @@ pub mod exit {
     /// `EX_CONFIG`: the configuration is invalid.
     pub const CONFIG: u8 = 78;
 
+    /// Whether an I/O error of this kind means the disk cannot take what is written (full, over
+    /// quota, read-only): no retry can mend it.
+    pub fn is_disk_full(kind: std::io::ErrorKind) -> bool {
+        use std::io::ErrorKind;
+        matches!(kind, ErrorKind::StorageFull | ErrorKind::QuotaExceeded | ErrorKind::ReadOnlyFilesystem)
+    }
+
+    /// An error that can say whether a restart could mend it: `Some(code)` ([`DISK`],
+    /// [`CONFIG`]) when it cannot. A binary maps its error to an exit code with it, and the
+    /// supervisor reads the code.
+    pub trait ExitCode {
+        fn exit_code(&self) -> Option<u8>;
+    }
+
+    impl ExitCode for crate::SetupError {
+        fn exit_code(&self) -> Option<u8> {
+            match self {
+                crate::SetupError::Config(_) => Some(CONFIG),
+                e if e.io_kind().is_some_and(is_disk_full) => Some(DISK),
+                _ => None,
+            }
+        }
+    }
+
+    impl ExitCode for std::io::Error {
+        fn exit_code(&self) -> Option<u8> {
+            is_disk_full(self.kind()).then_some(DISK)
+        }
+    }
+
     /// Why a process that exited with `code` is not started again (`None`: it may be).
     pub fn not_transient(code: Option<i32>) -> Option<&'static str> {
         match u8::try_from(code?).ok()? {
@@ -117,6 +147,16 @@ pub enum SuperviseError {
     Learner { status: String, logs: String },
     #[error(transparent)]
     Setup(#[from] SetupError),
+}
+
+impl exit::ExitCode for SuperviseError {
+    fn exit_code(&self) -> Option<u8> {
+        match self {
+            Self::NotTransient { code, .. } => Some(*code),
+            Self::Learner { .. } => None,
+            Self::Setup(e) => e.exit_code(),
+        }
+    }
 }
 
 struct Proc {
