@@ -3,16 +3,13 @@
 //! same run config; flags override its `[fleet]` table.
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
 
-use anyhow::bail;
 use clap::Args;
-use coadapt_transport::messages::Dims;
+use coadapt_coadaptation::config::{Overrides, resolve};
+use coadapt_coadaptation::{RunConfig, processes};
+use coadapt_fleet::TransportKind;
 
 use crate::progress::shutdown_on_ctrl_c;
-use crate::roles;
-use crate::run::{RunArgs, RunConfig, check, finish, resolve, resolve_initial_designs};
-use coadapt_fleet::TransportKind;
 
 /// What every role takes.
 #[derive(Debug, Args)]
@@ -39,29 +36,13 @@ pub struct RoleArgs {
 
 impl RoleArgs {
     fn load(&self) -> anyhow::Result<(RunConfig, String)> {
-        let run = RunArgs {
-            config: self.config.clone(),
-            out: None,
-            seed: self.seed,
-            exploit: None,
-            explore: None,
-            designs: None,
-            transport: self.transport,
-            actors: None,
-            flow: None,
-            resume: None,
-            serve: None,
-            insecure: false,
-        };
-        let (mut cfg, name) = resolve(&run)?;
+        let o = Overrides { seed: self.seed, transport: self.transport, ..Overrides::default() };
+        let (mut cfg, name) = resolve(self.config.as_deref(), None, &o)?;
         if let Some(f) = &self.fleet {
             cfg.fleet.name = f.clone();
         }
         cfg.security = crate::security::with_args(cfg.security.clone(), &self.security);
-        let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
-        resolve_initial_designs(&mut cfg, &spec);
-        check(&cfg, &spec)?;
-        Ok((cfg, name))
+        Ok((processes::prepare(cfg)?, name))
     }
 }
 
@@ -134,38 +115,8 @@ pub fn learner(args: LearnerArgs) -> anyhow::Result<()> {
     if let Some(a) = args.serve {
         cfg.design_service.listen = a;
     }
-    let dir = match args.out {
-        Some(d) => d,
-        None if args.resume => bail!("--resume needs --out RUN_DIR"),
-        None => crate::run::default_out(&name, cfg.seed),
-    };
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
-    let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
-    let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
-    coadapt_log::logln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
-    let stop_health = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let health = match &guard {
-        coadapt_fleet::LearnerGuard::Grpc(server) => {
-            let stall = Duration::try_from_secs_f64(cfg.fleet.health_stall_secs).ok().filter(|d| !d.is_zero()).ok_or_else(|| {
-                anyhow::anyhow!("fleet.health-stall-secs: {} is not a positive number of seconds", cfg.fleet.health_stall_secs)
-            })?;
-            Some(crate::health::watch(server.health(), stall, stop_health.clone())?)
-        }
-        coadapt_fleet::LearnerGuard::None => None,
-    };
-    let start = Instant::now();
-    let result = roles::learner(&cfg, &spec, &dir, &mut links, &shutdown, args.resume);
-    stop_health.store(true, std::sync::atomic::Ordering::Relaxed);
-    if let Some(h) = health {
-        let _ = h.join();
-    }
-    // Closing the channels tells actors and optimiser the run is over.
-    drop(links);
-    let mut outcome = result?;
-    finish(&cfg, &dir, &mut outcome, &shutdown, start)?;
-    drop(guard);
-    Ok(())
+    Ok(processes::learner(&cfg, &name, args.out, args.resume, &shutdown)?)
 }
 
 /// A default actor id: the same process never gets two, two hosts rarely collide.
@@ -185,11 +136,8 @@ pub fn actor(args: ActorArgs) -> anyhow::Result<()> {
         cfg.fleet.connect = c;
     }
     let id = args.id.unwrap_or_else(default_id);
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
-    let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
-    coadapt_log::logln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
-    roles::actor(&cfg, &spec, id, &mut links, &shutdown)
+    Ok(processes::actor(&cfg, id, &shutdown)?)
 }
 
 /// `coadapt optimizer`.
@@ -201,9 +149,6 @@ pub fn optimizer(args: OptimizerArgs) -> anyhow::Result<()> {
     if let Some(c) = args.connect {
         cfg.fleet.connect = c;
     }
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let shutdown = shutdown_on_ctrl_c();
-    let mut links = cfg.fleet.optimizer_links(&cfg.security)?;
-    coadapt_log::logln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());
-    roles::optimizer(&cfg, &spec, &mut links, &shutdown, args.state_dir.as_deref())
+    Ok(processes::optimizer(&cfg, args.state_dir.as_deref(), &shutdown)?)
 }

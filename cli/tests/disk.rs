@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use coadapt_cli::run::RunConfig;
+use coadapt_coadaptation::RunConfig;
 
 const SCRIPT: &str = r#"
 mnt=$1 host=$2 bin=$3 config=$4

@@ -9,8 +9,8 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use coadapt_cli::roles;
-use coadapt_cli::run::{RunConfig, resolve_initial_designs};
+use coadapt_coadaptation::roles;
+use coadapt_coadaptation::config::{RunConfig, resolve_initial_designs};
 use coadapt_fleet::TransportKind;
 use coadapt_learner::flow::FlowMode;
 use coadapt_transport::in_process;
@@ -203,7 +203,7 @@ fn async_flow_keeps_episodes_in_flight_and_reports_policy_lag() {
     c.flow.mode = FlowMode::Async;
     let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
     resolve_initial_designs(&mut c, &spec);
-    let o = coadapt_cli::run::run_config(&c, &dir.join("run"), &AtomicBool::new(false), false).unwrap();
+    let o = coadapt_coadaptation::run::run_config(&c, &dir.join("run"), &AtomicBool::new(false), false).unwrap();
     assert!(!o.interrupted);
     assert_eq!(o.designs.iter().map(|d| d.episodes).sum::<usize>(), 10);
     assert!(o.time.max_policy_lag >= 1, "with three episodes in flight some act with older weights: {:?}", o.time);

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use coadapt_cli::run::RunConfig;
+use coadapt_coadaptation::RunConfig;
 
 fn wait_for(path: &Path, text: &str) {
     let t = Instant::now();

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use coadapt_cli::run::RunConfig;
+use coadapt_coadaptation::RunConfig;
 
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
@@ -88,7 +88,7 @@ fn learner_and_optimizer_metrics_are_scraped_during_a_run() {
 
 #[test]
 fn the_grafana_dashboard_charts_only_metrics_that_exist() {
-    use coadapt_cli::metrics::{Source, render};
+    use coadapt_coadaptation::metrics::{Source, render};
     let disk =
         std::sync::Arc::new(coadapt_learner::disk::DiskWatch::new(&std::env::temp_dir(), &std::env::temp_dir().join("no-snapshots-here")));
     let text = render(&Source::Learner(Default::default(), Some(disk))) + &render(&Source::Optimizer(Default::default()));

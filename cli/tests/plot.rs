@@ -5,7 +5,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use coadapt_cli::plot;
+use coadapt_coadaptation::plot;
 
 fn tmpdir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("coadapt-plot-{}-{name}", std::process::id()));
@@ -167,12 +167,12 @@ fn compare_draws_several_runs_in_one_figure() {
         "one,two",
     ])
     .unwrap();
-    plot::run(args.args).unwrap();
+    coadapt_cli::plot::run(args.args).unwrap();
     assert!(texts(&assert_svg(&out)).iter().any(|t| t == "two"));
     let wrong =
         <PlotArgsCli as clap::Parser>::try_parse_from(["plot", "--compare", out.to_str().unwrap(), a.to_str().unwrap(), "--labels", "x,y"])
             .unwrap();
-    assert!(plot::run(wrong.args).is_err(), "label count must match");
+    assert!(coadapt_cli::plot::run(wrong.args).is_err(), "label count must match");
     for d in [a, b, out.parent().unwrap().to_path_buf()] {
         fs::remove_dir_all(d).unwrap();
     }
@@ -181,7 +181,7 @@ fn compare_draws_several_runs_in_one_figure() {
 #[derive(clap::Parser)]
 struct PlotArgsCli {
     #[command(flatten)]
-    args: plot::PlotArgs,
+    args: coadapt_cli::plot::PlotArgs,
 }
 
 #[test]

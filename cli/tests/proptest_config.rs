@@ -7,7 +7,7 @@
 
 use std::sync::LazyLock;
 
-use coadapt_cli::run::{RunConfig, check, resolve_initial_designs};
+use coadapt_coadaptation::config::{RunConfig, check, resolve_initial_designs};
 use coadapt_core::EnvSpec;
 use proptest::prelude::*;
 use toml::{Table, Value};

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use coadapt_cli::run::RunConfig;
+use coadapt_coadaptation::RunConfig;
 
 fn tmpdir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("coadapt-resume-{}-{name}", std::process::id()));

@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::AtomicBool;
 
-use coadapt_cli::run::{RunConfig, check, resolve_initial_designs, run_config};
+use coadapt_coadaptation::config::{RunConfig, check, resolve_initial_designs};
+use coadapt_coadaptation::run::run_config;
 use coadapt_design_optimizer::role::ExploitMethod;
 use coadapt_learner::fear::ActingPolicy;
 
@@ -208,7 +209,7 @@ fn random_designs_are_a_configuration() {
 /// Runs `c` in-process with a recording optimiser in place of the real one: it notes how many
 /// start states each design request carries and answers with the box's centre.
 fn run_recording_requests(c: &RunConfig, name: &str) -> (coadapt_learner::coadapt::RunOutcome, Vec<usize>) {
-    use coadapt_cli::roles;
+    use coadapt_coadaptation::roles;
     use coadapt_transport::{DesignReply, in_process};
     let spec = coadapt_robots::make(&c.env).unwrap().spec().clone();
     let (mut learner, mut actors, mut optimizer) = in_process::fleet(1);

@@ -13,7 +13,7 @@
 
 use std::sync::OnceLock;
 
-use coadapt_cli::run::{RunConfig, check, resolve_initial_designs};
+use coadapt_coadaptation::config::{RunConfig, check, resolve_initial_designs};
 use coadapt_core::EnvSpec;
 use libfuzzer_sys::arbitrary::{Result, Unstructured};
 use libfuzzer_sys::fuzz_target;
@@ -210,7 +210,7 @@ fn load(text: &str) {
     let written = toml::to_string(&cfg).expect("an accepted config serialises");
     let back: RunConfig = toml::from_str(&written).unwrap_or_else(|e| panic!("the written config.toml does not parse: {e}\n{written}"));
     check(&back, &f.spec).expect("the written config passes check again");
-    let _ = coadapt_cli::resume::check_compatible(&back, &cfg);
+    let _ = coadapt_coadaptation::resume::check_compatible(&back, &cfg);
 }
 
 fuzz_target!(|data: &[u8]| {

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use anyhow::Context;
+use crate::error::Context;
 use coadapt_actors::{Actor, PolicyKind};
 use coadapt_core::{Env, EnvSpec};
 use coadapt_design_optimizer::resume::StateFile;
@@ -20,7 +20,7 @@ use coadapt_learner::run_dir::RunWriter;
 use coadapt_learner::snapshot;
 use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 
-use crate::run::RunConfig;
+use crate::config::RunConfig;
 use coadapt_log::duration;
 
 /// Simulation rollouts for the baselines: one deterministic episode of the population policy
@@ -209,14 +209,14 @@ pub fn learner(
     links: &mut LearnerLinks,
     shutdown: &AtomicBool,
     resume: bool,
-) -> anyhow::Result<coadapt::RunOutcome> {
+) -> crate::Result<coadapt::RunOutcome> {
     let run_id = coadapt_fleet::new_run_id();
     let root = crate::resume::snapshot_root(dir);
     let mut snaps =
         coadapt::Snapshots { cfg: cfg.snapshot.clone(), root: Some(root.clone()), run_id: run_id.clone(), ..Default::default() };
     let holds_run = dir.join("designs.csv").exists();
     if holds_run && !resume {
-        anyhow::bail!("{} already holds a run (designs.csv exists); choose another --out, or --resume it", dir.display());
+        crate::error::bail!("{} already holds a run (designs.csv exists); choose another --out, or --resume it", dir.display());
     }
     let mut writer = if holds_run {
         crate::resume::check_compatible(&crate::resume::stored_config(dir)?, cfg)?;
@@ -228,7 +228,7 @@ pub fn learner(
             for why in &skipped {
                 coadapt_log::logln!("learner: skipped snapshot {why}");
             }
-            let at = coadapt::resume_point(&state).map_err(|e| anyhow::anyhow!("snapshot {}: {e}", from.display()))?;
+            let at = coadapt::resume_point(&state).map_err(|e| crate::error::failed!("snapshot {}: {e}", from.display()))?;
             coadapt_log::logln!(
                 "learner: resuming {} from {} ({}; written by run id {}), run id {run_id}",
                 dir.display(),
@@ -294,7 +294,7 @@ pub fn learner(
 }
 
 /// One actor: runs the episodes it is handed until the learner is done.
-pub fn actor(cfg: &RunConfig, spec: &EnvSpec, id: u64, links: &mut ActorLinks, shutdown: &AtomicBool) -> anyhow::Result<()> {
+pub fn actor(cfg: &RunConfig, spec: &EnvSpec, id: u64, links: &mut ActorLinks, shutdown: &AtomicBool) -> crate::Result<()> {
     let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), &cfg.learner.sac.hidden)?;
     let mut actor =
         Actor::new(make_env_with(&cfg.env, &cfg.remote, &cfg.security)?, policy, PolicyKind::SquashedGaussian, cfg.seed.wrapping_add(id))?;
@@ -317,7 +317,7 @@ pub fn optimizer(
     links: &mut OptimizerLinks,
     shutdown: &AtomicBool,
     state_dir: Option<&Path>,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let hidden = &cfg.learner.sac.hidden;
     let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
     let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
@@ -339,7 +339,7 @@ pub fn optimizer(
                     cfg.seed ^ (0x5349_4d00 + i as u64),
                 )?)
             })
-            .collect::<anyhow::Result<Vec<_>>>()?;
+            .collect::<crate::Result<Vec<_>>>()?;
         Some(SimEvaluator { actors, version: 0 })
     } else {
         None
@@ -358,7 +358,7 @@ pub fn optimizer(
             }
             if let Some((s, replies)) = state {
                 let n = replies.len();
-                opt.restore(s, replies).map_err(|e| anyhow::anyhow!("{}: {e}", store.path().display()))?;
+                opt.restore(s, replies).map_err(|e| crate::error::failed!("{}: {e}", store.path().display()))?;
                 coadapt_log::logln!("optimizer: continuing from {} ({n} replies so far)", store.path().display());
             }
             Some(store)

@@ -37,8 +37,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
-use clap::Args;
+use crate::error::{Context, bail};
 
 mod csv;
 mod figures;
@@ -48,56 +47,26 @@ pub use csv::{
 };
 use figures::{best_return, compare_plot, landscape_plot, learning_curves, write_svg};
 
-/// Draw the figures of a co-adaptation run, or compare runs.
-///
-/// `coadapt plot RUN_DIR` writes RUN_DIR/plots/learning_curves.svg (the training return of each
-/// episode within each design, one line per design coloured by design order, evaluation returns
-/// as dots), RUN_DIR/plots/best_return.svg (the best evaluation return so far over the design
-/// index, with each design's best as a dot coloured by how it was chosen) and
-/// RUN_DIR/plots/landscape.svg (the design objective over the first two principal components of
-/// the designs tried, with the designs in order: thesis Fig. 5.9).
-///
-/// Inputs, all CSV with a header row (columns found by name, others ignored):
-/// designs.csv (index, kind, best_eval_return), episodes.csv (design, episode, return,
-/// eval_return), landscape.csv (pc1, pc2, objective) and landscape_designs.csv (index, pc1, pc2).
-/// Empty numbers are unknown. A missing file skips its plots; a file cut short by an interrupted
-/// run is plotted as far as it goes; a malformed value is an error naming file, line and column.
-///
-/// `coadapt plot --compare OUT.svg RUN_DIR RUN_DIR... [--labels a,b,...]` instead draws the best
-/// evaluation return so far over the design index of every run in one figure.
-#[derive(Debug, Args)]
-pub struct PlotArgs {
-    /// Run directories (each written by `coadapt run`).
-    #[arg(required = true, value_name = "RUN_DIR")]
-    pub runs: Vec<PathBuf>,
-    /// Draw one comparison figure of all the runs into this SVG file instead of each run's plots.
-    #[arg(long, value_name = "OUT.svg")]
-    pub compare: Option<PathBuf>,
-    /// Legend labels of the compared runs, comma-separated, one per RUN_DIR (default: the
-    /// directory names). Only with --compare.
-    #[arg(long, value_delimiter = ',', requires = "compare")]
-    pub labels: Option<Vec<String>>,
-}
-
-/// Runs `coadapt plot`.
-pub fn run(args: PlotArgs) -> anyhow::Result<()> {
-    match args.compare {
+/// Draws each run's plots (`into: None`), or one figure comparing the best evaluation
+/// return so far of all `runs` into the SVG file `into` (legend: `labels`, default the directory names).
+pub fn plot(runs: Vec<PathBuf>, into: Option<PathBuf>, labels: Option<Vec<String>>) -> crate::Result<()> {
+    match into {
         Some(out) => {
-            let labels = match args.labels {
+            let labels = match labels {
                 Some(labels) => {
-                    if labels.len() != args.runs.len() {
-                        bail!("{} labels for {} run directories", labels.len(), args.runs.len());
+                    if labels.len() != runs.len() {
+                        bail!("{} labels for {} run directories", labels.len(), runs.len());
                     }
                     labels
                 }
-                None => args.runs.iter().map(|r| dir_label(r)).collect(),
+                None => runs.iter().map(|r| dir_label(r)).collect(),
             };
-            let runs: Vec<(String, PathBuf)> = labels.into_iter().zip(args.runs).collect();
+            let runs: Vec<(String, PathBuf)> = labels.into_iter().zip(runs).collect();
             compare(&runs, &out)?;
             coadapt_log::logln!("wrote {}", out.display());
         }
         None => {
-            for dir in &args.runs {
+            for dir in &runs {
                 for path in draw_run(dir)? {
                     coadapt_log::logln!("wrote {}", path.display());
                 }
@@ -115,7 +84,7 @@ fn dir_label(dir: &Path) -> String {
 /// Draws the plots of the run in `dir` into `dir/plots/` and returns the files written. A plot
 /// whose input is missing or empty is skipped with a note on stderr; errors for an unreadable or
 /// malformed file, or when no plot could be drawn at all.
-pub fn draw_run(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+pub fn draw_run(dir: &Path) -> crate::Result<Vec<PathBuf>> {
     let designs = read_designs(&dir.join("designs.csv"))?;
     let episodes = read_episodes(&dir.join("episodes.csv"))?;
     let landscape = read_landscape(&dir.join("landscape.csv"))?;
@@ -167,7 +136,7 @@ pub fn draw_run(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 /// Draws the best evaluation return so far over the design index of each `(label, run_dir)` in
 /// one figure at `out` (SVG). A run without any evaluation return yet is left out with a note;
 /// errors when none has one, or for a malformed file.
-pub fn compare(runs: &[(String, PathBuf)], out: &Path) -> anyhow::Result<()> {
+pub fn compare(runs: &[(String, PathBuf)], out: &Path) -> crate::Result<()> {
     let mut curves = Vec::new();
     for (label, dir) in runs {
         let designs = read_designs(&dir.join("designs.csv"))?;

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use crate::error::{Context, bail};
 
 /// A row of `designs.csv`.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,7 +37,7 @@ pub struct LandscapeDesign {
 }
 
 /// `designs.csv`, or `None` when the file does not exist.
-pub fn read_designs(path: &Path) -> anyhow::Result<Option<Vec<DesignRow>>> {
+pub fn read_designs(path: &Path) -> crate::Result<Option<Vec<DesignRow>>> {
     let Some(t) = Table::read(path)? else { return Ok(None) };
     let (index, kind, best) = (t.col("index")?, t.opt_col("kind"), t.col("best_eval_return")?);
     let prototype = t.opt_col("prototype");
@@ -54,7 +54,7 @@ pub fn read_designs(path: &Path) -> anyhow::Result<Option<Vec<DesignRow>>> {
 }
 
 /// `episodes.csv`, or `None` when the file does not exist.
-pub fn read_episodes(path: &Path) -> anyhow::Result<Option<Vec<EpisodeRow>>> {
+pub fn read_episodes(path: &Path) -> crate::Result<Option<Vec<EpisodeRow>>> {
     let Some(t) = Table::read(path)? else { return Ok(None) };
     let (design, episode, ret, eval) = (t.col("design")?, t.col("episode")?, t.col("return")?, t.opt_col("eval_return"));
     t.rows(|r| {
@@ -72,14 +72,14 @@ pub fn read_episodes(path: &Path) -> anyhow::Result<Option<Vec<EpisodeRow>>> {
 }
 
 /// `landscape.csv`, or `None` when the file does not exist.
-pub fn read_landscape(path: &Path) -> anyhow::Result<Option<Vec<LandscapePoint>>> {
+pub fn read_landscape(path: &Path) -> crate::Result<Option<Vec<LandscapePoint>>> {
     let Some(t) = Table::read(path)? else { return Ok(None) };
     let (pc1, pc2, obj) = (t.col("pc1")?, t.col("pc2")?, t.col("objective")?);
     t.rows(|r| Ok(LandscapePoint { pc: [r.req_num(pc1)?, r.req_num(pc2)?], objective: r.num(obj)? })).map(Some)
 }
 
 /// `landscape_designs.csv`, or `None` when the file does not exist.
-pub fn read_landscape_designs(path: &Path) -> anyhow::Result<Option<Vec<LandscapeDesign>>> {
+pub fn read_landscape_designs(path: &Path) -> crate::Result<Option<Vec<LandscapeDesign>>> {
     let Some(t) = Table::read(path)? else { return Ok(None) };
     let (index, kind, pc1, pc2) = (t.col("index")?, t.opt_col("kind"), t.col("pc1")?, t.col("pc2")?);
     t.rows(|r| {
@@ -109,7 +109,7 @@ struct Row<'a> {
 }
 
 impl Table {
-    fn read(path: &Path) -> anyhow::Result<Option<Self>> {
+    fn read(path: &Path) -> crate::Result<Option<Self>> {
         let bytes = match std::fs::read(path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
@@ -143,7 +143,7 @@ impl Table {
         self.path.display().to_string()
     }
 
-    fn col(&self, name: &str) -> anyhow::Result<usize> {
+    fn col(&self, name: &str) -> crate::Result<usize> {
         match self.opt_col(name) {
             Some(c) => Ok(c),
             None if self.header.is_empty() => Ok(usize::MAX), // no header, hence no rows
@@ -156,13 +156,13 @@ impl Table {
     }
 
     /// Parses every row with `f`; a failing last row without a final newline is dropped.
-    fn rows<T>(&self, f: impl Fn(&Row) -> anyhow::Result<T>) -> anyhow::Result<Vec<T>> {
+    fn rows<T>(&self, f: impl Fn(&Row) -> crate::Result<T>) -> crate::Result<Vec<T>> {
         let mut out = Vec::with_capacity(self.rows.len());
         let n = self.rows.len();
         for (k, (line, fields)) in self.rows.iter().enumerate() {
             let row = Row { table: self, line: *line, fields };
             let parsed = if fields.len() != self.header.len() {
-                Err(anyhow::anyhow!("{}: line {line}: {} values for {} columns", self.name(), fields.len(), self.header.len()))
+                Err(crate::error::failed!("{}: line {line}: {} values for {} columns", self.name(), fields.len(), self.header.len()))
             } else {
                 f(&row)
             };
@@ -183,9 +183,9 @@ impl Row<'_> {
         self.fields.get(col).map(String::as_str).unwrap_or("")
     }
 
-    fn err(&self, col: usize, what: &str) -> anyhow::Error {
+    fn err(&self, col: usize, what: &str) -> crate::Error {
         let name = self.table.header.get(col).map(String::as_str).unwrap_or("?");
-        anyhow::anyhow!(
+        crate::error::failed!(
             "{}: line {}, column {} ({name}): cannot read {:?} as {what}",
             self.table.name(),
             self.line,
@@ -195,7 +195,7 @@ impl Row<'_> {
     }
 
     /// An optional number: empty or non-finite is `None`.
-    fn num(&self, col: usize) -> anyhow::Result<Option<f64>> {
+    fn num(&self, col: usize) -> crate::Result<Option<f64>> {
         let s = self.text(col);
         if s.is_empty() {
             return Ok(None);
@@ -205,14 +205,14 @@ impl Row<'_> {
     }
 
     /// A required finite number.
-    fn req_num(&self, col: usize) -> anyhow::Result<f64> {
+    fn req_num(&self, col: usize) -> crate::Result<f64> {
         match self.num(col)? {
             Some(v) => Ok(v),
             None => Err(self.err(col, "a finite number")),
         }
     }
 
-    fn int(&self, col: usize) -> anyhow::Result<usize> {
+    fn int(&self, col: usize) -> crate::Result<usize> {
         self.text(col).parse().map_err(|_| self.err(col, "a non-negative integer"))
     }
 }

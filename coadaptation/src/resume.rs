@@ -3,9 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use crate::error::{Context, bail};
 
-use crate::run::RunConfig;
+use crate::config::RunConfig;
 
 /// Keys a resumed run may change: how long the schedule runs, how many actors and how the
 /// processes talk, the snapshot settings, deadlines and restart budgets. Everything else decides
@@ -52,7 +52,7 @@ fn first_difference(prefix: &str, a: &toml::Value, b: &toml::Value) -> Option<St
 
 /// Refuses `new` when it differs from the run's `stored` config in a key that decides what the
 /// run learns, naming the key and both values.
-pub fn check_compatible(stored: &RunConfig, new: &RunConfig) -> anyhow::Result<()> {
+pub fn check_compatible(stored: &RunConfig, new: &RunConfig) -> crate::Result<()> {
     let a = toml::Value::try_from(stored)?;
     let b = toml::Value::try_from(new)?;
     if let Some(key) = first_difference("", &a, &b) {
@@ -68,7 +68,7 @@ pub fn check_compatible(stored: &RunConfig, new: &RunConfig) -> anyhow::Result<(
 }
 
 /// The config saved in run directory `dir`.
-pub fn stored_config(dir: &Path) -> anyhow::Result<RunConfig> {
+pub fn stored_config(dir: &Path) -> crate::Result<RunConfig> {
     let path = dir.join("config.toml");
     let text =
         std::fs::read_to_string(&path).with_context(|| format!("reading {} (is {} a run directory?)", path.display(), dir.display()))?;

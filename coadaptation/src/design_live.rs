@@ -13,14 +13,14 @@ use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use anyhow::Context;
+use crate::error::Context;
 use coadapt_core::EnvSpec;
 use coadapt_design_service::{DesignServer, LiveSource, ServeConfig};
 use coadapt_learner::run_dir::{DesignsObserver, RunWriter};
 use coadapt_transport::{DesignRequest, LearnerLinks, Publisher, Sender, TransportError, Weights};
 use serde::{Deserialize, Serialize};
 
-use crate::run::RunConfig;
+use crate::config::RunConfig;
 
 /// `[design-service]`: the learner's design queries during a run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -63,19 +63,19 @@ impl Default for DesignServiceConfig {
 
 impl DesignServiceConfig {
     /// The server's bounds, each checked (the error names the key).
-    pub fn serve_config(&self) -> anyhow::Result<ServeConfig> {
+    pub fn serve_config(&self) -> crate::Result<ServeConfig> {
         let positive = |key: &str, v: usize| {
-            if v == 0 { anyhow::bail!("design-service.{key}: 0 would refuse every request; at least 1") } else { Ok(v) }
+            if v == 0 { crate::error::bail!("design-service.{key}: 0 would refuse every request; at least 1") } else { Ok(v) }
         };
         let rpc_timeout = Duration::try_from_secs_f64(self.rpc_timeout_secs)
             .ok()
             .filter(|d| !d.is_zero())
             .with_context(|| format!("design-service.rpc-timeout-secs: {} is not a positive number of seconds", self.rpc_timeout_secs))?;
         if !(self.max_busy_share > 0.0 && self.max_busy_share <= 1.0) {
-            anyhow::bail!("design-service.max-busy-share: {} is not in (0, 1]", self.max_busy_share);
+            crate::error::bail!("design-service.max-busy-share: {} is not in (0, 1]", self.max_busy_share);
         }
         if self.max_optimize_evaluations == 0 {
-            anyhow::bail!("design-service.max-optimize-evaluations: 0 would refuse every Optimize; at least 1");
+            crate::error::bail!("design-service.max-optimize-evaluations: 0 would refuse every Optimize; at least 1");
         }
         Ok(ServeConfig {
             max_score_batch: positive("max-score-batch", self.max_score_batch)?,
@@ -183,7 +183,7 @@ pub fn start(
     run_id: &str,
     links: &mut LearnerLinks,
     writer: &mut RunWriter,
-) -> anyhow::Result<Option<LiveService>> {
+) -> crate::Result<Option<LiveService>> {
     let listen = cfg.design_service.listen.trim();
     if listen.is_empty() {
         return Ok(None);

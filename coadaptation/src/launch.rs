@@ -9,11 +9,11 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-use anyhow::{Context, bail};
+use crate::error::{Context, bail};
 use coadapt_fleet::supervise::{Plan, Role, supervise};
 use coadapt_fleet::{TransportKind, clean_stale};
 
-use crate::run::RunConfig;
+use crate::config::RunConfig;
 
 /// The shared-memory fleet of this start. Every start gets its own name
 /// (`coadapt-start-PID`): a run killed whole (SIGKILL of its process group, an OOM kill, a
@@ -22,7 +22,7 @@ use crate::run::RunConfig;
 /// comes back from the run's config.toml, so a generated name (this form, or `coadapt-PID` of
 /// earlier versions) is replaced, never reused. A name the operator chose (to attach processes of
 /// their own) is kept, but refused while another fleet's channels of that name exist.
-pub fn shm_fleet_name(configured: &str, pid: u32) -> anyhow::Result<String> {
+pub fn shm_fleet_name(configured: &str, pid: u32) -> crate::Result<String> {
     let generated = |n: &str| {
         let digits = n.strip_prefix("coadapt-start-").or_else(|| n.strip_prefix("coadapt-"));
         digits.is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
@@ -45,7 +45,7 @@ pub fn shm_fleet_name(configured: &str, pid: u32) -> anyhow::Result<String> {
 /// `--resume` from its newest snapshot, the other processes with it (actors hold nothing; the
 /// optimiser continues from its state file), within `fleet.max-restarts` per
 /// `fleet.restart-window-secs`.
-pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> anyhow::Result<()> {
+pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> crate::Result<()> {
     let mut cfg = cfg.clone();
     match cfg.fleet.transport {
         TransportKind::Shm => {

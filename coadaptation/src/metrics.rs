@@ -10,7 +10,7 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use anyhow::Context;
+use crate::error::Context;
 use coadapt_design_optimizer::role::Counters;
 use coadapt_learner::coadapt::Stats;
 use serde::{Deserialize, Serialize};
@@ -34,7 +34,7 @@ pub enum Source {
 }
 
 /// Serves `/metrics` on `addr` until the process ends; returns the bound address (port 0: any).
-pub fn serve(addr: &str, source: Source) -> anyhow::Result<SocketAddr> {
+pub fn serve(addr: &str, source: Source) -> crate::Result<SocketAddr> {
     let listener = TcpListener::bind(addr).with_context(|| format!("metrics: binding {addr}"))?;
     let local = listener.local_addr()?;
     let source = Arc::new(source);

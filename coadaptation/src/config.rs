@@ -1,0 +1,209 @@
+//! [`RunConfig`]: everything a co-adaptation run needs (the TOML file's layout), read with a
+//! command line's [`Overrides`] and checked against the robot.
+
+use std::path::{Path, PathBuf};
+
+use coadapt_core::EnvSpec;
+use coadapt_design_optimizer::role::{ExploitMethod, ExploreMethod, OptimizerConfig};
+use coadapt_fleet::{FleetConfig, TransportKind};
+use coadapt_learner::coadapt::ScheduleConfig;
+use coadapt_learner::fear::FearLearnerConfig;
+use coadapt_learner::flow::{FlowConfig, FlowMode};
+use serde::{Deserialize, Serialize};
+
+use crate::error::Context;
+
+/// The reference protocol on HalfCheetah, used when no `--config` is given.
+pub const DEFAULT_CONFIG: &str = include_str!("../../configs/half-cheetah-reference.toml");
+
+/// Everything a co-adaptation run needs; the TOML file's layout.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct RunConfig {
+    /// The robot (pendulum, half-cheetah, walker, hopper, daisy), or a remote one served over
+    /// dm_env_rpc: `dm-env-rpc://HOST:PORT` (dimensions and boxes come from its specs).
+    pub env: String,
+    /// Seed of every random stream: the same seed and config give the same run.
+    pub seed: u64,
+    /// Actors running episodes (processes, or threads in-process; lock-step uses one at a time).
+    pub actors: usize,
+    /// Transitions per experience chunk an actor sends.
+    pub chunk_len: usize,
+    /// Threads running the simulation baselines' rollouts.
+    pub sim_threads: usize,
+    /// Points per side of the design-landscape grid drawn at the end (0: no landscape).
+    pub landscape_grid: usize,
+    /// Start states of Eq. 5.6 for the landscape (the thesis's figures use 256).
+    pub landscape_start_states: usize,
+    pub schedule: ScheduleConfig,
+    /// Collection against training: lock-step (the reference) or episodes in flight.
+    pub flow: FlowConfig,
+    /// How the roles talk and find each other.
+    pub fleet: FleetConfig,
+    pub learner: FearLearnerConfig,
+    pub optimizer: OptimizerConfig,
+    /// Deadlines and retries of a remote environment.
+    pub remote: coadapt_fleet::RemoteEnvConfig,
+    /// Snapshots of the whole run for `--resume` (`every-episodes`, `keep`).
+    pub snapshot: coadapt_learner::snapshot::SnapshotConfig,
+    /// Prometheus `/metrics` of the learner and the optimiser (`learner-listen`,
+    /// `optimizer-listen`; empty: off).
+    pub metrics: crate::metrics::MetricsConfig,
+    /// The learner's DesignService and `design-critic` model during the run (`listen`; empty:
+    /// off) and their bounds.
+    pub design_service: crate::design_live::DesignServiceConfig,
+    /// TLS and tokens of every gRPC endpoint (`tls-cert`, `tls-key`, `tls-ca`, `tokens-file`,
+    /// `token-file`, `insecure`, ...).
+    pub security: coadapt_fleet::SecurityConfig,
+}
+
+impl Default for RunConfig {
+    fn default() -> Self {
+        Self {
+            env: "half-cheetah".into(),
+            seed: 1,
+            actors: 1,
+            chunk_len: 250,
+            sim_threads: 2,
+            landscape_grid: 40,
+            landscape_start_states: 256,
+            schedule: ScheduleConfig::default(),
+            flow: FlowConfig::default(),
+            fleet: FleetConfig::default(),
+            learner: FearLearnerConfig::default(),
+            optimizer: OptimizerConfig::default(),
+            remote: coadapt_fleet::RemoteEnvConfig::default(),
+            snapshot: coadapt_learner::snapshot::SnapshotConfig::default(),
+            metrics: crate::metrics::MetricsConfig::default(),
+            design_service: crate::design_live::DesignServiceConfig::default(),
+            security: coadapt_fleet::SecurityConfig::default(),
+        }
+    }
+}
+
+fn parse_enum<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> crate::Result<T> {
+    T::deserialize(serde::de::value::StrDeserializer::<serde::de::value::Error>::new(v))
+        .map_err(|e| crate::Error::Config(format!("--{flag} {v}: {e}")))
+}
+
+/// What a command line may change in a config (each `None`/`false`: as the config says).
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    pub seed: Option<u64>,
+    /// `optimizer.exploit`, by its config name.
+    pub exploit: Option<String>,
+    /// `optimizer.explore`, by its config name.
+    pub explore: Option<String>,
+    pub designs: Option<usize>,
+    pub transport: Option<TransportKind>,
+    pub actors: Option<usize>,
+    /// `flow.mode`, by its config name.
+    pub flow: Option<String>,
+    /// `design-service.listen`.
+    pub serve: Option<String>,
+    /// `security.insecure`.
+    pub insecure: bool,
+}
+
+/// Reads the config: `resume`'s config.toml when resuming without `config`, else `config`, else
+/// the embedded reference protocol; then the overrides. Returns it with its name (the file's
+/// stem).
+pub fn resolve(config: Option<&Path>, resume: Option<&Path>, o: &Overrides) -> crate::Result<(RunConfig, String)> {
+    let resumed_config = match (resume, config) {
+        (Some(dir), None) => Some(dir.join("config.toml")),
+        _ => None,
+    };
+    let (text, name) = match resumed_config.as_deref().or(config) {
+        Some(p) => (
+            std::fs::read_to_string(p).with_context(|| format!("reading config {}", p.display()))?,
+            p.file_stem().map_or("run".into(), |s| s.to_string_lossy().into_owned()),
+        ),
+        None => (DEFAULT_CONFIG.to_string(), "half-cheetah-reference".into()),
+    };
+    let mut cfg: RunConfig = toml::from_str(&text).map_err(|e| crate::Error::Config(format!("parsing config {name}: {e}")))?;
+    if let Some(s) = o.seed {
+        cfg.seed = s;
+    }
+    if let Some(m) = &o.exploit {
+        cfg.optimizer.exploit = parse_enum::<ExploitMethod>("exploit", m)?;
+    }
+    if let Some(m) = &o.explore {
+        cfg.optimizer.explore = parse_enum::<ExploreMethod>("explore", m)?;
+    }
+    if let Some(d) = o.designs {
+        cfg.schedule.designs = d;
+    }
+    if let Some(t) = o.transport {
+        cfg.fleet.transport = t;
+    }
+    if let Some(n) = o.actors {
+        cfg.actors = n;
+    }
+    if let Some(f) = &o.flow {
+        cfg.flow.mode = parse_enum::<FlowMode>("flow", f)?;
+    }
+    if let Some(a) = &o.serve {
+        cfg.design_service.listen = a.clone();
+    }
+    if o.insecure {
+        cfg.security.insecure = true;
+    }
+    Ok((cfg, name))
+}
+
+/// Fills in what the config leaves to the robot: the initial designs.
+pub fn resolve_initial_designs(cfg: &mut RunConfig, spec: &EnvSpec) {
+    if !cfg.schedule.initial_designs.is_empty() {
+        return;
+    }
+    cfg.schedule.initial_designs = coadapt_robots::reference_initial_designs(&cfg.env).unwrap_or_else(|| {
+        let mut rng = coadapt_core::rng(cfg.seed, 0x494e_4954);
+        let mut v = vec![spec.default_design.clone()];
+        for _ in 0..4 {
+            let mut d = vec![0.0; spec.design_dim()];
+            spec.design.sample(&mut rng, &mut d);
+            v.push(d);
+        }
+        v
+    });
+}
+
+/// Checks what the config asks of the robot `spec` and of the fleet.
+pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> crate::Result<()> {
+    if cfg.schedule.designs == 0 {
+        crate::error::bail_config!("schedule.designs: must be at least 1");
+    }
+    if cfg.actors == 0 {
+        crate::error::bail_config!("actors: must be at least 1");
+    }
+    if cfg.schedule.designs > cfg.schedule.initial_designs.len() && spec.design_dim() == 0 {
+        crate::error::bail_config!("env {}: has no design parameters to optimise", cfg.env);
+    }
+    for (i, d) in cfg.schedule.initial_designs.iter().enumerate() {
+        spec.design.check("design", d).map_err(|e| crate::Error::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
+    }
+    cfg.flow.lease().map_err(crate::Error::Config)?;
+    cfg.schedule.poll_interval().map_err(crate::Error::Config)?;
+    cfg.remote.options(&cfg.security)?;
+    if cfg.fleet.transport == TransportKind::Shm && cfg.actors > cfg.fleet.max_actors {
+        crate::error::bail_config!(
+            "actors: {} is more than fleet.max-actors ({}); raise fleet.max-actors",
+            cfg.actors,
+            cfg.fleet.max_actors
+        );
+    }
+    Ok(())
+}
+
+/// `runs/<name>-seed<seed>`, or with `-2`, `-3`, ... appended when that already holds a run, so
+/// running the same command again never overwrites or refuses.
+pub fn default_out(name: &str, seed: u64) -> PathBuf {
+    let base = PathBuf::from("runs").join(format!("{name}-seed{seed}"));
+    let mut dir = base.clone();
+    let mut i = 2;
+    while dir.join("designs.csv").exists() {
+        dir = PathBuf::from(format!("{}-{i}", base.display()));
+        i += 1;
+    }
+    dir
+}

@@ -1,0 +1,197 @@
+//! `coadapt run`: a whole co-adaptation (FEAR or a baseline) on one robot. The learner, the
+//! design optimiser and the actors run as separate processes over shared memory (the default;
+//! [`crate::launch`] launches and supervises them), or as threads of this process over the
+//! in-process transport (`--transport in-process`, [`run_config`]).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use coadapt_design_optimizer::landscape::{self, Pca2};
+use coadapt_design_optimizer::{CriticObjective, DesignObjective, QMode, SwarmObjective};
+use coadapt_fleet::TransportKind;
+use coadapt_learner::coadapt;
+use coadapt_learner::fear::{ActingPolicy, FearLearner};
+use coadapt_log::print_stdout_line;
+use coadapt_transport::in_process;
+
+use crate::config::{RunConfig, check, default_out, resolve_initial_designs};
+use crate::error::bail;
+use crate::roles;
+
+/// Runs the co-adaptation described by `cfg` into `dir`, every role a thread of this process
+/// over the in-process transport.
+pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> crate::Result<coadapt::RunOutcome> {
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    check(cfg, &spec)?;
+    let (mut learner_links, actor_links, mut optimizer_links) = in_process::fleet(cfg.actors);
+    std::thread::scope(|s| -> crate::Result<coadapt::RunOutcome> {
+        let spec = &spec;
+        // A role that fails stops the run: in one process nothing would restart it.
+        let stop_on_error = |r: crate::Result<()>| {
+            if r.is_err() {
+                shutdown.store(true, Ordering::Relaxed);
+            }
+            r
+        };
+        let actors: Vec<_> = actor_links
+            .into_iter()
+            .enumerate()
+            .map(|(i, mut links)| s.spawn(move || stop_on_error(roles::actor(cfg, spec, i as u64, &mut links, shutdown))))
+            .collect();
+        let state = crate::resume::optimizer_state_dir(dir);
+        let opt = s.spawn(move || stop_on_error(roles::optimizer(cfg, spec, &mut optimizer_links, shutdown, Some(&state))));
+        let result = roles::learner(cfg, spec, dir, &mut learner_links, shutdown, resume);
+        // Closing the learner's channels lets the other roles finish.
+        drop(learner_links);
+        let mut errors = Vec::new();
+        for t in actors.into_iter().map(|t| t.join()).chain(std::iter::once(opt.join())) {
+            match t {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => errors.push(format!("{e:#}")),
+                Err(_) => errors.push("a role thread panicked".into()),
+            }
+        }
+        match (result, errors.first()) {
+            (Ok(o), Some(first)) if o.interrupted => Err(crate::error::failed!("{first}")),
+            (Ok(o), first) => {
+                if let Some(e) = first {
+                    coadapt_log::logln!("warning: {e}");
+                }
+                Ok(o)
+            }
+            (Err(e), Some(first)) => Err(e.context(format!("first role failure: {first}"))),
+            (Err(e), None) => Err(e),
+        }
+    })
+}
+
+/// Scores the design objective on a grid over the first two principal components of the
+/// designs tried (thesis Fig. 5.9) with the final population networks, and writes
+/// `landscape.csv` (pc1, pc2, objective) and `landscape_designs.csv` (the designs, projected).
+pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome) -> crate::Result<()> {
+    let n = cfg.landscape_grid;
+    if n == 0 || outcome.designs.is_empty() {
+        return Ok(());
+    }
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let dim = spec.design_dim();
+    let designs: Vec<f32> = outcome.designs.iter().flat_map(|d| d.design.clone()).collect();
+    let pca = Pca2::fit(&designs, dim)?;
+    let grid = landscape::grid(&pca, &designs, &spec.design, n)?;
+    let learner: &mut FearLearner = &mut outcome.learner;
+    let Some(states) = learner.sample_start_states(cfg.landscape_start_states.max(1)) else { return Ok(()) };
+    let pop = learner.agent(ActingPolicy::Population);
+    let objective =
+        DesignObjective::new(pop.policy(), pop.policy_params(), pop.critic(), &[pop.critic_params(0).0], &states, spec.state_dim, dim)?;
+    let mut scores = vec![0.0; n * n];
+    CriticObjective::new(&objective, QMode::First, 2).evaluate(&grid.designs, &mut scores);
+    let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("landscape.csv"))?);
+    writeln!(f, "pc1,pc2,objective")?;
+    for (pc, s) in grid.pc.iter().zip(&scores) {
+        writeln!(f, "{},{},{}", pc[0], pc[1], s)?;
+    }
+    f.flush()?;
+    let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("landscape_designs.csv"))?);
+    writeln!(f, "index,kind,pc1,pc2")?;
+    for d in &outcome.designs {
+        let p = pca.project(&d.design);
+        writeln!(f, "{},{},{},{}", d.index, d.kind, p[0], p[1])?;
+    }
+    f.flush()?;
+    Ok(())
+}
+
+/// What a finished learner leaves besides its rows: the design landscape, the plots, and the
+/// one JSON summary line on stdout.
+pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, shutdown: &AtomicBool, start: Instant) -> crate::Result<()> {
+    if let Err(e) = write_landscape(cfg, dir, outcome) {
+        coadapt_log::logln!("warning: design landscape not written: {e:#}");
+    }
+    let interrupted = outcome.interrupted || shutdown.load(Ordering::Relaxed);
+    let plots = match crate::plot::draw_run(dir) {
+        Ok(p) => p,
+        // Stopped before anything was learned (say, Ctrl-C while the first prototype was
+        // awaited): the summary still says where the run got to.
+        Err(e) if interrupted => {
+            coadapt_log::logln!("warning: no plots: {e:#}");
+            Vec::new()
+        }
+        Err(e) => return Err(e.context("drawing the plots")),
+    };
+    for p in &plots {
+        coadapt_log::logln!("wrote {}", p.display());
+    }
+    let best = outcome.designs.iter().filter_map(|d| d.best_eval_return.map(|r| (r, d))).max_by(|a, b| a.0.total_cmp(&b.0));
+    let t = outcome.time;
+    let summary = serde_json::json!({
+        "run_dir": dir.display().to_string(),
+        "env": cfg.env,
+        "exploit": cfg.optimizer.exploit.name(),
+        "transport": cfg.fleet.transport.name(),
+        "designs": outcome.designs.len(),
+        "interrupted": interrupted,
+        "best_eval_return": best.map(|b| b.0),
+        "best_design": best.map(|b| b.1.design.clone()),
+        "design_rollouts": outcome.designs.iter().map(|d| d.design_rollouts).sum::<u64>(),
+        "seconds": start.elapsed().as_secs_f64(),
+        "learner_waiting_seconds": t.waiting,
+        "learner_sending_seconds": t.sending,
+        "learner_training_seconds": t.training,
+        "episodes_reissued": t.reissued,
+        "episodes_restarted": t.restarted,
+        "design_requests_resent": t.design_requests_resent,
+        "design_replies_refused": t.design_replies_refused,
+        "episodes_rejected": t.episodes_rejected,
+        "rollbacks": t.rollbacks,
+        "max_policy_lag": t.max_policy_lag,
+        // The prototype step (schedule.confirm-designs, schedule.reset-needs-confirmation).
+        "prototype_waiting_seconds": t.waiting_for_prototype,
+        "reset_waiting_seconds": t.waiting_for_reset,
+        "prototypes_rejected": outcome.rejected.len(),
+        "population_updates_while_waiting": t.updates_while_waiting,
+        // Every transition in the replay, and every episode start: only whole episodes get in.
+        "replay_transitions": outcome.learner.population_transitions(),
+        "start_states": outcome.learner.start_states(),
+    });
+    print_stdout_line(&summary.to_string());
+    Ok(())
+}
+
+/// `coadapt run`: the co-adaptation of `cfg` (named `name`) into `out` (default:
+/// `runs/<name>-seed<seed>`), or continuing the run in `resume`; until done or `shutdown`.
+pub fn run(mut cfg: RunConfig, name: &str, out: Option<PathBuf>, resume: Option<PathBuf>, shutdown: &AtomicBool) -> crate::Result<()> {
+    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    resolve_initial_designs(&mut cfg, &spec);
+    check(&cfg, &spec)?;
+    let resuming = resume.is_some();
+    let dir = match resume {
+        Some(d) => {
+            crate::resume::check_compatible(&crate::resume::stored_config(&d)?, &cfg)?;
+            d
+        }
+        None => out.unwrap_or_else(|| default_out(name, cfg.seed)),
+    };
+    if !resuming && dir.join("designs.csv").exists() {
+        bail!("{} already holds a run (designs.csv exists); choose another --out, or --resume it", dir.display());
+    }
+    coadapt_log::logln!(
+        "coadapt run: {} on {}, {} designs ({} episodes), exploit {}, explore {}, {} actor(s) over {}, into {}",
+        name,
+        cfg.env,
+        cfg.schedule.designs,
+        cfg.schedule.total_episodes(),
+        cfg.optimizer.exploit.name(),
+        if cfg.schedule.alternate { format!("{:?}", cfg.optimizer.explore).to_lowercase() } else { "none".into() },
+        cfg.actors,
+        cfg.fleet.transport.name(),
+        dir.display()
+    );
+    if cfg.fleet.transport != TransportKind::InProcess {
+        return crate::launch::launch(&cfg, &dir, shutdown, resuming);
+    }
+    let start = Instant::now();
+    let mut outcome = run_config(&cfg, &dir, shutdown, resuming)?;
+    finish(&cfg, &dir, &mut outcome, shutdown, start)
+}

@@ -1,0 +1,104 @@
+//! A run's design critic for the design service: Eq. 5.6 with the run's networks
+//! ([`design_model`], also what the live service of a running learner serves), a designs.csv row
+//! as a history row, and a finished run's model and history from its newest snapshot ([`load`],
+//! for `coadapt serve`).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use coadapt_design_optimizer::objective::QMode;
+use coadapt_design_optimizer::role::QModeConfig;
+use coadapt_design_service::{DesignModel, HistoryRow, StaticSource};
+use coadapt_learner::fear::{ActingPolicy, FearLearner};
+use coadapt_learner::{coadapt, networks, run_dir, snapshot};
+
+use crate::error::Context;
+
+/// Eq. 5.6 of `cfg`'s run with population networks `(policy, q1, q2)` of `version` over
+/// `start_states`, with the run's `optimizer.q`: what the optimiser maximises.
+pub fn design_model(
+    cfg: &crate::RunConfig,
+    spec: &coadapt_core::EnvSpec,
+    version: u64,
+    run_id: String,
+    (phi, q1, q2): (&[f32], &[f32], &[f32]),
+    start_states: &[f32],
+) -> crate::Result<DesignModel> {
+    let hidden = &cfg.learner.sac.hidden;
+    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
+    let mode = match cfg.optimizer.q {
+        QModeConfig::Q1 => QMode::First,
+        QModeConfig::MinOfTwin => QMode::MinOfTwin,
+        QModeConfig::Pessimistic => QMode::MeanMinusKStd(cfg.optimizer.pessimism),
+    };
+    // Both critics always: Q1 alone scores under `q1`, and the pair gives each score's
+    // disagreement.
+    let thetas: Vec<&[f32]> = vec![q1, q2];
+    Ok(DesignModel::new(
+        spec.name.clone(),
+        spec.design_names.clone(),
+        spec.design.clone(),
+        version,
+        run_id,
+        (&policy, phi, &critic, &thetas),
+        start_states,
+        spec.state_dim,
+        mode,
+    )?)
+}
+
+/// A designs.csv row as the service's history row.
+pub fn history_row(r: run_dir::DesignRow) -> HistoryRow {
+    HistoryRow {
+        index: r.index,
+        kind: r.kind,
+        design: r.design,
+        episodes: r.episodes,
+        best_eval_return: r.best_eval_return,
+        last_eval_return: r.last_eval_return,
+        predicted_objective: r.predicted_objective,
+        design_rollouts: r.design_rollouts,
+        method: r.method,
+        prototype: r.prototype,
+    }
+}
+
+/// The model and history of the run in `dir`.
+pub fn load(dir: &Path) -> crate::Result<StaticSource> {
+    let cfg = crate::resume::stored_config(dir)?;
+    let env = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?;
+    let spec = env.spec();
+    let root = crate::resume::snapshot_root(dir);
+    let (from, manifest, mut state, skipped) =
+        snapshot::load_latest(&root).with_context(|| format!("{} has no readable snapshot to serve", dir.display()))?;
+    for why in &skipped {
+        coadapt_log::logln!("serve: skipped snapshot {why}");
+    }
+    let mut fear = FearLearner::new(spec.obs_dim(), spec.act_dim(), cfg.learner.clone(), cfg.seed)?;
+    fear.load_state(&mut state).map_err(|e| crate::error::failed!("snapshot {}: {e}", from.display()))?;
+    let version = coadapt::population_version(&state).map_err(|e| crate::error::failed!("snapshot {}: {e}", from.display()))?;
+    let n = cfg.schedule.start_state_batch.max(1);
+    let starts = fear
+        .sample_start_states(n)
+        .ok_or_else(|| crate::error::failed!("snapshot {}: no start states yet (no episode finished)", from.display()))?;
+    let pop = fear.agent(ActingPolicy::Population);
+    let model = design_model(
+        &cfg,
+        spec,
+        version,
+        manifest.run_id.clone(),
+        (pop.policy_params(), pop.critic_params(0).0, pop.critic_params(1).0),
+        &starts,
+    )?;
+    let path = dir.join("designs.csv");
+    let len = std::fs::metadata(&path).with_context(|| format!("reading {}", path.display()))?.len();
+    let history = run_dir::read_designs(&path, len)?.into_iter().map(history_row).collect();
+    coadapt_log::logln!(
+        "serve: {} from {} ({}), population weights version {version}, {n} start states",
+        dir.display(),
+        from.display(),
+        manifest.label
+    );
+    Ok(StaticSource { model: Arc::new(model), history })
+}
