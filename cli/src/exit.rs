@@ -20,6 +20,7 @@ pub fn code_of(e: &anyhow::Error) -> u8 {
             .and_then(ExitCode::exit_code)
             .or_else(|| cause.downcast_ref::<SetupError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<CoadaptError>().and_then(ExitCode::exit_code))
+            .or_else(|| cause.downcast_ref::<coadapt_coadaptation::Error>().and_then(coadapt_coadaptation::Error::exit_code))
             .or_else(|| cause.downcast_ref::<std::io::Error>().and_then(ExitCode::exit_code));
         if let Some(code) = code {
             return code;
@@ -42,6 +43,10 @@ mod tests {
         assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Io(full)).context("learner")), DISK);
         assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Config("schedule.x".into()))), CONFIG);
         assert_eq!(code_of(&anyhow::anyhow!("connection refused")), 1);
+        // Through the co-adaptation's error, with context around it.
+        let full = coadapt_coadaptation::Error::Run(CoadaptError::Io(std::io::Error::from_raw_os_error(28))).context("learner");
+        assert_eq!(code_of(&anyhow::Error::new(full)), DISK);
+        assert_eq!(code_of(&anyhow::Error::new(coadapt_coadaptation::Error::Config("actors: 0".into()))), CONFIG);
         assert_eq!(code_of(&anyhow::Error::new(std::io::Error::from(ErrorKind::ConnectionReset))), 1);
         assert!(not_transient(Some(73)).is_some() && not_transient(Some(1)).is_none() && not_transient(None).is_none());
     }

@@ -9,8 +9,8 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use coadapt_coadaptation::roles;
 use coadapt_coadaptation::config::{RunConfig, resolve_initial_designs};
+use coadapt_coadaptation::roles;
 use coadapt_fleet::TransportKind;
 use coadapt_learner::flow::FlowMode;
 use coadapt_transport::in_process;

@@ -16,13 +16,15 @@ pub enum Error {
     #[error("{0}")]
     Config(String),
     /// A file could not be read or written (a full disk is told apart by its kind).
-    #[error("{0}")]
+    // Transparent, as every wrapper here: `#[from]` makes the inner error the source, and a
+    // message of its own as well would print the cause twice in a `{:#}` chain.
+    #[error(transparent)]
     Io(#[from] std::io::Error),
-    #[error("{0}")]
+    #[error(transparent)]
     Setup(#[from] SetupError),
-    #[error("{0}")]
+    #[error(transparent)]
     Run(#[from] CoadaptError),
-    #[error("{0}")]
+    #[error(transparent)]
     Supervise(#[from] SuperviseError),
     /// Anything else, said in words.
     #[error("{0}")]

@@ -65,8 +65,9 @@ pub trait Worker {
 pub enum ActorLoopError<E: Display> {
     #[error("{0}")]
     Worker(E),
+    // The cause in the message, not as a source: `{:#}` would print it twice.
     #[error("transport: {0}")]
-    Transport(#[from] TransportError),
+    Transport(TransportError),
 }
 
 /// What an actor did before it stopped.
@@ -213,4 +214,10 @@ pub fn run<W: Worker>(
         }
     }
     Ok(summary)
+}
+
+impl<E: Display> From<TransportError> for ActorLoopError<E> {
+    fn from(e: TransportError) -> Self {
+        Self::Transport(e)
+    }
 }

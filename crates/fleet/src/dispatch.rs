@@ -146,8 +146,9 @@ pub struct Done<T> {
 /// Why the dispatcher gave up.
 #[derive(Debug, thiserror::Error)]
 pub enum DispatchError {
+    // The cause in the message, not as a source: `{:#}` would print it twice.
     #[error("transport: {0}")]
-    Transport(#[from] TransportError),
+    Transport(TransportError),
     #[error("no actor has sent anything for {after:?} ({outstanding} job(s) outstanding): are the actors running?")]
     Silence { after: Duration, outstanding: usize },
     #[error("{what} not back after {after:?}: are the actors running?")]
@@ -390,5 +391,11 @@ impl<T: Display> Dispatcher<T> {
                 }
             }
         }
+    }
+}
+
+impl From<TransportError> for DispatchError {
+    fn from(e: TransportError) -> Self {
+        Self::Transport(e)
     }
 }
