@@ -24,10 +24,9 @@
 //! - [`search`]: `coadapt search`, episodic policy search (GrouPS, PePPER, PoWER, NAC) on the
 //!   planar benchmark; [`search_fleet`]: its rollouts on actors and `coadapt search-actor`;
 //!   `search_plot`: its learning-curve and synergy plots.
-//! - [`latent`]: `coadapt latent`, DDPG from pixels exploring by latent trajectory optimisation
-//!   (thesis ch. 4); [`latent_embed`]: its frozen embedding, built from state-based DDPG's frames;
-//!   [`latent_config`]: its config and flags; [`latent_fleet`]: its episodes on actors that plan where the robot is, `coadapt latent-actor`.
-//! - `latent_resume`: `coadapt latent --resume`, finished runs kept.
+//! - [`latent`]: the flags of `coadapt latent` (DDPG from pixels exploring by latent trajectory
+//!   optimisation, thesis ch. 4) and `coadapt latent-actor`; the application is
+//!   `coadapt_latent::app`.
 //! - [`actor_procs`]: actor processes a learner starts itself (search, latent), and how an actor
 //!   process joins its learner (`JoinArgs`).
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
@@ -49,10 +48,6 @@ pub mod env_serve;
 pub mod exit;
 pub mod health;
 pub mod latent;
-pub mod latent_config;
-pub mod latent_embed;
-pub mod latent_fleet;
-mod latent_resume;
 pub mod launch;
 pub mod metrics;
 pub mod plot;
@@ -100,7 +95,7 @@ pub enum Command {
     Latent(latent::LatentArgs),
     /// Runs the episodes a `coadapt latent` hands out (shm or gRPC), planning every step on
     /// this machine's camera robot.
-    LatentActor(latent_fleet::LatentActorArgs),
+    LatentActor(latent::LatentActorArgs),
     /// Runs the rollouts a `coadapt search` hands out (shm or gRPC), on this machine's robot.
     SearchActor(search_fleet::SearchActorArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
@@ -133,7 +128,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Search(args) => search::run(args),
         Command::SearchActor(args) => search_fleet::actor(args),
         Command::Latent(args) => latent::run(args),
-        Command::LatentActor(args) => latent_fleet::actor(args),
+        Command::LatentActor(args) => latent::actor(args),
         Command::Token(cmd) => credentials::token(cmd),
         Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),
