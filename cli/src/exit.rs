@@ -5,6 +5,7 @@
 
 use coadapt_latent::app::LatentError;
 use coadapt_learner::coadapt::CoadaptError;
+use coadapt_policy_search::app::SearchError;
 
 use coadapt_fleet::SetupError;
 use coadapt_fleet::supervise::SuperviseError;
@@ -22,6 +23,7 @@ pub fn code_of(e: &anyhow::Error) -> u8 {
             .or_else(|| cause.downcast_ref::<SetupError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<CoadaptError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<LatentError>().and_then(ExitCode::exit_code))
+            .or_else(|| cause.downcast_ref::<SearchError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<std::io::Error>().and_then(ExitCode::exit_code));
         if let Some(code) = code {
             return code;
@@ -45,6 +47,7 @@ mod tests {
         assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Config("schedule.x".into()))), CONFIG);
         let full = LatentError::Io { what: "writing episodes.csv".into(), error: std::io::Error::from_raw_os_error(28) };
         assert_eq!(code_of(&anyhow::Error::new(full)), DISK);
+        assert_eq!(code_of(&anyhow::Error::new(SearchError::Config("method: \"sgd\"".into()))), CONFIG);
         assert_eq!(code_of(&anyhow::anyhow!("connection refused")), 1);
         assert_eq!(code_of(&anyhow::Error::new(std::io::Error::from(ErrorKind::ConnectionReset))), 1);
         assert!(not_transient(Some(73)).is_some() && not_transient(Some(1)).is_none() && not_transient(None).is_none());

@@ -21,9 +21,9 @@
 //! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
 //!   [`design_client`]: `coadapt score`, `coadapt optimize` and `coadapt history`, its
 //!   command-line clients.
-//! - [`search`]: `coadapt search`, episodic policy search (GrouPS, PePPER, PoWER, NAC) on the
-//!   planar benchmark; [`search_fleet`]: its rollouts on actors and `coadapt search-actor`;
-//!   `search_plot`: its learning-curve and synergy plots.
+//! - [`search`]: the flags of `coadapt search` (episodic policy search: GrouPS, PePPER, PoWER,
+//!   NAC on the planar benchmark) and `coadapt search-actor`; the application is
+//!   `coadapt_policy_search::app`.
 //! - [`latent`]: the flags of `coadapt latent` (DDPG from pixels exploring by latent trajectory
 //!   optimisation, thesis ch. 4) and `coadapt latent-actor`; the application is
 //!   `coadapt_latent::app`.
@@ -58,8 +58,6 @@ pub mod role_cmd;
 pub mod roles;
 pub mod run;
 pub mod search;
-pub mod search_fleet;
-mod search_plot;
 pub mod security;
 pub mod serve;
 pub mod train;
@@ -97,7 +95,7 @@ pub enum Command {
     /// this machine's camera robot.
     LatentActor(latent::LatentActorArgs),
     /// Runs the rollouts a `coadapt search` hands out (shm or gRPC), on this machine's robot.
-    SearchActor(search_fleet::SearchActorArgs),
+    SearchActor(search::SearchActorArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
     #[command(subcommand)]
     Token(credentials::TokenCommand),
@@ -126,7 +124,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(args) => serve::run(args),
         Command::Score(args) => design_client::score(args),
         Command::Search(args) => search::run(args),
-        Command::SearchActor(args) => search_fleet::actor(args),
+        Command::SearchActor(args) => search::actor(args),
         Command::Latent(args) => latent::run(args),
         Command::LatentActor(args) => latent::actor(args),
         Command::Token(cmd) => credentials::token(cmd),
