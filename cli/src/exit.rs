@@ -3,7 +3,9 @@
 //! way every time, and restarting only hides the cause under ten copies of it. Those exit with
 //! their `sysexits.h` code, and the supervisor (`launch`) stops the fleet and says why.
 
+use coadapt_latent::app::LatentError;
 use coadapt_learner::coadapt::CoadaptError;
+use coadapt_policy_search::app::SearchError;
 
 use coadapt_fleet::SetupError;
 use coadapt_fleet::supervise::SuperviseError;
@@ -21,6 +23,8 @@ pub fn code_of(e: &anyhow::Error) -> u8 {
             .or_else(|| cause.downcast_ref::<SetupError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<CoadaptError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<coadapt_coadaptation::Error>().and_then(coadapt_coadaptation::Error::exit_code))
+            .or_else(|| cause.downcast_ref::<LatentError>().and_then(ExitCode::exit_code))
+            .or_else(|| cause.downcast_ref::<SearchError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<std::io::Error>().and_then(ExitCode::exit_code));
         if let Some(code) = code {
             return code;
@@ -42,6 +46,9 @@ mod tests {
         let full = std::io::Error::from_raw_os_error(28);
         assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Io(full)).context("learner")), DISK);
         assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Config("schedule.x".into()))), CONFIG);
+        let full = LatentError::Io { what: "writing episodes.csv".into(), error: std::io::Error::from_raw_os_error(28) };
+        assert_eq!(code_of(&anyhow::Error::new(full)), DISK);
+        assert_eq!(code_of(&anyhow::Error::new(SearchError::Config("method: \"sgd\"".into()))), CONFIG);
         assert_eq!(code_of(&anyhow::anyhow!("connection refused")), 1);
         // Through the co-adaptation's error, with context around it.
         let full = coadapt_coadaptation::Error::Run(CoadaptError::Io(std::io::Error::from_raw_os_error(28))).context("learner");

@@ -21,13 +21,12 @@
 //! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
 //!   [`design_client`]: `coadapt score`, `coadapt optimize` and `coadapt history`, its
 //!   command-line clients.
-//! - [`search`]: `coadapt search`, episodic policy search (GrouPS, PePPER, PoWER, NAC) on the
-//!   planar benchmark; [`search_fleet`]: its rollouts on actors and `coadapt search-actor`;
-//!   `search_plot`: its learning-curve and synergy plots.
-//! - [`latent`]: `coadapt latent`, DDPG from pixels exploring by latent trajectory optimisation
-//!   (thesis ch. 4); [`latent_embed`]: its frozen embedding, built from state-based DDPG's frames;
-//!   [`latent_config`]: its config and flags; [`latent_fleet`]: its episodes on actors that plan where the robot is, `coadapt latent-actor`.
-//! - `latent_resume`: `coadapt latent --resume`, finished runs kept.
+//! - [`search`]: the flags of `coadapt search` (episodic policy search: GrouPS, PePPER, PoWER,
+//!   NAC on the planar benchmark) and `coadapt search-actor`; the application is
+//!   `coadapt_policy_search::app`.
+//! - [`latent`]: the flags of `coadapt latent` (DDPG from pixels exploring by latent trajectory
+//!   optimisation, thesis ch. 4) and `coadapt latent-actor`; the application is
+//!   `coadapt_latent::app`.
 //! - [`actor_procs`]: actor processes a learner starts itself (search, latent), and how an actor
 //!   process joins its learner (`JoinArgs`).
 //! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
@@ -47,18 +46,12 @@ pub mod design_client;
 pub mod env_serve;
 pub mod exit;
 pub mod latent;
-pub mod latent_config;
-pub mod latent_embed;
-pub mod latent_fleet;
-mod latent_resume;
 pub mod plot;
 pub mod progress;
 pub mod render;
 pub mod role_cmd;
 pub mod run;
 pub mod search;
-pub mod search_fleet;
-mod search_plot;
 pub mod security;
 pub mod serve;
 pub mod train;
@@ -94,9 +87,9 @@ pub enum Command {
     Latent(latent::LatentArgs),
     /// Runs the episodes a `coadapt latent` hands out (shm or gRPC), planning every step on
     /// this machine's camera robot.
-    LatentActor(latent_fleet::LatentActorArgs),
+    LatentActor(latent::LatentActorArgs),
     /// Runs the rollouts a `coadapt search` hands out (shm or gRPC), on this machine's robot.
-    SearchActor(search_fleet::SearchActorArgs),
+    SearchActor(search::SearchActorArgs),
     /// Role tokens for the fleet's endpoints (`coadapt token new --role actor --out FILE`).
     #[command(subcommand)]
     Token(credentials::TokenCommand),
@@ -125,9 +118,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(args) => serve::run(args),
         Command::Score(args) => design_client::score(args),
         Command::Search(args) => search::run(args),
-        Command::SearchActor(args) => search_fleet::actor(args),
+        Command::SearchActor(args) => search::actor(args),
         Command::Latent(args) => latent::run(args),
-        Command::LatentActor(args) => latent_fleet::actor(args),
+        Command::LatentActor(args) => latent::actor(args),
         Command::Token(cmd) => credentials::token(cmd),
         Command::Tls(cmd) => credentials::tls(cmd),
         Command::Optimize(args) => design_client::optimize(args),

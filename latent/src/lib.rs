@@ -22,9 +22,13 @@
 //! - `agent`: Alg. 3, [`LatentAgent`]: DDPG (Q or V critic) on the stacked latent state, OU or
 //!   planned exploration (three objectives), the model, the reward model and DDPG trained at
 //!   each episode's end.
+//! - [`app`]: `coadapt latent` and `coadapt latent-actor` as a library: the config, the runs
+//!   and their run directory, `--resume`, the embedding built once, the episodes on actors
+//!   started here, the plot; [`app::run`] and [`app::actor`] take the binary's shutdown flag.
 
 mod actor;
 mod agent;
+pub mod app;
 mod dynamics;
 mod embedding;
 mod embedding_io;

@@ -26,8 +26,12 @@
 //!   [`FleetRunner`] (the learner's side, a [`RolloutRunner`]), [`run_actor`], and
 //!   [`PlanarEnv`] (from `coadapt_robots::bimanual`), the planar benchmark as a robot an actor
 //!   steps.
+//! - [`app`]: `coadapt search` and `coadapt search-actor` as a library: the config, the runs
+//!   and their run directory, the rollouts on actors started here, the plots; [`app::run`] and
+//!   [`app::actor`] take the binary's shutdown flag.
 
 mod alpha;
+pub mod app;
 mod features;
 mod fleet;
 mod groups;

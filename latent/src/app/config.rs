@@ -1,14 +1,13 @@
-//! `coadapt latent`'s config (`[camera]`, the agent, the embedding, the fleet) and its command
-//! line, resolved and checked before anything runs.
+//! `coadapt latent`'s config (`[camera]`, the agent, the embedding, the fleet) and the
+//! command line's overrides over it, resolved and checked before anything runs.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Context;
-use clap::Args;
-use coadapt_latent::{AgentConfig, Explore};
 use serde::{Deserialize, Serialize};
 
-use crate::latent_embed::EmbeddingSettings;
+use super::embed::EmbeddingSettings;
+use super::error::LatentError;
+use crate::{AgentConfig, Explore};
 
 /// The camera (the `[camera]` table).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -102,107 +101,94 @@ impl Default for LatentConfig {
     }
 }
 
-/// DDPG from pixels exploring by latent trajectory optimisation (thesis ch. 4).
-#[derive(Debug, Args)]
-pub struct LatentArgs {
-    /// The TOML config (default: the pixel half-cheetah, Q critic, planning with H = 10).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Override `agent.explore`: plan or ou.
-    #[arg(long)]
+/// What the command line overrides (each `None`: the config's value stands).
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    /// `agent.explore`: plan or ou.
     pub explore: Option<String>,
-    /// Override `agent.critic`: q or v.
-    #[arg(long)]
+    /// `agent.critic`: q or v.
     pub critic: Option<String>,
-    /// Override `agent.objective`: sum-q, reward-plus-q or last-q.
-    #[arg(long)]
+    /// `agent.objective`: sum-q, reward-plus-q or last-q.
     pub objective: Option<String>,
-    /// Override `agent.horizon`.
-    #[arg(long)]
     pub horizon: Option<usize>,
-    /// Override `agent.updates-per-episode` (1000 in Fig. 4.5, 3000 in Fig. 4.6).
-    #[arg(long)]
     pub updates_per_episode: Option<usize>,
-    /// Override `runs`.
-    #[arg(long)]
     pub runs: Option<usize>,
-    /// Override `episodes`.
-    #[arg(long)]
     pub episodes: Option<usize>,
-    /// Override `seed`.
-    #[arg(long)]
     pub seed: Option<u64>,
-    /// Override `embedding.path`.
-    #[arg(long)]
+    /// `embedding.path`.
     pub embedding: Option<PathBuf>,
-    /// Only load or build the embedding, then stop.
-    #[arg(long)]
-    pub embed_only: bool,
-    /// The run directory (default runs/latent-<explore>-<critic>-h<H>-seed<seed>).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Override `actors`: run the episodes on N actors that plan where the robot is (0: in
-    /// this process).
-    #[arg(long)]
     pub actors: Option<usize>,
-    /// Override fleet.transport: in-process (threads), shm or grpc.
-    #[arg(long, value_enum)]
+    /// `fleet.transport`.
     pub transport: Option<coadapt_fleet::TransportKind>,
-    /// Go on with the stopped run in --out: its finished runs are kept, the first unfinished
-    /// one starts again (a run is deterministic given its seed). The config must be the run's.
-    #[arg(long)]
-    pub resume: bool,
 }
 
-fn parse_enum<T: serde::de::DeserializeOwned>(key: &str, v: &str, choices: &str) -> anyhow::Result<T> {
+fn parse_enum<T: serde::de::DeserializeOwned>(key: &str, v: &str, choices: &str) -> Result<T, LatentError> {
     T::deserialize(serde::de::value::StrDeserializer::<serde::de::value::Error>::new(v))
-        .map_err(|_| anyhow::anyhow!("{key} = {v:?}: one of {choices}"))
+        .map_err(|_| LatentError::Config(format!("{key} = {v:?}: one of {choices}")))
 }
 
-pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
-    let mut cfg: LatentConfig = match &a.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            toml::from_str(&text).with_context(|| format!("parsing {}", p.display()))?
-        }
+impl LatentConfig {
+    /// The config in the TOML file at `path`.
+    pub fn load(path: &Path) -> Result<Self, LatentError> {
+        let text = std::fs::read_to_string(path).map_err(LatentError::io(format!("reading {}", path.display())))?;
+        toml::from_str(&text).map_err(|e| LatentError::Config(format!("parsing {}: {e}", path.display())))
+    }
+
+    /// The run directory when none is given: `runs/latent-<method>-seed<seed>`.
+    pub fn default_out(&self) -> PathBuf {
+        PathBuf::from(format!("runs/latent-{}-seed{}", super::run::label(self), self.seed))
+    }
+}
+
+/// The config in `file` (the defaults without one) with `o` over it, checked.
+pub fn resolve(file: Option<&Path>, o: &Overrides) -> Result<LatentConfig, LatentError> {
+    let mut cfg = match file {
+        Some(p) => LatentConfig::load(p)?,
         None => LatentConfig::default(),
     };
-    if let Some(v) = &a.explore {
+    if let Some(v) = &o.explore {
         cfg.agent.explore = parse_enum("explore", v, "plan, ou")?;
     }
-    if let Some(v) = &a.critic {
+    if let Some(v) = &o.critic {
         cfg.agent.critic = parse_enum("critic", v, "q, v")?;
     }
-    if let Some(v) = &a.objective {
+    if let Some(v) = &o.objective {
         cfg.agent.objective = parse_enum("objective", v, "sum-q, reward-plus-q, last-q")?;
     }
-    if let Some(h) = a.horizon {
+    if let Some(h) = o.horizon {
         cfg.agent.horizon = h;
     }
-    if let Some(u) = a.updates_per_episode {
+    if let Some(u) = o.updates_per_episode {
         cfg.agent.updates_per_episode = u;
     }
-    if let Some(r) = a.runs {
+    if let Some(r) = o.runs {
         cfg.runs = r;
     }
-    if let Some(e) = a.episodes {
+    if let Some(e) = o.episodes {
         cfg.episodes = e;
     }
-    if let Some(s) = a.seed {
+    if let Some(s) = o.seed {
         cfg.seed = s;
     }
-    if let Some(p) = &a.embedding {
+    if let Some(p) = &o.embedding {
         cfg.embedding.path = p.display().to_string();
     }
-    if let Some(n) = a.actors {
+    if let Some(n) = o.actors {
         cfg.actors = n;
     }
-    if let Some(t) = a.transport {
+    if let Some(t) = o.transport {
         cfg.fleet.transport = t;
     }
+    check(&mut cfg)?;
+    Ok(cfg)
+}
+
+/// Refuses settings that cannot run, naming the key; fills in the default embedding path.
+fn check(cfg: &mut LatentConfig) -> Result<(), LatentError> {
+    let bad = |m: String| Err(LatentError::Config(m));
     for (key, v) in [("episode-lease-secs", cfg.episode_lease_secs), ("episode-deadline-secs", cfg.episode_deadline_secs)] {
         if !(v.is_finite() && v > 0.0 && v < 1e9) {
-            anyhow::bail!("{key} = {v}: a positive number of seconds");
+            return bad(format!("{key} = {v}: a positive number of seconds"));
         }
     }
     if cfg.embedding.path.trim().is_empty() {
@@ -211,44 +197,40 @@ pub(crate) fn resolve(a: &LatentArgs) -> anyhow::Result<LatentConfig> {
     }
     let c = &cfg.camera;
     if !(8..=1024).contains(&c.side) || c.frames == 0 || c.action_repeat == 0 {
-        anyhow::bail!("camera: side from 8 to 1024, frames and action-repeat at least 1 ({c:?})");
+        return bad(format!("camera: side from 8 to 1024, frames and action-repeat at least 1 ({c:?})"));
     }
     if cfg.embedding.shape.image != c.side || cfg.embedding.shape.in_channels != 3 {
-        anyhow::bail!(
+        return bad(format!(
             "embedding.shape: image = {} and in-channels = {} must match the camera ({} pixels square, RGB: 3)",
-            cfg.embedding.shape.image,
-            cfg.embedding.shape.in_channels,
-            c.side
-        );
+            cfg.embedding.shape.image, cfg.embedding.shape.in_channels, c.side
+        ));
     }
     for (key, v) in
         [("runs", cfg.runs), ("episodes", cfg.episodes), ("episode-steps", cfg.episode_steps), ("agent.horizon", cfg.agent.horizon)]
     {
         if v == 0 {
-            anyhow::bail!("{key} = 0: at least 1");
+            return bad(format!("{key} = 0: at least 1"));
         }
     }
     if cfg.agent.plan_iterations == 0 && cfg.agent.explore == Explore::Plan {
-        anyhow::bail!("agent.plan-iterations = 0: planning needs at least 1 L-BFGS iteration");
+        return bad("agent.plan-iterations = 0: planning needs at least 1 L-BFGS iteration".into());
     }
     if cfg.agent.ddpg.batch_size == 0 || cfg.agent.replay_capacity < cfg.agent.ddpg.batch_size {
-        anyhow::bail!(
+        return bad(format!(
             "agent.ddpg.batch-size = {}: at least 1 and within agent.replay-capacity ({})",
-            cfg.agent.ddpg.batch_size,
-            cfg.agent.replay_capacity
-        );
+            cfg.agent.ddpg.batch_size, cfg.agent.replay_capacity
+        ));
     }
     if cfg.demonstrations > 0 && cfg.robot != "reach" {
-        anyhow::bail!(
+        return bad(format!(
             "demonstrations = {}: only robot = \"reach\" has a scripted demonstrator (robot is {:?})",
-            cfg.demonstrations,
-            cfg.robot
-        );
+            cfg.demonstrations, cfg.robot
+        ));
     }
     if cfg.embedding.episodes == 0 || cfg.embedding.steps == 0 || cfg.embedding.batch == 0 {
-        anyhow::bail!("embedding: episodes, steps and batch at least 1 each");
+        return bad("embedding: episodes, steps and batch at least 1 each".into());
     }
-    Ok(cfg)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -256,7 +238,6 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
     use super::*;
-    use std::path::Path;
 
     /// Every shipped config resolves (known keys, consistent camera and embedding).
     #[test]
@@ -265,24 +246,7 @@ mod tests {
         let mut n = 0;
         for e in std::fs::read_dir(&dir).unwrap() {
             let p = e.unwrap().path();
-            let args = LatentArgs {
-                config: Some(p.clone()),
-                explore: None,
-                critic: None,
-                objective: None,
-                horizon: None,
-                updates_per_episode: None,
-                runs: None,
-                episodes: None,
-                seed: None,
-                embedding: None,
-                embed_only: false,
-                out: None,
-                actors: None,
-                transport: None,
-                resume: false,
-            };
-            let cfg = resolve(&args).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
+            let cfg = resolve(Some(&p), &Overrides::default()).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
             assert!(!cfg.embedding.path.is_empty());
             n += 1;
         }

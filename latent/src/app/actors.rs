@@ -1,5 +1,5 @@
-//! `coadapt latent`'s fleet: the episodes on N actors (threads, or `coadapt latent-actor`
-//! processes over shared memory or gRPC) that plan where the robot is, and the actor command.
+//! `coadapt latent`'s actors: the episodes on N actors (threads, or `coadapt latent-actor`
+//! processes over shared memory or gRPC) that plan where the robot is, and the actor process.
 //!
 //! Each actor holds a [`LatentActor`] and its own camera robot; the learner publishes the
 //! packed networks (encoder included: an actor needs only the run's config) before every
@@ -8,40 +8,16 @@
 //! per-step latency is a property of the robot's host, not of the learner's.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
-use anyhow::Context;
-use clap::Args;
-use coadapt_latent::{ActorEpisode, Embedding, EpisodeRunner, FleetError, LatentActor};
-
-use crate::latent::{LatentConfig, camera_env};
 use coadapt_fleet::procs::Children;
 use coadapt_fleet::{LearnerGuard, TransportKind};
 
-/// `coadapt latent-actor`: runs the episodes a `coadapt latent` learner hands out on this
-/// machine's robot, planning every step here.
-#[derive(Debug, Args)]
-pub struct LatentActorArgs {
-    /// The run's config (its `config.toml`, or the file the learner was started with).
-    #[arg(long)]
-    pub config: PathBuf,
-    /// This actor's id, unique among the run's actors.
-    #[arg(long)]
-    pub id: u64,
-    /// How to reach the learner (over the config's [fleet]).
-    #[command(flatten)]
-    pub join: crate::actor_procs::JoinArgs,
-    /// Override `robot`: a built-in robot or `dm-env-rpc://HOST:PORT` (this host's camera
-    /// robot).
-    #[arg(long)]
-    pub robot: Option<String>,
-    /// Append each episode's planning latency here (CSV; created with its header if new).
-    #[arg(long)]
-    pub latency_csv: Option<PathBuf>,
-    /// TLS and the actor's token (over [security]).
-    #[command(flatten)]
-    pub security: crate::security::SecurityArgs,
-}
+use super::config::LatentConfig;
+use super::error::{LatentError, Within};
+use super::run::{camera_env, latency};
+use crate::{ActorEpisode, Embedding, EpisodeRunner, FleetError, LatentActor};
 
 /// The learner's fleet: the episode runner over its links, and what keeps them up.
 pub(crate) struct Fleet {
@@ -52,31 +28,35 @@ pub(crate) struct Fleet {
 }
 
 /// One actor: its networks, sized from the config alone.
-fn latent_actor(cfg: &LatentConfig, act: usize, id: u64) -> anyhow::Result<LatentActor> {
-    let emb = Embedding::new(cfg.embedding.shape).context("embedding.shape")?;
+fn latent_actor(cfg: &LatentConfig, act: usize, id: u64) -> Result<LatentActor, LatentError> {
+    let emb = Embedding::new(cfg.embedding.shape).within(|| "embedding.shape")?;
     LatentActor::new(cfg.agent.clone(), emb, cfg.camera.frames, act, cfg.seed.wrapping_mul(1_000_003).wrapping_add(id))
-        .context("building the actor's networks")
+        .within(|| "building the actor's networks")
 }
 
 /// Writes each episode's figures to `path` (CSV, appended).
-fn latency_log(path: Option<&Path>, id: u64) -> anyhow::Result<impl FnMut(&ActorEpisode) + Send + use<>> {
+fn latency_log(path: Option<&Path>, id: u64) -> Result<impl FnMut(&ActorEpisode) + Send + use<>, LatentError> {
     let mut file = match path {
         Some(p) => {
             if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+                std::fs::create_dir_all(dir).map_err(LatentError::io(format!("creating {}", dir.display())))?;
             }
             let new = !p.exists();
-            let mut f =
-                std::fs::OpenOptions::new().create(true).append(true).open(p).with_context(|| format!("opening {}", p.display()))?;
+            let mut f = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(p)
+                .map_err(LatentError::io(format!("opening {}", p.display())))?;
             if new {
-                writeln!(f, "assignment,train,steps,return,plan_ms_mean,plan_ms_p90,seconds")?;
+                writeln!(f, "assignment,train,steps,return,plan_ms_mean,plan_ms_p90,seconds")
+                    .map_err(LatentError::io(format!("writing {}", p.display())))?;
             }
             Some(f)
         }
         None => None,
     };
     Ok(move |e: &ActorEpisode| {
-        let (mean, p90) = crate::latent::latency(&e.plan_ms);
+        let (mean, p90) = latency(&e.plan_ms);
         coadapt_log::logln!(
             "latent actor {id}: {} episode (assignment {}): {} steps, return {:.1}, plan {mean:.1} ms/step (p90 {p90:.1}), {:.1} s",
             if e.train { "training" } else { "evaluation" },
@@ -119,7 +99,7 @@ impl Fleet {
     /// The learner's side over `cfg.fleet`, with `cfg.actors` actors started here (threads,
     /// or processes unless `start-actors = false`); `out` is the run directory (its
     /// `config.toml` is what started actors read).
-    pub(crate) fn start(cfg: &LatentConfig, out: &Path, act: usize) -> anyhow::Result<Self> {
+    pub(crate) fn start(cfg: &LatentConfig, out: &Path, act: usize) -> Result<Self, LatentError> {
         let state = cfg.camera.frames * cfg.embedding.shape.latent;
         let dims = coadapt_transport::messages::Dims { obs: state, act, design: 0 };
         let lease = std::time::Duration::from_secs_f64(cfg.episode_lease_secs);
@@ -138,10 +118,10 @@ impl Fleet {
                         let steps = cfg.episode_steps;
                         Ok(std::thread::spawn(move || {
                             let stop = std::sync::atomic::AtomicBool::new(false);
-                            coadapt_latent::run_actor(&mut actor, source.env(), steps, i as u64, &mut links, &stop, &mut log)
+                            crate::run_actor(&mut actor, source.env(), steps, i as u64, &mut links, &stop, &mut log)
                         }))
                     })
-                    .collect::<anyhow::Result<Vec<_>>>()?;
+                    .collect::<Result<Vec<_>, LatentError>>()?;
                 (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
             }
             _ => {
@@ -178,23 +158,18 @@ impl Fleet {
     }
 }
 
-/// `coadapt latent-actor`.
-pub fn actor(a: LatentActorArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&a.config).with_context(|| format!("reading {}", a.config.display()))?;
-    let mut cfg: LatentConfig = toml::from_str(&text).with_context(|| format!("parsing {}", a.config.display()))?;
-    a.join.apply(&mut cfg.fleet)?;
-    if let Some(r) = &a.robot {
-        cfg.robot = r.clone();
-    }
-    cfg.security = crate::security::with_args(cfg.security.clone(), &a.security);
-    let mut source = camera_env(&cfg)?;
+/// `coadapt latent-actor`: runs the episodes a learner hands out over `cfg.fleet` (shm or
+/// gRPC) on `cfg.robot`, planning here, until the learner closes the queue or `shutdown` is
+/// set; each episode's planning latency is appended to `latency_csv`. Returns how many
+/// episodes it ran.
+pub fn actor(cfg: &LatentConfig, id: u64, latency_csv: Option<&Path>, shutdown: &AtomicBool) -> Result<u64, LatentError> {
+    let mut source = camera_env(cfg)?;
     let act = source.env().spec().act_dim();
-    let mut actor = latent_actor(&cfg, act, a.id)?;
-    let mut links = cfg.fleet.actor_links(a.id, &cfg.security)?;
-    let shutdown = crate::progress::shutdown_on_ctrl_c();
-    let mut log = latency_log(a.latency_csv.as_deref(), a.id)?;
-    coadapt_log::logln!("latent actor {}: {} through the camera over {}", a.id, cfg.robot, cfg.fleet.transport.name());
-    let n = coadapt_latent::run_actor(&mut actor, source.env(), cfg.episode_steps, a.id, &mut links, &shutdown, &mut log)?;
-    coadapt_log::logln!("latent actor {}: done after {n} episodes", a.id);
-    Ok(())
+    let mut actor = latent_actor(cfg, act, id)?;
+    let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
+    let mut log = latency_log(latency_csv, id)?;
+    coadapt_log::logln!("latent actor {id}: {} through the camera over {}", cfg.robot, cfg.fleet.transport.name());
+    let n = crate::run_actor(&mut actor, source.env(), cfg.episode_steps, id, &mut links, shutdown, &mut log)?;
+    coadapt_log::logln!("latent actor {id}: done after {n} episodes");
+    Ok(n)
 }

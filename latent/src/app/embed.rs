@@ -11,12 +11,15 @@
 use std::io::Write;
 use std::path::Path;
 
-use anyhow::Context;
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use coadapt_core::{Env, Pixels, ReplayBuffer, Transition};
-use coadapt_latent::{Embedding, EmbeddingConfig, EmbeddingTrainer, FrameSet};
 use coadapt_learner::config::DdpgConfig;
 use coadapt_learner::ddpg::Ddpg;
 use serde::{Deserialize, Serialize};
+
+use super::error::LatentError;
+use crate::{Embedding, EmbeddingConfig, EmbeddingTrainer, FrameSet};
 
 /// How the embedding is built (the `[embedding]` table).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -91,13 +94,16 @@ impl FrameSource {
 }
 
 /// Collects the frames and trains the embedding; writes it to `path` and its training log
-/// next to it (`<path>.csv`: step, reconstruction, pull, push of each logged step).
+/// next to it (`<path>.csv`: step, reconstruction, pull, push of each logged step). Stops,
+/// writing nothing, when `shutdown` is set.
 pub fn build(
     settings: &EmbeddingSettings,
     mut source: FrameSource,
     episode_steps: usize,
     path: &Path,
-) -> anyhow::Result<(Embedding, Vec<f32>)> {
+    shutdown: &AtomicBool,
+) -> Result<(Embedding, Vec<f32>), LatentError> {
+    let stopped = || LatentError::Interrupted(format!("interrupted while building the embedding; {} not written", path.display()));
     let px_len = 3 * settings.shape.image * settings.shape.image;
     let spec = source.env().spec().clone();
     let (design, act) = (spec.default_design.clone(), spec.act_dim());
@@ -120,9 +126,15 @@ pub fn build(
     let mut a = vec![0.0; act];
     let t0 = std::time::Instant::now();
     for ep in 0..settings.episodes {
+        if shutdown.load(Ordering::Relaxed) {
+            return Err(stopped());
+        }
         let mut episode = source.env().reset(settings.seed * 1_000_003 + ep as u64, &design)?.to_vec();
         if episode.len() < px_len {
-            anyhow::bail!("the robot's observation has {} values, fewer than one {px_len}-value frame", episode.len());
+            return Err(LatentError::Config(format!(
+                "the robot's observation has {} values, fewer than one {px_len}-value frame",
+                episode.len()
+            )));
         }
         episode.truncate(px_len);
         let mut s = source.state().map(<[f32]>::to_vec);
@@ -157,7 +169,7 @@ pub fn build(
                 break;
             }
         }
-        frames.push_episode(&episode).map_err(|e| anyhow::anyhow!("frames of episode {ep}: {e}"))?;
+        frames.push_episode(&episode).map_err(|e| LatentError::Config(format!("frames of episode {ep}: {e}")))?;
         coadapt_log::logln!(
             "embedding: collection episode {}/{} return {ret:.1} ({} frames, {:.0} s)",
             ep + 1,
@@ -168,25 +180,27 @@ pub fn build(
     }
     let emb = Embedding::new(settings.shape)?;
     if emb.image_len() != px_len {
-        anyhow::bail!(
+        return Err(LatentError::Config(format!(
             "embedding.shape: {}x{} images of {} channels, but the camera gives {px_len} values",
-            settings.shape.image,
-            settings.shape.image,
-            settings.shape.in_channels
-        );
+            settings.shape.image, settings.shape.image, settings.shape.in_channels
+        )));
     }
     let mut trainer = EmbeddingTrainer::new(emb, settings.lr, &mut rng);
     let log_path = path.with_extension("csv");
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(LatentError::io(format!("creating {}", dir.display())))?;
     }
-    let mut log = std::io::BufWriter::new(std::fs::File::create(&log_path).with_context(|| format!("creating {}", log_path.display()))?);
-    writeln!(log, "step,reconstruction,pull,push")?;
+    let writing = || LatentError::io(format!("writing {}", log_path.display()));
+    let mut log =
+        std::io::BufWriter::new(std::fs::File::create(&log_path).map_err(LatentError::io(format!("creating {}", log_path.display())))?);
+    writeln!(log, "step,reconstruction,pull,push").map_err(writing())?;
     for step in 1..=settings.steps {
+        if shutdown.load(Ordering::Relaxed) {
+            return Err(stopped());
+        }
         let p = trainer.step(&frames, settings.batch, &mut rng);
         if step % 50 == 0 || step == settings.steps {
-            writeln!(log, "{step},{},{},{}", p.reconstruction, p.pull, p.push)?;
-            log.flush()?;
+            writeln!(log, "{step},{},{},{}", p.reconstruction, p.pull, p.push).and_then(|()| log.flush()).map_err(writing())?;
         }
         if step % 200 == 0 || step == settings.steps {
             coadapt_log::logln!(
@@ -199,7 +213,7 @@ pub fn build(
             );
         }
     }
-    coadapt_latent::save_embedding(path, &trainer.emb, &trainer.enc, &trainer.dec)?;
+    crate::save_embedding(path, &trainer.emb, &trainer.enc, &trainer.dec)?;
     coadapt_log::logln!("embedding: saved {}", path.display());
     Ok((trainer.emb, trainer.enc))
 }
@@ -207,12 +221,13 @@ pub fn build(
 /// The embedding at `path`, or a fresh one built there (see [`build`]).
 pub fn load_or_build(
     settings: &EmbeddingSettings,
-    make_env: impl FnOnce() -> anyhow::Result<FrameSource>,
+    make_env: impl FnOnce() -> Result<FrameSource, LatentError>,
     episode_steps: usize,
-) -> anyhow::Result<(Embedding, Vec<f32>)> {
+    shutdown: &AtomicBool,
+) -> Result<(Embedding, Vec<f32>), LatentError> {
     let path = Path::new(&settings.path);
     if path.exists() {
-        let (emb, enc, _) = coadapt_latent::load_embedding(path)?;
+        let (emb, enc, _) = crate::load_embedding(path)?;
         coadapt_log::logln!("embedding: loaded {}", path.display());
         return Ok((emb, enc));
     }
@@ -222,5 +237,5 @@ pub fn load_or_build(
         settings.episodes,
         settings.steps
     );
-    build(settings, make_env()?, episode_steps, path)
+    build(settings, make_env()?, episode_steps, path, shutdown)
 }

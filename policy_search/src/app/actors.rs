@@ -1,47 +1,26 @@
-//! `coadapt search`'s fleet: the rollouts on N actors (threads, or `coadapt search-actor`
-//! processes over shared memory or gRPC), and the actor command itself.
+//! `coadapt search`'s actors: the rollouts on N actors (threads, or `coadapt search-actor`
+//! processes over shared memory or gRPC), and the actor process itself.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
-use anyhow::Context;
-use clap::Args;
-use coadapt_policy_search::{FleetRunner, PlanarEnv};
-
-use crate::search::SearchConfig;
 use coadapt_fleet::procs::Children;
 use coadapt_fleet::{LearnerGuard, TransportKind};
 
-/// `coadapt search-actor`: runs the rollouts a search hands out on this machine's robot.
-#[derive(Debug, Args)]
-pub struct SearchActorArgs {
-    /// The search's config (its `config.toml`, or the file the search was started with).
-    #[arg(long)]
-    pub config: PathBuf,
-    /// This actor's id, unique among the search's actors.
-    #[arg(long)]
-    pub id: u64,
-    /// How to reach the search (over the config's [fleet]).
-    #[command(flatten)]
-    pub join: crate::actor_procs::JoinArgs,
-    /// Override `robot`: step this dm_env_rpc robot (`dm-env-rpc://HOST:PORT`) instead of the
-    /// built-in planar one.
-    #[arg(long)]
-    pub robot: Option<String>,
-    /// TLS and the actor's token (over [security]).
-    #[command(flatten)]
-    pub security: crate::security::SecurityArgs,
-}
+use super::config::SearchConfig;
+use super::error::{SearchError, Within};
+use crate::{FleetRunner, PlanarEnv};
 
 /// The search's fleet: the runner over the learner's links, and what keeps them up.
 pub(crate) struct Fleet {
     pub(crate) runner: FleetRunner,
     guard: LearnerGuard,
-    threads: Vec<std::thread::JoinHandle<Result<u64, coadapt_policy_search::RolloutError>>>,
+    threads: Vec<std::thread::JoinHandle<Result<u64, crate::RolloutError>>>,
     children: Children,
 }
 
 impl Fleet {
-    pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> anyhow::Result<Self> {
+    pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> Result<Self, SearchError> {
         let env = PlanarEnv::new(cfg.planar());
         let spec = coadapt_core::Env::spec(&env).clone();
         let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
@@ -58,10 +37,10 @@ impl Fleet {
                         let steps = spec.max_episode_steps;
                         Ok(std::thread::spawn(move || {
                             let stop = std::sync::atomic::AtomicBool::new(false);
-                            coadapt_policy_search::run_actor(&mut *robot, steps, i as u64, &mut links, &stop)
+                            crate::run_actor(&mut *robot, steps, i as u64, &mut links, &stop)
                         }))
                     })
-                    .collect::<anyhow::Result<Vec<_>>>()?;
+                    .collect::<Result<Vec<_>, SearchError>>()?;
                 (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
             }
             _ => {
@@ -98,53 +77,44 @@ impl Fleet {
     }
 }
 
-/// `coadapt search-actor`.
-pub fn actor(a: SearchActorArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&a.config).with_context(|| format!("reading {}", a.config.display()))?;
-    let mut cfg: SearchConfig = toml::from_str(&text).with_context(|| format!("parsing {}", a.config.display()))?;
-    if cfg.task != "planar" {
-        anyhow::bail!("task: {:?}; only \"planar\" so far", cfg.task);
-    }
-    a.join.apply(&mut cfg.fleet)?;
-    if let Some(r) = &a.robot {
-        cfg.robot = r.clone();
-    }
-    let security = crate::security::with_args(cfg.security.clone(), &a.security);
-    let mut robot = robot(&cfg, &security)?;
-    let mut links = cfg.fleet.actor_links(a.id, &security)?;
-    let shutdown = crate::progress::shutdown_on_ctrl_c();
+/// `coadapt search-actor`: runs the rollouts a search hands out over `cfg.fleet` (shm or
+/// gRPC) on `cfg.robot` (the built-in planar robot when empty), with `cfg.security`, until the
+/// search closes the queue or `shutdown` is set. Returns how many rollouts it ran.
+pub fn actor(cfg: &SearchConfig, id: u64, shutdown: &AtomicBool) -> Result<u64, SearchError> {
+    let mut robot = robot(cfg, &cfg.security)?;
+    let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
     let name = if cfg.robot.is_empty() { "the planar robot" } else { cfg.robot.as_str() };
-    coadapt_log::logln!("search actor {}: {name} over {}", a.id, cfg.fleet.transport.name());
+    coadapt_log::logln!("search actor {id}: {name} over {}", cfg.fleet.transport.name());
     let steps = coadapt_core::Env::spec(&PlanarEnv::new(cfg.planar())).max_episode_steps;
-    let n = coadapt_policy_search::run_actor(&mut *robot, steps, a.id, &mut links, &shutdown)?;
-    coadapt_log::logln!("search actor {}: done after {n} rollouts", a.id);
-    Ok(())
+    let n = crate::run_actor(&mut *robot, steps, id, &mut links, shutdown)?;
+    coadapt_log::logln!("search actor {id}: done after {n} rollouts");
+    Ok(n)
 }
 
 /// The robot an actor steps: the built-in planar one, or `cfg.robot` over dm_env_rpc (which
 /// must have the planar task's shape: 12 actions, a 3-value observation, no design).
-fn robot(cfg: &SearchConfig, security: &coadapt_fleet::SecurityConfig) -> anyhow::Result<Box<dyn coadapt_core::Env>> {
+fn robot(cfg: &SearchConfig, security: &coadapt_fleet::SecurityConfig) -> Result<Box<dyn coadapt_core::Env>, SearchError> {
     if cfg.robot.is_empty() {
         return Ok(Box::new(PlanarEnv::new(cfg.planar())));
     }
     if !coadapt_env_rpc::is_remote(&cfg.robot) {
-        anyhow::bail!("robot = {:?}: empty (the built-in planar robot) or dm-env-rpc://HOST:PORT", cfg.robot);
+        return Err(SearchError::Config(format!("robot = {:?}: empty (the built-in planar robot) or dm-env-rpc://HOST:PORT", cfg.robot)));
     }
     let remote =
-        coadapt_env_rpc::RemoteEnv::connect(&cfg.robot, cfg.remote.options(security)?).with_context(|| format!("robot = {}", cfg.robot))?;
+        coadapt_env_rpc::RemoteEnv::connect(&cfg.robot, cfg.remote.options(security)?).within(|| format!("robot = {}", cfg.robot))?;
     let env = ServerUnits::new(remote);
     let (want, got) = (PlanarEnv::new(cfg.planar()), coadapt_core::Env::spec(&env));
     let want = coadapt_core::Env::spec(&want);
     // (A remote robot need not say its episode length: the actor plays the task's steps.)
     if (got.act_dim(), got.obs_dim()) != (want.act_dim(), want.obs_dim()) {
-        anyhow::bail!(
+        return Err(SearchError::Config(format!(
             "robot = {}: {} actions and {}-value observations; the planar task needs {} and {}",
             cfg.robot,
             got.act_dim(),
             got.obs_dim(),
             want.act_dim(),
             want.obs_dim()
-        );
+        )));
     }
     Ok(Box::new(env))
 }

@@ -8,9 +8,8 @@
 
 use std::path::Path;
 
-use anyhow::Context;
-
-use crate::latent::LatentConfig;
+use super::config::LatentConfig;
+use super::error::LatentError;
 
 /// The header `coadapt latent` writes.
 pub(crate) const HEADER: &str = "run,episode,train_return,eval_return,train_steps,eval_steps,model_loss,plan_ms_mean,plan_ms_p90,seconds";
@@ -66,26 +65,28 @@ fn differing(a: &toml::Value, b: &toml::Value, prefix: &str, out: &mut Vec<Strin
 }
 
 /// Reads `out`'s config and episodes and keeps its leading finished runs.
-pub(crate) fn finished(out: &Path, cfg: &LatentConfig) -> anyhow::Result<Finished> {
+pub(crate) fn finished(out: &Path, cfg: &LatentConfig) -> Result<Finished, LatentError> {
     let path = out.join("config.toml");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("--resume: reading {}", path.display()))?;
-    let theirs: LatentConfig = toml::from_str(&text).with_context(|| format!("--resume: parsing {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).map_err(LatentError::io(format!("--resume: reading {}", path.display())))?;
+    let theirs: LatentConfig =
+        toml::from_str(&text).map_err(|e| LatentError::Config(format!("--resume: parsing {}: {e}", path.display())))?;
     let (a, b) = (comparable(&theirs), comparable(cfg));
     if a != b {
         let mut keys = Vec::new();
-        differing(&toml::Value::try_from(&a)?, &toml::Value::try_from(&b)?, "", &mut keys);
-        anyhow::bail!(
+        let value = |c: &LatentConfig| toml::Value::try_from(c).map_err(|e| LatentError::Config(e.to_string()));
+        differing(&value(&a)?, &value(&b)?, "", &mut keys);
+        return Err(LatentError::Config(format!(
             "--resume: the config differs from the run's {} in {}; resume with --config {}",
             path.display(),
             keys.join(", "),
             path.display()
-        );
+        )));
     }
     let path = out.join("episodes.csv");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("--resume: reading {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).map_err(LatentError::io(format!("--resume: reading {}", path.display())))?;
     let mut lines = text.lines();
     if lines.next() != Some(HEADER) {
-        anyhow::bail!("--resume: {} does not start with coadapt latent's header", path.display());
+        return Err(LatentError::Config(format!("--resume: {} does not start with coadapt latent's header", path.display())));
     }
     let mut f = Finished::default();
     let mut current: Vec<(String, [f64; 10])> = Vec::new();
