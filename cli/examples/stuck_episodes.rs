@@ -16,8 +16,8 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use coadapt_cli::render::Policy;
 use coadapt_core::Env;
+use coadapt_learner::render::Policy;
 use coadapt_robots::half_cheetah::{HalfCheetah, JOINT_LIMITS, SimConfig};
 use rand_distr::{Distribution, StandardNormal};
 

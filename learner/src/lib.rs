@@ -19,7 +19,8 @@
 //!   written crash-safely and checked on reading, for resuming after any crash.
 //! - [`disk`]: free space where the run directory lives against what the next snapshot needs
 //!   (the progress line's and `/metrics`' warning before a full disk stops a run).
-//! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`.
+//! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`;
+//!   [`render`]: an episode of a robot with a trained policy as an animated GIF (`coadapt render`).
 
 pub mod agent;
 pub mod coadapt;
@@ -30,6 +31,7 @@ pub mod fear;
 pub mod flow;
 pub mod networks;
 pub mod prototype;
+pub mod render;
 pub mod run_dir;
 pub mod sac;
 pub mod snapshot;
