@@ -3,6 +3,7 @@
 //! way every time, and restarting only hides the cause under ten copies of it. Those exit with
 //! their `sysexits.h` code, and the supervisor (`launch`) stops the fleet and says why.
 
+use coadapt_bench::BenchError;
 use coadapt_learner::coadapt::CoadaptError;
 
 use coadapt_fleet::SetupError;
@@ -20,6 +21,7 @@ pub fn code_of(e: &anyhow::Error) -> u8 {
             .and_then(ExitCode::exit_code)
             .or_else(|| cause.downcast_ref::<SetupError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<CoadaptError>().and_then(ExitCode::exit_code))
+            .or_else(|| cause.downcast_ref::<BenchError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<std::io::Error>().and_then(ExitCode::exit_code));
         if let Some(code) = code {
             return code;
@@ -41,6 +43,11 @@ mod tests {
         let full = std::io::Error::from_raw_os_error(28);
         assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Io(full)).context("learner")), DISK);
         assert_eq!(code_of(&anyhow::Error::new(CoadaptError::Config("schedule.x".into()))), CONFIG);
+        assert_eq!(code_of(&anyhow::Error::new(BenchError::Config("--repetitions must be at least 1".into()))), CONFIG);
+        let full = BenchError::Io { what: "writing under target/bench-snapshot/n1".into(), error: std::io::Error::from_raw_os_error(28) };
+        assert_eq!(code_of(&anyhow::Error::new(full)), DISK);
+        let setup = BenchError::Setup(SetupError::Config("tls".into()));
+        assert_eq!(code_of(&anyhow::Error::new(setup)), CONFIG);
         assert_eq!(code_of(&anyhow::anyhow!("connection refused")), 1);
         assert_eq!(code_of(&anyhow::Error::new(std::io::Error::from(ErrorKind::ConnectionReset))), 1);
         assert!(not_transient(Some(73)).is_some() && not_transient(Some(1)).is_none() && not_transient(None).is_none());
