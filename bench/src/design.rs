@@ -73,17 +73,24 @@ fn designs(n: usize, seed: u64) -> Vec<f32> {
 
 /// Times `f` for about `seconds` (after two warm-up calls); emits latency quantiles and
 /// designs/s under `config`. `prepare` makes each call's input outside the timed region (the
-/// gRPC side's request copy; nothing in process), so both sides time the same work.
-fn time_calls<T>(config: &str, batch: usize, seconds: f64, mut prepare: impl FnMut() -> T, mut f: impl FnMut(T)) {
-    f(prepare());
-    f(prepare());
+/// gRPC side's request copy; nothing in process), so both sides time the same work. A failed
+/// call ends the benchmark before any figure of `config` is printed.
+fn time_calls<T>(
+    config: &str,
+    batch: usize,
+    seconds: f64,
+    mut prepare: impl FnMut() -> T,
+    mut f: impl FnMut(T) -> Result<(), BenchError>,
+) -> Result<(), BenchError> {
+    f(prepare())?;
+    f(prepare())?;
     let mut lat = Vec::new();
     let mut timed = 0.0;
     let start = Instant::now();
     while start.elapsed().as_secs_f64() < seconds || lat.len() < 3 {
         let input = prepare();
         let t = Instant::now();
-        f(input);
+        f(input)?;
         let dt = t.elapsed().as_secs_f64();
         timed += dt;
         lat.push(dt * 1e3);
@@ -96,6 +103,7 @@ fn time_calls<T>(config: &str, batch: usize, seconds: f64, mut prepare: impl FnM
     emit("design_score_latency_p10", config, q(0.1), "ms");
     emit("design_score_latency_p90", config, q(0.9), "ms");
     emit("design_score", config, (lat.len() * batch) as f64 / total, "designs/s");
+    Ok(())
 }
 
 fn serve(m: DesignModel, tls: Option<&std::path::Path>) -> Result<coadapt_design_service::DesignServer, BenchError> {
@@ -147,7 +155,16 @@ pub fn run(a: &DesignOptions) -> Result<(), BenchError> {
         // In process: Eq. 5.6 on this thread, as the server's pool computes it.
         let m = model(&sac)?;
         let (mut mean, mut spread, mut ws) = (vec![0.0; n], vec![0.0; n], ObjectiveWorkspace::default());
-        time_calls(&format!("inproc-batch{n}-{STATES}states"), n, a.seconds, || (), |()| m.score(&d, &mut mean, &mut spread, &mut ws));
+        time_calls(
+            &format!("inproc-batch{n}-{STATES}states"),
+            n,
+            a.seconds,
+            || (),
+            |()| {
+                m.score(&d, &mut mean, &mut spread, &mut ws);
+                Ok(())
+            },
+        )?;
         let mut transports: Vec<(&str, Option<&std::path::Path>)> = vec![("grpc", None)];
         if let Some(dir) = &a.tls {
             transports.push(("grpc-tls", Some(dir.as_path())));
@@ -162,10 +179,13 @@ pub fn run(a: &DesignOptions) -> Result<(), BenchError> {
                 a.seconds,
                 || req.clone(),
                 |req| {
-                    let r = rt.block_on(c.score(req));
-                    assert!(r.is_ok_and(|r| r.get_ref().scores.len() == n), "a Score call failed");
+                    let got = rt.block_on(c.score(req))?.get_ref().scores.len();
+                    if got != n {
+                        return Err(BenchError::Failed(format!("a Score call answered {got} scores for {n} designs")));
+                    }
+                    Ok(())
                 },
-            );
+            )?;
         }
     }
     if !a.score_only {
