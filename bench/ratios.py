@@ -42,7 +42,7 @@ def transport_pairs(figures):
     return sorted(pairs, key=lambda p: not p[1].startswith("grpc-"))  # grpc rows first, then shm
 
 
-# `coadapt bench conv` (cli/src/bench_conv.rs) is paired with bench/peers/conv_bench.py by config:
+# `coadapt bench conv` (bench/src/conv.rs) is paired with bench/peers/conv_bench.py by config:
 # ours against the same config (PyTorch with one thread, the matched figure) and, for context,
 # against `<config>-threadsN` (PyTorch's default threads) when the file has it. ms: lower is better.
 CONV_BENCHES = ("conv_forward", "conv_forward_backward")

@@ -1,5 +1,5 @@
 """The image embedding's convolutions in PyTorch: the peer of `coadapt bench conv`
-(cli/src/bench_conv.rs).
+(bench/src/conv.rs).
 
 The shapes are read from the file `coadapt bench conv --dump FILE` writes (the layers of
 `Embedding::new(EmbeddingConfig::default())`: 3x3, stride 2, padding 1; conv 3->32 (64->32),

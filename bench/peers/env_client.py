@@ -2,7 +2,7 @@
 
 usage: python bench/peers/env_client.py dm-env-rpc://HOST:PORT [SECONDS] [NAME]
 
-The same work as the Rust client (cli/src/bench_env.rs): one world, actions drawn before the
+The same work as the Rust client (bench/src/env.rs): one world, actions drawn before the
 timed loop (uniform in the action box), every step requesting observation, reward and
 discount, each step timed on its own; at an episode's end a ResetWorld (design, seed) and the
 first step of the next episode, inside the time. Prints one JSON line per figure. Runs in the

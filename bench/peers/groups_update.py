@@ -1,4 +1,4 @@
-"""One GrouPS update in NumPy: the peer of `coadapt bench groups` (cli/src/bench_groups.rs).
+"""One GrouPS update in NumPy: the peer of `coadapt bench groups` (bench/src/groups.rs).
 
 The same work as `Groups::update` + `Groups::resize` in policy_search/src/groups.rs (thesis
 Alg. 1, Eq. 2.15-2.29 in the form of thesis-notes.md 1.3-1.4): the best-k reward weights, then

@@ -3,6 +3,7 @@
 //! way every time, and restarting only hides the cause under ten copies of it. Those exit with
 //! their `sysexits.h` code, and the supervisor (`launch`) stops the fleet and says why.
 
+use coadapt_bench::BenchError;
 use coadapt_latent::app::LatentError;
 use coadapt_learner::coadapt::CoadaptError;
 use coadapt_policy_search::app::SearchError;
@@ -25,6 +26,7 @@ pub fn code_of(e: &anyhow::Error) -> u8 {
             .or_else(|| cause.downcast_ref::<coadapt_coadaptation::Error>().and_then(coadapt_coadaptation::Error::exit_code))
             .or_else(|| cause.downcast_ref::<LatentError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<SearchError>().and_then(ExitCode::exit_code))
+            .or_else(|| cause.downcast_ref::<BenchError>().and_then(ExitCode::exit_code))
             .or_else(|| cause.downcast_ref::<std::io::Error>().and_then(ExitCode::exit_code));
         if let Some(code) = code {
             return code;
@@ -49,6 +51,11 @@ mod tests {
         let full = LatentError::Io { what: "writing episodes.csv".into(), error: std::io::Error::from_raw_os_error(28) };
         assert_eq!(code_of(&anyhow::Error::new(full)), DISK);
         assert_eq!(code_of(&anyhow::Error::new(SearchError::Config("method: \"sgd\"".into()))), CONFIG);
+        assert_eq!(code_of(&anyhow::Error::new(BenchError::Config("--repetitions must be at least 1".into()))), CONFIG);
+        let full = BenchError::Io { what: "writing under target/bench-snapshot/n1".into(), error: std::io::Error::from_raw_os_error(28) };
+        assert_eq!(code_of(&anyhow::Error::new(full)), DISK);
+        let setup = BenchError::Setup(SetupError::Config("tls".into()));
+        assert_eq!(code_of(&anyhow::Error::new(setup)), CONFIG);
         assert_eq!(code_of(&anyhow::anyhow!("connection refused")), 1);
         // Through the co-adaptation's error, with context around it.
         let full = coadapt_coadaptation::Error::Run(CoadaptError::Io(std::io::Error::from_raw_os_error(28))).context("learner");

@@ -12,10 +12,8 @@
 //!   a reset.
 //! - [`plot`]: `coadapt plot`, the run directory's SVG plots (also drawn at the end of a run).
 //! - [`train`]: `coadapt train`, RL on one environment and one design.
-//! - [`bench`]: `coadapt bench`, benchmarks printing one JSON line per figure
-//!   ([`bench_transport`]: the fleet's transports between processes; [`bench_env`]:
-//!   environments over dm_env_rpc; [`bench_groups`]: one GrouPS update; [`bench_conv`]: the
-//!   image embedding's convolutions; [`bench_plan`]: one planning step of Alg. 3).
+//! - [`bench`]: `coadapt bench`, its subcommands and their dispatch into `coadapt_bench` (the
+//!   benchmarks, each printing one JSON line per figure).
 //! - [`render`]: `coadapt render`, an episode as an animated GIF.
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
 //! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
@@ -33,13 +31,6 @@
 
 pub mod actor_procs;
 pub mod bench;
-pub mod bench_conv;
-pub mod bench_design;
-pub mod bench_env;
-pub mod bench_groups;
-pub mod bench_plan;
-pub mod bench_snapshot;
-pub mod bench_transport;
 pub mod confirm;
 pub mod credentials;
 pub mod design_client;

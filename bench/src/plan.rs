@@ -16,29 +16,30 @@
 
 use std::time::Instant;
 
-use clap::Args;
 use coadapt_latent::{LatentDynamics, Lbfgsb, Planner};
 use coadapt_nn::Mlp;
 use rand::Rng;
 use serde_json::json;
 
-use crate::bench_groups::percentile;
+use crate::BenchError;
+use crate::figure::percentile;
 
-#[derive(Debug, Args)]
-pub struct PlanBenchArgs {
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct PlanOptions {
     /// Timed repetitions (control steps) per horizon.
-    #[arg(long, default_value_t = 200)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 200))]
     pub repetitions: usize,
     /// Untimed steps before the timed ones.
-    #[arg(long, default_value_t = 20)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
     pub warmup: usize,
     /// Horizons H (H + 1 actions are planned), comma-separated.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 10, 20])]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ',', default_values_t = vec![1usize, 10, 20]))]
     pub horizon: Vec<usize>,
     /// L-BFGS iterations per step (Alg. 3: 20).
-    #[arg(long, default_value_t = 20)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
     pub iterations: usize,
-    #[arg(long, default_value_t = 1)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
 }
 
@@ -50,7 +51,7 @@ pub const MODEL_HIDDEN: [usize; 2] = [400, 400];
 pub const CRITIC_HIDDEN: [usize; 2] = [400, 300];
 
 /// The model and critic with their parameters.
-pub fn networks(seed: u64) -> anyhow::Result<(LatentDynamics, Vec<f32>, Mlp, Vec<f32>)> {
+pub fn networks(seed: u64) -> Result<(LatentDynamics, Vec<f32>, Mlp, Vec<f32>), BenchError> {
     let model = LatentDynamics::new(LATENT, FRAMES, ACT, &MODEL_HIDDEN)?;
     let critic = Mlp::new(&[FRAMES * LATENT + ACT, CRITIC_HIDDEN[0], CRITIC_HIDDEN[1], 1])?;
     let mut r = coadapt_core::rng(seed, 10);
@@ -105,8 +106,10 @@ pub fn config_name(horizon: usize, iterations: usize) -> String {
     )
 }
 
-pub fn run(a: &PlanBenchArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(a.repetitions > 0, "--repetitions must be at least 1");
+pub fn run(a: &PlanOptions) -> Result<(), BenchError> {
+    if a.repetitions == 0 {
+        return Err(BenchError::Config("--repetitions must be at least 1".into()));
+    }
     let (model, mp, critic, cp) = networks(a.seed)?;
     let mut opt = Lbfgsb::default();
     for &h in &a.horizon {
@@ -143,7 +146,9 @@ pub fn run(a: &PlanBenchArgs) -> anyhow::Result<()> {
         for ((z0, warm), v) in inputs[a.warmup..].iter().zip(&values) {
             actions.copy_from_slice(warm);
             let (f, it, ev) = plan_counted(&mut planner, z0, &mut actions, a.iterations, &mut opt);
-            anyhow::ensure!(f.to_bits() == v.to_bits(), "the counting pass ended at f_Q {f}, plan at {v}");
+            if f.to_bits() != v.to_bits() {
+                return Err(BenchError::Failed(format!("the counting pass ended at f_Q {f}, plan at {v}")));
+            }
             evals.push(ev as f64);
             iters.push(it as f64);
         }

@@ -19,36 +19,37 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clap::Args;
 use coadapt_latent::EmbeddingConfig;
 use coadapt_nn::{Conv2d, ConvScratch, ConvTranspose2d, NnError};
 use rand::Rng;
 use serde_json::json;
 
-use crate::bench_groups::percentile;
+use crate::BenchError;
+use crate::figure::percentile;
 
-#[derive(Debug, Args)]
-pub struct ConvBenchArgs {
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct ConvOptions {
     /// Timed repetitions per figure (each one call on its own).
-    #[arg(long, default_value_t = 100)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 100))]
     pub repetitions: usize,
     /// Untimed calls before the timed ones, per figure.
-    #[arg(long, default_value_t = 10)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 10))]
     pub warmup: usize,
     /// Batch sizes, comma-separated.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![32usize, 1])]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ',', default_values_t = vec![32usize, 1]))]
     pub batch: Vec<usize>,
     /// Time only the figures whose config contains this (e.g. `conv2`, `encoder`).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub only: Option<String>,
     /// Seed of the random parameters and inputs.
-    #[arg(long, default_value_t = 1)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
     /// Write every layer's shape, inputs and our outputs (batch 2) to this JSON file first.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub dump: Option<PathBuf>,
     /// With --dump: write the file and time nothing.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub dump_only: bool,
 }
 
@@ -282,11 +283,13 @@ pub fn figures(layers: &[Layer]) -> Vec<(String, std::ops::Range<usize>)> {
     v
 }
 
-pub fn run(a: &ConvBenchArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(a.repetitions > 0, "--repetitions must be at least 1");
+pub fn run(a: &ConvOptions) -> Result<(), BenchError> {
+    if a.repetitions == 0 {
+        return Err(BenchError::Config("--repetitions must be at least 1".into()));
+    }
     let layers = embedding_layers(&EmbeddingConfig::default())?;
     if let Some(path) = &a.dump {
-        std::fs::write(path, dump(&layers, 2, a.seed).to_string())?;
+        std::fs::write(path, dump(&layers, 2, a.seed).to_string()).map_err(BenchError::io(format!("writing {}", path.display())))?;
         coadapt_log::logln!("bench conv: shapes, inputs and outputs written to {}", path.display());
         if a.dump_only {
             return Ok(());

@@ -13,26 +13,29 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clap::Args;
 use coadapt_policy_search::{EpisodicTask, Groups, GroupsConfig, PlanarReaching, Sample, TimeFeatures};
 use serde_json::json;
 
-#[derive(Debug, Args)]
-pub struct GroupsBenchArgs {
+use crate::BenchError;
+use crate::figure::percentile;
+
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct GroupsOptions {
     /// Timed repetitions (each one update from the same state).
-    #[arg(long, default_value_t = 200)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 200))]
     pub repetitions: usize,
     /// Untimed updates before the timed ones.
-    #[arg(long, default_value_t = 20)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 20))]
     pub warmup: usize,
     /// Iterations on the planar task before the benchmarked state is taken.
-    #[arg(long, default_value_t = 5)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 5))]
     pub train_iterations: usize,
     /// Seed of the learner (its W and its rollouts' draws).
-    #[arg(long, default_value_t = 1)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 1))]
     pub seed: u64,
     /// Write the inputs (state, rollouts, features) and one update's outputs to this JSON file.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub dump: Option<PathBuf>,
 }
 
@@ -56,11 +59,11 @@ pub fn one_update(g: &mut Groups, best: &[Sample], phi: &TimeFeatures) {
 
 /// The learner after `train` iterations and one iteration's rollouts sampled from it, evaluated
 /// on the planar task, best first.
-pub fn inputs(train: usize, seed: u64) -> anyhow::Result<(Groups, Vec<Sample>, TimeFeatures)> {
+pub fn inputs(train: usize, seed: u64) -> Result<(Groups, Vec<Sample>, TimeFeatures), BenchError> {
     let task = PlanarReaching::default();
     let phi = TimeFeatures::thesis(task.steps());
     let (cfg, groups) = setting();
-    let mut g = Groups::new(cfg, groups, task.action_dim(), phi.len(), seed).map_err(|e| anyhow::anyhow!("groups: {e}"))?;
+    let mut g = Groups::new(cfg, groups, task.action_dim(), phi.len(), seed).map_err(|e| BenchError::Failed(format!("groups: {e}")))?;
     for _ in 0..train {
         g.iterate(&task, &phi)?;
     }
@@ -71,7 +74,9 @@ pub fn inputs(train: usize, seed: u64) -> anyhow::Result<(Groups, Vec<Sample>, T
     }
     samples.sort_by(|a, b| b.ret.total_cmp(&a.ret));
     let total: f64 = samples[..g.cfg.best].iter().map(|s| s.ret.max(0.0)).sum();
-    anyhow::ensure!(total > 0.0 && total.is_finite(), "the best rollouts' returns sum to {total}");
+    if !(total > 0.0 && total.is_finite()) {
+        return Err(BenchError::Failed(format!("the best rollouts' returns sum to {total}")));
+    }
     Ok((g, samples, phi))
 }
 
@@ -80,14 +85,17 @@ pub fn copy_of(g: &Groups) -> Groups {
     g.clone()
 }
 
-pub fn run(a: &GroupsBenchArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(a.repetitions > 0, "--repetitions must be at least 1");
+pub fn run(a: &GroupsOptions) -> Result<(), BenchError> {
+    if a.repetitions == 0 {
+        return Err(BenchError::Config("--repetitions must be at least 1".into()));
+    }
     let (state, samples, phi) = inputs(a.train_iterations, a.seed)?;
     let best = &samples[..state.cfg.best];
     if let Some(path) = &a.dump {
         let mut g = copy_of(&state);
         one_update(&mut g, best, &phi);
-        std::fs::write(path, dump(&state, &samples, &phi, &g).to_string())?;
+        std::fs::write(path, dump(&state, &samples, &phi, &g).to_string())
+            .map_err(BenchError::io(format!("writing {}", path.display())))?;
         coadapt_log::logln!("bench groups: inputs and outputs written to {}", path.display());
     }
     for _ in 0..a.warmup {
@@ -124,13 +132,6 @@ pub fn run(a: &GroupsBenchArgs) -> anyhow::Result<()> {
 pub fn config_name(g: &Groups, phi: &TimeFeatures) -> String {
     let c = &g.cfg;
     format!("r{}-b{}-d{}-p{}-t{}-k{}-i{}-g{}", c.rollouts, c.best, g.d, g.p, phi.steps(), c.latent, c.inner, g.groups.len())
-}
-
-/// Linear interpolation between order statistics of the sorted `v` (NumPy's default).
-pub fn percentile(v: &[f64], q: f64) -> f64 {
-    let x = q * (v.len() - 1) as f64;
-    let (lo, hi) = (x.floor() as usize, x.ceil() as usize);
-    v[lo] + (v[hi] - v[lo]) * (x - lo as f64)
 }
 
 fn round(ms: f64) -> f64 {
@@ -178,6 +179,5 @@ mod tests {
         one_update(&mut h, best, &phi);
         assert_eq!((&h.m, &h.w, &h.alpha, &h.tau), (&g.m, &g.w, &g.alpha, &g.tau));
         assert_ne!(g.m, state.m, "the update changed nothing");
-        assert!(percentile(&[1.0, 2.0, 3.0, 4.0, 5.0], 0.5) == 3.0 && percentile(&[1.0, 2.0], 0.9) == 1.9);
     }
 }

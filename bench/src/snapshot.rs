@@ -5,30 +5,32 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clap::Args;
 use coadapt_core::{Transition, rng};
 use coadapt_learner::fear::{FearLearner, FearLearnerConfig};
 use coadapt_learner::snapshot;
 use rand::Rng;
 use serde_json::json;
 
-#[derive(Debug, Args)]
-pub struct SnapshotArgs {
+use crate::BenchError;
+
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct SnapshotOptions {
     /// Transitions in the population buffer (comma-separated list: one figure each).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1_000_000usize, 10_000_000])]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ',', default_values_t = vec![1_000_000usize, 10_000_000]))]
     pub transitions: Vec<usize>,
     /// Where to write (a directory on the disk to measure; removed afterwards).
-    #[arg(long, default_value = "target/bench-snapshot")]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "target/bench-snapshot"))]
     pub dir: PathBuf,
     /// Write/read rounds per size.
-    #[arg(long, default_value_t = 3)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 3))]
     pub rounds: usize,
     /// Drop the page cache before each read (needs root), so reads come from the disk.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub drop_caches: bool,
 }
 
-pub fn run(a: &SnapshotArgs) -> anyhow::Result<()> {
+pub fn run(a: &SnapshotOptions) -> Result<(), BenchError> {
     // HalfCheetah: 17 state + 6 design observation columns, 6 actions.
     let (obs, act) = (23, 6);
     for &n in &a.transitions {
@@ -51,27 +53,34 @@ pub fn run(a: &SnapshotArgs) -> anyhow::Result<()> {
         for round in 0..a.rounds {
             let _ = std::fs::remove_dir_all(&root);
             let t = Instant::now();
-            let dir = snapshot::write(&root, round as u64, "bench", "bench", 2, |out| l.save_state(out))?;
+            let dir = snapshot::write(&root, round as u64, "bench", "bench", 2, |out| l.save_state(out))
+                // Its message names the file and what became of the partial snapshot.
+                .map_err(snapshot::SnapshotError::Io)?;
             let write = t.elapsed().as_secs_f64();
-            let bytes: u64 = std::fs::read_dir(&dir)?.filter_map(|e| e.ok()?.metadata().ok()).map(|m| m.len()).sum();
+            let bytes: u64 = std::fs::read_dir(&dir)
+                .map_err(BenchError::io(format!("reading {}", dir.display())))?
+                .filter_map(|e| e.ok()?.metadata().ok())
+                .map(|m| m.len())
+                .sum();
             let mut fresh = FearLearner::new(obs, act, cfg.clone(), 2)?;
             if a.drop_caches {
-                std::fs::write("/proc/sys/vm/drop_caches", "3\n").map_err(|e| anyhow::anyhow!("--drop-caches: {e} (needs root)"))?;
+                std::fs::write("/proc/sys/vm/drop_caches", "3\n")
+                    .map_err(|e| BenchError::Failed(format!("--drop-caches: {e} (needs root)")))?;
             }
             let t = Instant::now();
-            let (_, mut state) = snapshot::load(&dir).map_err(|e| anyhow::anyhow!("{e}"))?;
-            fresh.load_state(&mut state).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let (_, mut state) = snapshot::load(&dir)?;
+            fresh.load_state(&mut state)?;
             let read = t.elapsed().as_secs_f64();
-            anyhow::ensure!(fresh.population_transitions() == n, "read back {} transitions of {n}", fresh.population_transitions());
+            if fresh.population_transitions() != n {
+                return Err(BenchError::Failed(format!("read back {} transitions of {n}", fresh.population_transitions())));
+            }
             let mb = bytes as f64 / 1e6;
             for (what, s) in [("write", write), ("read", read)] {
-                println!(
-                    "{}",
-                    json!({"bench": format!("snapshot_{what}"), "config": format!("{n} transitions, {mb:.0} MB, round {}", round + 1), "value": s, "unit": "s", "mb_per_s": mb / s})
-                );
+                let line = json!({"bench": format!("snapshot_{what}"), "config": format!("{n} transitions, {mb:.0} MB, round {}", round + 1), "value": s, "unit": "s", "mb_per_s": mb / s});
+                coadapt_log::print_stdout_line(&line.to_string());
             }
         }
-        std::fs::remove_dir_all(&root)?;
+        std::fs::remove_dir_all(&root).map_err(BenchError::io(format!("removing {}", root.display())))?;
     }
     Ok(())
 }

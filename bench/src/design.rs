@@ -15,7 +15,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use clap::Args;
 use coadapt_core::{BoxSpace, rng};
 use coadapt_design_optimizer::{ObjectiveWorkspace, QMode};
 use coadapt_design_service::{DesignModel, HistoryRow, ServeConfig, StaticSource};
@@ -24,21 +23,24 @@ use coadapt_wire::pb;
 use coadapt_wire::pb::design_service_client::DesignServiceClient;
 use rand::Rng;
 
-use crate::bench::emit;
+use crate::BenchError;
+use crate::figure::{emit, rate};
+use crate::nn::random_batch;
 
-#[derive(Debug, Args)]
-pub struct DesignBenchArgs {
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct DesignOptions {
     /// Seconds per figure.
-    #[arg(long, default_value_t = 5.0)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 5.0))]
     pub seconds: f64,
     /// Designs per Score call.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 100, 10_000])]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ',', default_values_t = vec![1usize, 100, 10_000]))]
     pub batches: Vec<usize>,
     /// Also over TLS with `coadapt tls new --out DIR`'s certificates.
-    #[arg(long, value_name = "DIR")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "DIR"))]
     pub tls: Option<std::path::PathBuf>,
     /// Skip the learner figures (Score only).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub score_only: bool,
 }
 
@@ -47,7 +49,7 @@ const DESIGN: usize = 6;
 const ACT: usize = 6;
 const STATES: usize = 32;
 
-fn model(sac: &Sac) -> anyhow::Result<DesignModel> {
+fn model(sac: &Sac) -> Result<DesignModel, BenchError> {
     let mut r = rng(11, 0);
     let starts: Vec<f32> = (0..STATES * (STATE + DESIGN)).map(|_| r.random_range(-1.0..1.0)).collect();
     let names = (0..DESIGN).map(|i| format!("d{i}")).collect();
@@ -71,17 +73,24 @@ fn designs(n: usize, seed: u64) -> Vec<f32> {
 
 /// Times `f` for about `seconds` (after two warm-up calls); emits latency quantiles and
 /// designs/s under `config`. `prepare` makes each call's input outside the timed region (the
-/// gRPC side's request copy; nothing in process), so both sides time the same work.
-fn time_calls<T>(config: &str, batch: usize, seconds: f64, mut prepare: impl FnMut() -> T, mut f: impl FnMut(T)) {
-    f(prepare());
-    f(prepare());
+/// gRPC side's request copy; nothing in process), so both sides time the same work. A failed
+/// call ends the benchmark before any figure of `config` is printed.
+fn time_calls<T>(
+    config: &str,
+    batch: usize,
+    seconds: f64,
+    mut prepare: impl FnMut() -> T,
+    mut f: impl FnMut(T) -> Result<(), BenchError>,
+) -> Result<(), BenchError> {
+    f(prepare())?;
+    f(prepare())?;
     let mut lat = Vec::new();
     let mut timed = 0.0;
     let start = Instant::now();
     while start.elapsed().as_secs_f64() < seconds || lat.len() < 3 {
         let input = prepare();
         let t = Instant::now();
-        f(input);
+        f(input)?;
         let dt = t.elapsed().as_secs_f64();
         timed += dt;
         lat.push(dt * 1e3);
@@ -94,13 +103,14 @@ fn time_calls<T>(config: &str, batch: usize, seconds: f64, mut prepare: impl FnM
     emit("design_score_latency_p10", config, q(0.1), "ms");
     emit("design_score_latency_p90", config, q(0.9), "ms");
     emit("design_score", config, (lat.len() * batch) as f64 / total, "designs/s");
+    Ok(())
 }
 
-fn serve(m: DesignModel, tls: Option<&std::path::Path>) -> anyhow::Result<coadapt_design_service::DesignServer> {
+fn serve(m: DesignModel, tls: Option<&std::path::Path>) -> Result<coadapt_design_service::DesignServer, BenchError> {
     serve_with(m, tls, 1.0)
 }
 
-fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> anyhow::Result<coadapt_design_service::DesignServer> {
+fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> Result<coadapt_design_service::DesignServer, BenchError> {
     let mut cfg = ServeConfig { max_busy_share: share, ..ServeConfig::default() };
     if let Some(dir) = tls {
         let f = |n: &str| dir.join(n).display().to_string();
@@ -108,13 +118,14 @@ fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> anyh
             .server_auth()?;
     }
     let source = StaticSource { model: Arc::new(m), history: Vec::<HistoryRow>::new() };
-    Ok(coadapt_design_service::serve("127.0.0.1:0".parse()?, cfg, Arc::new(source))?)
+    let loopback = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+    coadapt_design_service::serve(loopback, cfg, Arc::new(source)).map_err(BenchError::io("starting the design server"))
 }
 
 async fn client(
     addr: std::net::SocketAddr,
     tls: Option<&std::path::Path>,
-) -> anyhow::Result<DesignServiceClient<coadapt_auth::AuthChannel>> {
+) -> Result<DesignServiceClient<coadapt_auth::AuthChannel>, BenchError> {
     let mut sec = coadapt_fleet::SecurityConfig::default();
     if let Some(dir) = tls {
         sec.tls_ca = dir.join("ca.pem").display().to_string();
@@ -127,19 +138,33 @@ async fn client(
         .max_encoding_message_size(16 << 20))
 }
 
+/// The client's runtime: one thread, as `coadapt score`'s.
+fn runtime() -> Result<tokio::runtime::Runtime, BenchError> {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().map_err(BenchError::io("starting the Tokio runtime"))
+}
+
 fn request(d: &[f32]) -> pb::ScoreRequest {
     pb::ScoreRequest { designs: d.chunks_exact(DESIGN).map(|v| pb::Design { values: v.to_vec() }).collect() }
 }
 
-pub fn run(a: &DesignBenchArgs) -> anyhow::Result<()> {
+pub fn run(a: &DesignOptions) -> Result<(), BenchError> {
     let sac = Sac::new(STATE + DESIGN, ACT, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 5)?;
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let rt = runtime()?;
     for &n in &a.batches {
         let d = designs(n, n as u64);
         // In process: Eq. 5.6 on this thread, as the server's pool computes it.
         let m = model(&sac)?;
         let (mut mean, mut spread, mut ws) = (vec![0.0; n], vec![0.0; n], ObjectiveWorkspace::default());
-        time_calls(&format!("inproc-batch{n}-{STATES}states"), n, a.seconds, || (), |()| m.score(&d, &mut mean, &mut spread, &mut ws));
+        time_calls(
+            &format!("inproc-batch{n}-{STATES}states"),
+            n,
+            a.seconds,
+            || (),
+            |()| {
+                m.score(&d, &mut mean, &mut spread, &mut ws);
+                Ok(())
+            },
+        )?;
         let mut transports: Vec<(&str, Option<&std::path::Path>)> = vec![("grpc", None)];
         if let Some(dir) = &a.tls {
             transports.push(("grpc-tls", Some(dir.as_path())));
@@ -154,10 +179,13 @@ pub fn run(a: &DesignBenchArgs) -> anyhow::Result<()> {
                 a.seconds,
                 || req.clone(),
                 |req| {
-                    let r = rt.block_on(c.score(req));
-                    assert!(r.is_ok_and(|r| r.get_ref().scores.len() == n), "a Score call failed");
+                    let got = rt.block_on(c.score(req))?.get_ref().scores.len();
+                    if got != n {
+                        return Err(BenchError::Failed(format!("a Score call answered {got} scores for {n} designs")));
+                    }
+                    Ok(())
                 },
-            );
+            )?;
         }
     }
     if !a.score_only {
@@ -167,10 +195,10 @@ pub fn run(a: &DesignBenchArgs) -> anyhow::Result<()> {
 }
 
 /// SAC updates/s alone, then with a client scoring batches of 100 in a loop.
-fn learner_rates(a: &DesignBenchArgs, sac: &Sac) -> anyhow::Result<()> {
-    let (obs, batch) = (STATE + DESIGN, crate::bench::random_batch(256, STATE + DESIGN, ACT, 2));
+fn learner_rates(a: &DesignOptions, sac: &Sac) -> Result<(), BenchError> {
+    let (obs, batch) = (STATE + DESIGN, random_batch(256, STATE + DESIGN, ACT, 2));
     let mut learner = Sac::new(obs, ACT, SacConfig { hidden: vec![256; 3], auto_alpha: true, ..SacConfig::default() }, 1)?;
-    let alone = crate::bench::rate(a.seconds, || {
+    let alone = rate(a.seconds, || {
         learner.update(&batch);
     });
     emit("learner_updates", "3x256-obs23-alone", alone, "updates/s");
@@ -182,20 +210,20 @@ fn learner_rates(a: &DesignBenchArgs, sac: &Sac) -> anyhow::Result<()> {
 
 /// The learner's rate beside a client scoring in a loop against a server of `share`.
 fn beside_learner(
-    a: &DesignBenchArgs,
+    a: &DesignOptions,
     sac: &Sac,
     learner: &mut Sac,
     batch: &coadapt_core::Batch,
     alone: f64,
     share: f64,
-) -> anyhow::Result<()> {
+) -> Result<(), BenchError> {
     let server = serve_with(model(sac)?, None, share)?;
     let addr = server.local_addr();
     let stop = Arc::new(AtomicBool::new(false));
     let calls = Arc::new(AtomicU64::new(0));
     let (s, k) = (stop.clone(), calls.clone());
-    let scorer = std::thread::spawn(move || -> anyhow::Result<()> {
-        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    let scorer = std::thread::spawn(move || -> Result<(), BenchError> {
+        let rt = runtime()?;
         let mut c = rt.block_on(client(addr, None))?;
         let req = request(&designs(100, 7));
         while !s.load(Ordering::Relaxed) {
@@ -207,12 +235,12 @@ fn beside_learner(
     std::thread::sleep(Duration::from_millis(200));
     let t = Instant::now();
     let before = calls.load(Ordering::Relaxed);
-    let busy = crate::bench::rate(a.seconds, || {
+    let busy = rate(a.seconds, || {
         learner.update(batch);
     });
     let scored = (calls.load(Ordering::Relaxed) - before) as f64 * 100.0 / t.elapsed().as_secs_f64();
     stop.store(true, Ordering::Relaxed);
-    scorer.join().map_err(|_| anyhow::anyhow!("the scoring client panicked"))??;
+    scorer.join().map_err(|_| BenchError::Failed("the scoring client panicked".into()))??;
     let tag = format!("score-client-batch100-busy-share{share}");
     emit("learner_updates", &format!("3x256-obs23-with-{tag}"), busy, "updates/s");
     emit("learner_updates_kept", &format!("with-{tag}"), busy / alone * 100.0, "%");

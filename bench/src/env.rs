@@ -8,23 +8,25 @@
 
 use std::time::Instant;
 
-use clap::Args;
 use coadapt_core::{Env, rng};
 use coadapt_env_rpc::{BackgroundServer, RemoteEnv, RemoteOptions};
 use rand::Rng;
 use serde_json::json;
 
-#[derive(Debug, Args)]
-pub struct EnvArgs {
+use crate::BenchError;
+
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct EnvOptions {
     /// Seconds to time each figure for.
-    #[arg(long, default_value_t = 5.0)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 5.0))]
     pub seconds: f64,
     /// Built-in robots to serve on loopback and time (comma-separated).
-    #[arg(long, value_delimiter = ',', default_values_t = vec!["pendulum".to_string(), "half-cheetah".to_string()])]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ',', default_values_t = vec!["pendulum".to_string(), "half-cheetah".to_string()]))]
     pub env: Vec<String>,
     /// Also time these servers (dm-env-rpc://HOST:PORT, e.g. `coadapt-gym-serve --env
     /// Pendulum-v1`), comma-separated.
-    #[arg(long, value_delimiter = ',')]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ','))]
     pub url: Vec<String>,
 }
 
@@ -35,7 +37,7 @@ struct Timing {
 }
 
 /// Steps `env` for `seconds` with pre-drawn uniform actions, timing each step.
-fn time_env(env: &mut dyn Env, seconds: f64) -> anyhow::Result<Timing> {
+fn time_env(env: &mut dyn Env, seconds: f64) -> Result<Timing, BenchError> {
     let spec = env.spec().clone();
     let mut r = rng(1, 0x454e_5642);
     let n_actions = 4096;
@@ -75,20 +77,25 @@ fn emit(name: &str, transport: &str, t: &mut Timing) {
     t.latencies_us.sort_by(f64::total_cmp);
     let rate = t.steps as f64 / t.seconds;
     let config = json!({"env": name, "transport": transport, "steps": t.steps, "client": "coadapt (Rust)"});
-    println!("{}", json!({"bench": "env_steps_per_second", "config": config, "value": rate, "unit": "steps/s"}));
+    coadapt_log::print_stdout_line(
+        &json!({"bench": "env_steps_per_second", "config": config, "value": rate, "unit": "steps/s"}).to_string(),
+    );
     for (label, p) in [("median", 0.5), ("p99", 0.99)] {
         let v = percentile(&t.latencies_us, p);
-        println!("{}", json!({"bench": format!("env_step_latency_{label}"), "config": config, "value": v, "unit": "us"}));
+        coadapt_log::print_stdout_line(
+            &json!({"bench": format!("env_step_latency_{label}"), "config": config, "value": v, "unit": "us"}).to_string(),
+        );
     }
 }
 
-pub fn run(a: &EnvArgs) -> anyhow::Result<()> {
+pub fn run(a: &EnvOptions) -> Result<(), BenchError> {
     for name in &a.env {
         let mut local = coadapt_robots::make(name)?;
         emit(name, "in-process", &mut time_env(&mut *local, a.seconds)?);
         let n = name.clone();
         let server =
-            BackgroundServer::start("127.0.0.1:0", std::sync::Arc::new(move || coadapt_robots::make(&n).map_err(|e| e.to_string())))?;
+            BackgroundServer::start("127.0.0.1:0", std::sync::Arc::new(move || coadapt_robots::make(&n).map_err(|e| e.to_string())))
+                .map_err(BenchError::io(format!("serving {name} on loopback")))?;
         let mut remote = RemoteEnv::connect(&server.url(), RemoteOptions::default())?;
         emit(name, "dm_env_rpc loopback", &mut time_env(&mut remote, a.seconds)?);
     }

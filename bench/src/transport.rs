@@ -9,19 +9,21 @@
 //!   payload per transition) as fast as the transport takes them; the learner receives and
 //!   decodes; transitions/s and MB/s of payload.
 //!
-//! The actor side runs as `coadapt bench transport --peer ...` children of this process.
+//! The actor side runs as children of this process, started by the caller's [`PeerCommand`]
+//! (`coadapt bench transport --peer ...`), each running [`run`] with [`TransportOptions::peer`].
 
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
-use clap::{Args, ValueEnum};
+use coadapt_fleet::{FleetConfig, TransportKind};
 use coadapt_transport::{ExperienceChunk, Weights};
 
-use crate::bench::emit;
-use coadapt_fleet::{FleetConfig, TransportKind};
+use crate::BenchError;
+use crate::figure::emit;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Peer {
     /// Answer every weights version with a chunk naming it.
     Echo,
@@ -29,41 +31,50 @@ pub enum Peer {
     Flood,
 }
 
-#[derive(Debug, Args)]
-pub struct TransportArgs {
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct TransportOptions {
     /// Transports to time.
-    #[arg(long, value_enum, value_delimiter = ',', default_values = ["shm", "grpc"])]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, value_delimiter = ',', default_values = ["shm", "grpc"]))]
     pub transport: Vec<TransportKind>,
     /// Actor processes for the weight broadcast.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16])]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16]))]
     pub actors: Vec<usize>,
     /// Actor processes sending experience.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4])]
+    #[cfg_attr(feature = "clap", arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4]))]
     pub senders: Vec<usize>,
     /// Seconds per figure.
-    #[arg(long, default_value_t = 5.0)]
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 5.0))]
     pub seconds: f64,
     /// Internal: run as an actor-side peer of a running benchmark.
-    #[arg(long, value_enum, hide = true)]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, hide = true))]
     pub peer: Option<Peer>,
-    #[arg(long, hide = true, default_value = "")]
+    // A peer's fleet name, its learner's address (gRPC) and its actor id (hidden: internal).
+    #[cfg_attr(feature = "clap", arg(long, hide = true, default_value = ""))]
     pub fleet: String,
-    #[arg(long, hide = true, default_value = "")]
+    #[cfg_attr(feature = "clap", arg(long, hide = true, default_value = ""))]
     pub connect: String,
-    #[arg(long, hide = true, default_value_t = 0)]
+    #[cfg_attr(feature = "clap", arg(long, hide = true, default_value_t = 0))]
     pub id: u64,
     /// Time gRPC over TLS with the certificates in DIR (`coadapt tls new --out DIR`: ca.pem,
     /// server.pem, server-key.pem); the figures' configs end in `-tls`.
-    #[arg(long, value_name = "DIR")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "DIR"))]
     pub tls: Option<std::path::PathBuf>,
 }
 
-/// `--tls`: the same for the learner and its peer processes.
-static TLS_DIR: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+/// How the benchmark starts an actor-side peer: `program args... --peer echo|flood ...`, a
+/// process that parses those flags into [`TransportOptions`] and calls [`run`] (for the
+/// `coadapt` binary: its own executable and `bench transport`).
+#[derive(Debug, Clone)]
+pub struct PeerCommand {
+    pub program: PathBuf,
+    pub args: Vec<String>,
+}
 
-/// The benchmark's TLS settings (none without `--tls`).
-fn security() -> coadapt_fleet::SecurityConfig {
-    let Some(dir) = TLS_DIR.get() else { return coadapt_fleet::SecurityConfig::default() };
+/// The benchmark's TLS settings (none without `--tls`); the same for the learner and its
+/// peer processes.
+fn security(tls: Option<&Path>) -> coadapt_fleet::SecurityConfig {
+    let Some(dir) = tls else { return coadapt_fleet::SecurityConfig::default() };
     let f = |n: &str| dir.join(n).display().to_string();
     coadapt_fleet::SecurityConfig {
         tls_cert: f("server.pem"),
@@ -75,8 +86,8 @@ fn security() -> coadapt_fleet::SecurityConfig {
 }
 
 /// `-tls` when timing over TLS.
-fn tls_suffix() -> &'static str {
-    if TLS_DIR.get().is_some() { "-tls" } else { "" }
+fn tls_suffix(tls: Option<&Path>) -> &'static str {
+    if tls.is_some() { "-tls" } else { "" }
 }
 
 const OBS: usize = 23;
@@ -114,26 +125,33 @@ fn fleet_config(kind: TransportKind, fleet: &str, connect: &str) -> FleetConfig 
     FleetConfig { transport: kind, name: fleet.into(), listen: "127.0.0.1:0".into(), connect: connect.into(), ..FleetConfig::default() }
 }
 
-pub fn run(a: &TransportArgs) -> anyhow::Result<()> {
-    if let Some(dir) = &a.tls {
-        let _ = TLS_DIR.set(dir.clone());
-    }
+/// Times every figure `a` asks for, starting peers with `peers`; with `a.peer`, runs as one
+/// of those peers instead.
+pub fn run(a: &TransportOptions, peers: &PeerCommand) -> Result<(), BenchError> {
     if let Some(peer) = a.peer {
-        let kind = *a.transport.first().context("--peer needs --transport")?;
+        let kind = *a.transport.first().ok_or_else(|| BenchError::Config("--peer needs --transport".into()))?;
         return run_peer(peer, &fleet_config(kind, &a.fleet, &a.connect), a);
     }
+    let b = Bench { tls: a.tls.as_deref(), peers, seconds: a.seconds };
     for &kind in &a.transport {
         if kind == TransportKind::InProcess {
-            bail!("--transport: in-process has nothing to time here; use shm or grpc");
+            return Err(BenchError::Config("--transport: in-process has nothing to time here; use shm or grpc".into()));
         }
         for &n in &a.actors {
-            broadcast(kind, n, a.seconds)?;
+            broadcast(&b, kind, n)?;
         }
         for &n in &a.senders {
-            experience(kind, n, a.seconds)?;
+            experience(&b, kind, n)?;
         }
     }
     Ok(())
+}
+
+/// What every figure of one run shares.
+struct Bench<'a> {
+    tls: Option<&'a Path>,
+    peers: &'a PeerCommand,
+    seconds: f64,
 }
 
 /// The learner side of one figure: its links, and how peers reach it.
@@ -144,10 +162,10 @@ struct Learner {
     connect: String,
 }
 
-fn learner(kind: TransportKind, tag: &str) -> anyhow::Result<Learner> {
+fn learner(b: &Bench<'_>, kind: TransportKind, tag: &str) -> Result<Learner, BenchError> {
     let fleet = format!("coadapt-bench-{}-{tag}", std::process::id());
     let cfg = fleet_config(kind, &fleet, "");
-    let (links, guard) = cfg.learner_links(None, None, &security())?;
+    let (links, guard) = cfg.learner_links(None, None, &security(b.tls))?;
     let connect = match &guard {
         coadapt_fleet::LearnerGuard::Grpc(s) => format!("http://{}", s.local_addr()),
         coadapt_fleet::LearnerGuard::None => String::new(),
@@ -155,18 +173,18 @@ fn learner(kind: TransportKind, tag: &str) -> anyhow::Result<Learner> {
     Ok(Learner { links, _guard: guard, fleet, connect })
 }
 
-fn spawn_peers(kind: TransportKind, l: &Learner, peer: &str, n: usize, seconds: f64) -> anyhow::Result<Vec<Child>> {
-    let exe = std::env::current_exe().context("finding the coadapt binary")?;
+fn spawn_peers(b: &Bench<'_>, kind: TransportKind, l: &Learner, peer: &str, n: usize) -> Result<Vec<Child>, BenchError> {
     (0..n)
         .map(|i| {
-            Command::new(&exe)
-                .args(["bench", "transport", "--peer", peer, "--transport", kind.name(), "--fleet", &l.fleet, "--connect", &l.connect])
-                .args(["--id", &i.to_string(), "--seconds", &seconds.to_string()])
-                .args(TLS_DIR.get().map(|d| vec!["--tls".to_string(), d.display().to_string()]).unwrap_or_default())
+            Command::new(&b.peers.program)
+                .args(&b.peers.args)
+                .args(["--peer", peer, "--transport", kind.name(), "--fleet", &l.fleet, "--connect", &l.connect])
+                .args(["--id", &i.to_string(), "--seconds", &b.seconds.to_string()])
+                .args(b.tls.map(|d| vec!["--tls".to_string(), d.display().to_string()]).unwrap_or_default())
                 .stdin(Stdio::null())
                 .stdout(Stdio::null())
                 .spawn()
-                .context("starting a peer process")
+                .map_err(BenchError::io("starting a peer process"))
         })
         .collect()
 }
@@ -182,12 +200,13 @@ fn reap(children: Vec<Child>) {
     }
 }
 
-fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> {
-    let mut l = learner(kind, &format!("w{n}"))?;
-    let peers = spawn_peers(kind, &l, "echo", n, seconds)?;
+fn broadcast(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchError> {
+    let seconds = b.seconds;
+    let mut l = learner(b, kind, &format!("w{n}"))?;
+    let peers = spawn_peers(b, kind, &l, "echo", n)?;
     let len = policy_len();
     let mut version = 0u64;
-    let publish = |l: &mut Learner, version: u64| -> anyhow::Result<()> {
+    let publish = |l: &mut Learner, version: u64| -> Result<(), BenchError> {
         let policy = (0..len).map(|i| (i as f32 * 1e-4) + version as f32).collect();
         l.links.acting_weights.publish(Weights { version, policy, q1: vec![], q2: vec![] })?;
         Ok(())
@@ -207,7 +226,7 @@ fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> 
             }
         }
         if Instant::now() > ready_by {
-            bail!("the {n} peer processes did not all answer within 60 s");
+            return Err(BenchError::Failed(format!("the {n} peer processes did not all answer within 60 s")));
         }
     }
     let mut times = Vec::new();
@@ -221,7 +240,7 @@ fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> 
             match l.links.experience.recv_timeout(Duration::from_secs(10))? {
                 Some(c) if c.weights_version == version => got += 1,
                 Some(_) => {}
-                None => bail!("a peer did not answer version {version} within 10 s"),
+                None => return Err(BenchError::Failed(format!("a peer did not answer version {version} within 10 s"))),
             }
         }
         times.push(t.elapsed().as_secs_f64() * 1e3);
@@ -229,7 +248,7 @@ fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> 
     drop(l);
     reap(peers);
     times.sort_by(f64::total_cmp);
-    let config = format!("{}-{n}actors-{}KB{}", kind.name(), len * 4 / 1000, tls_suffix());
+    let config = format!("{}-{n}actors-{}KB{}", kind.name(), len * 4 / 1000, tls_suffix(b.tls));
     emit("weights_broadcast_median", &config, times[times.len() / 2], "ms");
     emit("weights_broadcast_p99", &config, times[(times.len() * 99 / 100).min(times.len() - 1)], "ms");
     // Weights delivered per second of median round trip, all actors together.
@@ -237,9 +256,9 @@ fn broadcast(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> 
     Ok(())
 }
 
-fn experience(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()> {
-    let mut l = learner(kind, &format!("e{n}"))?;
-    let peers = spawn_peers(kind, &l, "flood", n, seconds)?;
+fn experience(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchError> {
+    let mut l = learner(b, kind, &format!("e{n}"))?;
+    let peers = spawn_peers(b, kind, &l, "flood", n)?;
     let bytes_per_row = (2 * OBS + ACT + 1) * 4 + 1;
     let (mut rows, mut first, mut last) = (0usize, None, Instant::now());
     let mut idle = Instant::now();
@@ -266,16 +285,16 @@ fn experience(kind: TransportKind, n: usize, seconds: f64) -> anyhow::Result<()>
     }
     drop(l);
     reap(peers);
-    let Some(first) = first else { bail!("no experience arrived from {n} peer processes") };
+    let Some(first) = first else { return Err(BenchError::Failed(format!("no experience arrived from {n} peer processes"))) };
     let secs = last.duration_since(first).as_secs_f64().max(1e-9);
-    let config = format!("{}-{n}senders-{ROWS}rows{}", kind.name(), tls_suffix());
+    let config = format!("{}-{n}senders-{ROWS}rows{}", kind.name(), tls_suffix(b.tls));
     emit("experience", &config, rows as f64 / secs, "transitions/s");
     emit("experience", &config, (rows * bytes_per_row) as f64 / secs / 1e6, "MB/s");
     Ok(())
 }
 
-fn run_peer(peer: Peer, cfg: &FleetConfig, a: &TransportArgs) -> anyhow::Result<()> {
-    let mut links = cfg.actor_links(a.id, &security())?;
+fn run_peer(peer: Peer, cfg: &FleetConfig, a: &TransportOptions) -> Result<(), BenchError> {
+    let mut links = cfg.actor_links(a.id, &security(a.tls.as_deref()))?;
     match peer {
         Peer::Echo => {
             let mut seen = 0;

@@ -1,0 +1,88 @@
+//! `coadapt bench nn`: SAC updates per second (three network sizes, batch 256) and the design
+//! objective's forward throughput (700 particles over 32, optionally 256, start states).
+
+use coadapt_core::{Batch, rng};
+use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
+use coadapt_learner::{Sac, SacConfig};
+use rand::Rng;
+
+use crate::BenchError;
+use crate::figure::{emit, rate};
+
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct NnOptions {
+    /// Seconds to time each figure for.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 10.0))]
+    pub seconds: f64,
+    /// Rows per chunk in the forward benchmark.
+    #[cfg_attr(feature = "clap", arg(long, default_value_t = 256))]
+    pub chunk_rows: usize,
+    /// Also time the 179,200-row (256 start states) forward pass.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub large: bool,
+    /// Run only the figures whose bench name contains this (e.g. `sac`, `forward`).
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub only: Option<String>,
+}
+
+pub fn run(a: &NnOptions) -> Result<(), BenchError> {
+    let wanted = |bench: &str| a.only.as_deref().is_none_or(|o| bench.contains(o));
+    if wanted("sac_update") {
+        sac_updates(a)?;
+    }
+    if wanted("forward_actor_critic") {
+        forward(a)?;
+    }
+    Ok(())
+}
+
+/// A batch of `rows` transitions with every value uniform in [-1, 1).
+pub fn random_batch(rows: usize, obs: usize, act: usize, seed: u64) -> Batch {
+    let mut r = rng(seed, 9);
+    let mut b = Batch::new(rows, obs, act);
+    for v in b.obs.iter_mut().chain(b.next_obs.iter_mut()).chain(b.rew.iter_mut()) {
+        *v = r.random_range(-1.0..1.0);
+    }
+    for v in b.act.iter_mut() {
+        *v = r.random_range(-1.0..1.0);
+    }
+    b
+}
+
+fn sac_updates(a: &NnOptions) -> Result<(), BenchError> {
+    for (config, hidden, obs) in [("3x256-obs17", vec![256; 3], 17), ("3x200-obs23", vec![200; 3], 23), ("2x256-obs17", vec![256; 2], 17)] {
+        let act = 6;
+        let cfg = SacConfig { hidden, auto_alpha: true, ..SacConfig::default() };
+        let mut sac = Sac::new(obs, act, cfg, 1)?;
+        let batch = random_batch(256, obs, act, 2);
+        let r = rate(a.seconds, || {
+            sac.update(&batch);
+        });
+        emit("sac_update", config, r, "updates/s");
+    }
+    Ok(())
+}
+
+fn forward(a: &NnOptions) -> Result<(), BenchError> {
+    let states = if a.large { vec![32, 256] } else { vec![32] };
+    for n_states in states {
+        let (obs, act, design) = (23, 6, 6);
+        let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 3)?;
+        let mut r = rng(4, 0);
+        let start: Vec<f32> = (0..n_states * obs).map(|_| r.random_range(-1.0..1.0)).collect();
+        let (q1, _) = sac.critic_params(0);
+        let objective = DesignObjective::new(sac.policy(), sac.policy_params(), sac.critic(), &[q1], &start, obs - design, design)?;
+        let particles = 700;
+        let designs: Vec<f32> = (0..particles * design).map(|_| r.random_range(0.8..2.0)).collect();
+        let mut out = vec![0.0; particles];
+        let mut ws = vec![ObjectiveWorkspace::default(); rayon::current_num_threads()];
+        let passes = rate(a.seconds, || objective.evaluate(&designs, QMode::First, a.chunk_rows, &mut out, &mut ws));
+        let rows = particles * n_states;
+        let config = format!("{rows}rows");
+        emit("forward_actor_critic", &config, 1.0 / passes, "s/pass");
+        emit("forward_actor_critic", &config, rows as f64 * passes, "rows/s");
+        emit("forward_actor_critic", &config, (rows * objective.flops_per_row()) as f64 * passes / 1e9, "GFLOP/s");
+    }
+    Ok(())
+}
