@@ -1,33 +1,29 @@
-//! The `coadapt` command line: thin subcommands over the libraries.
+//! The `coadapt` command line: argument parsing and dispatch into the libraries, which own
+//! every application (docs/ARCHITECTURE.md). Each module holds a subcommand's clap flags and
+//! turns them into the library's options; the binary makes the shutdown flag (Ctrl-C, SIGTERM)
+//! and maps a library's error to an exit code ([`exit`]).
 //!
 //! # Layout
 //! - [`Cli`] and [`run`]: the clap command tree and its dispatch.
-//! - [`run`]: `coadapt run`, a whole co-adaptation, its config and the run directory's last
-//!   touches (landscape, plots, summary).
-//! - [`roles`]: the learner, actor and design-optimiser roles over any links.
-//! - [`role_cmd`]: `coadapt learner|actor|optimizer`, one role per process.
-//! - [`fleet`]: the `[fleet]` config and each role's links over shared memory or gRPC.
-//! - [`launch`]: the local fleet of `coadapt run`: starts, supervises and stops the processes.
+//! - [`run`]: `coadapt run` (`coadapt_coadaptation::run`); [`role_cmd`]:
+//!   `coadapt learner|actor|optimizer`, one role per process (`coadapt_coadaptation::processes`).
 //! - [`confirm`]: `coadapt confirm`, the operator's answer to a run waiting for a prototype or
-//!   a reset.
-//! - [`plot`]: `coadapt plot`, the run directory's SVG plots (also drawn at the end of a run).
-//! - [`train`]: `coadapt train`, RL on one environment and one design.
-//! - [`bench`]: `coadapt bench`, its subcommands and their dispatch into `coadapt_bench` (the
-//!   benchmarks, each printing one JSON line per figure).
-//! - [`render`]: `coadapt render`, an episode as an animated GIF.
+//!   a reset (`coadapt_learner::prototype`).
+//! - [`plot`]: `coadapt plot` (`coadapt_coadaptation::plot`).
+//! - [`train`]: `coadapt train` (`coadapt_learner::train`); [`render`]: `coadapt render`
+//!   (`coadapt_learner::render`).
+//! - [`bench`]: `coadapt bench` and its subcommands (`coadapt_bench`).
 //! - [`env_serve`]: `coadapt env-serve`, a built-in robot served over dm_env_rpc.
-//! - [`serve`]: `coadapt serve`, a run's design critic (DesignService, Open Inference Protocol);
-//!   [`design_client`]: `coadapt score`, `coadapt optimize` and `coadapt history`, its
-//!   command-line clients.
-//! - [`search`]: the flags of `coadapt search` (episodic policy search: GrouPS, PePPER, PoWER,
-//!   NAC on the planar benchmark) and `coadapt search-actor`; the application is
-//!   `coadapt_policy_search::app`.
-//! - [`latent`]: the flags of `coadapt latent` (DDPG from pixels exploring by latent trajectory
-//!   optimisation, thesis ch. 4) and `coadapt latent-actor`; the application is
-//!   `coadapt_latent::app`.
-//! - [`actor_procs`]: actor processes a learner starts itself (search, latent), and how an actor
-//!   process joins its learner (`JoinArgs`).
-//! - [`progress`]: progress lines and the shutdown flag set by Ctrl-C.
+//! - [`serve`]: `coadapt serve`, a run's design critic (`coadapt_coadaptation::serve`,
+//!   `coadapt_design_service`); [`design_client`]: `coadapt score`, `optimize` and `history`,
+//!   its command-line clients.
+//! - [`search`]: `coadapt search` and `search-actor` (`coadapt_policy_search::app`).
+//! - [`latent`]: `coadapt latent` and `latent-actor` (`coadapt_latent::app`).
+//! - [`actor_procs`]: how an actor process joins its learner's fleet (`JoinArgs`).
+//! - [`security`]: the TLS and token flags of the commands without a run config.
+//! - [`credentials`]: `coadapt token new` and `coadapt tls new`.
+//! - [`exit`]: exit codes from the libraries' errors; [`progress`]: the shutdown flag set by
+//!   Ctrl-C and SIGTERM.
 
 pub mod actor_procs;
 pub mod bench;
