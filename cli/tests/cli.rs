@@ -10,9 +10,7 @@ fn coadapt(args: &[&str]) -> Output {
 }
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+    coadapt_test_support::scratch("cli", name)
 }
 
 #[test]

@@ -14,13 +14,11 @@ use coadapt_learner::prototype::{
 };
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-confirm-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+    coadapt_test_support::scratch("confirm", name)
 }
 
 fn workspace_file(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+    coadapt_test_support::workspace_file(rel)
 }
 
 fn confirm(dir: &Path, flags: &[&str]) -> Output {

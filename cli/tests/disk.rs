@@ -31,10 +31,7 @@ cp "$mnt/run/designs.csv" "$host/designs.csv"
 "#;
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-disk-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    coadapt_test_support::scratch_dir("disk", name)
 }
 
 /// Starts the script in a private mount namespace (as root, else in a user namespace).
@@ -54,8 +51,7 @@ fn a_full_disk_stops_the_run_cleanly_and_the_newest_snapshot_resumes() {
     let host = tmpdir("host");
     let mnt = host.join("mnt");
     std::fs::create_dir_all(&mnt).unwrap();
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
-    let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut c: RunConfig = coadapt_test_support::read_config("configs/half-cheetah-tiny.toml");
     c.landscape_grid = 0;
     c.schedule.designs = 6;
     // Snapshots at the end of design 1 (episode 6) and at episode 10: the disk is filled after

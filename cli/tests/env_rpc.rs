@@ -14,14 +14,11 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 fn workspace_file(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+    coadapt_test_support::workspace_file(rel)
 }
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-envrpc-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    coadapt_test_support::scratch_dir("envrpc", name)
 }
 
 /// The bridge's virtualenv (created on first use, then reused: the script checks a stamp).

@@ -16,15 +16,11 @@ use coadapt_learner::flow::FlowMode;
 use coadapt_transport::in_process;
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-fleet-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    coadapt_test_support::scratch_dir("fleet", name)
 }
 
 fn tiny() -> RunConfig {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
-    let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut c: RunConfig = coadapt_test_support::read_config("configs/half-cheetah-tiny.toml");
     c.landscape_grid = 0;
     c
 }

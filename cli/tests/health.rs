@@ -27,8 +27,7 @@ fn a_stalled_learner_goes_not_serving_and_recovers() {
     let dir = std::env::temp_dir().join(format!("coadapt-health-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
-    let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut c: RunConfig = coadapt_test_support::read_config("configs/half-cheetah-tiny.toml");
     c.landscape_grid = 0;
     c.fleet.health_stall_secs = 1.0;
     c.fleet.name = "health-test".into();

@@ -32,8 +32,7 @@ fn learner_and_optimizer_metrics_are_scraped_during_a_run() {
     let dir = std::env::temp_dir().join(format!("coadapt-metrics-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
-    let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut c: RunConfig = coadapt_test_support::read_config("configs/half-cheetah-tiny.toml");
     c.landscape_grid = 0;
     c.schedule.designs = 6;
     let (lp, op) = (free_port(), free_port());

@@ -8,10 +8,7 @@ use std::path::{Path, PathBuf};
 use coadapt_coadaptation::plot;
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-plot-{}-{name}", std::process::id()));
-    let _ = fs::remove_dir_all(&d);
-    fs::create_dir_all(&d).unwrap();
-    d
+    coadapt_test_support::scratch_dir("plot", name)
 }
 
 const DESIGNS: &str = "index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts

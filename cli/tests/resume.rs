@@ -12,17 +12,13 @@ use std::time::{Duration, Instant};
 use coadapt_coadaptation::RunConfig;
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-resume-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    coadapt_test_support::scratch_dir("resume", name)
 }
 
 /// The tiny protocol, 6 designs, a snapshot every 2 episodes, short deadlines, and a PSO big
 /// enough (seconds) that a kill lands while the learner waits for a design.
 fn config() -> RunConfig {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/half-cheetah-tiny.toml");
-    let mut c: RunConfig = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut c: RunConfig = coadapt_test_support::read_config("configs/half-cheetah-tiny.toml");
     c.landscape_grid = 0;
     c.schedule.designs = 6;
     c.schedule.design_request_resend_secs = 1.5;

@@ -13,13 +13,11 @@ use coadapt_design_optimizer::role::ExploitMethod;
 use coadapt_learner::fear::ActingPolicy;
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-run-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+    coadapt_test_support::scratch("run", name)
 }
 
 fn workspace_file(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+    coadapt_test_support::workspace_file(rel)
 }
 
 fn tiny() -> RunConfig {

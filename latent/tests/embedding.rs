@@ -4,6 +4,12 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
 use coadapt_latent::{Embedding, EmbeddingConfig, EmbeddingWork};
+use coadapt_test_support::reference::{self as reference, stats};
+
+/// Within 0.0002 of PyTorch's statistics (f32 against float64).
+fn close(name: &str, got: [f64; 3], want: [f64; 3]) {
+    reference::close(name, got, want, 0.0002);
+}
 
 fn small() -> (Embedding, Vec<f32>, Vec<f32>, Vec<f32>) {
     let cfg = EmbeddingConfig { image: 8, in_channels: 2, channels: [3, 3, 2], latent: 4, margin: 1.9 };
@@ -12,23 +18,6 @@ fn small() -> (Embedding, Vec<f32>, Vec<f32>, Vec<f32>) {
     let dec: Vec<f32> = (0..e.decoder_params()).map(|i| (0.3 * (0.23 * i as f64).cos()) as f32).collect();
     let frames: Vec<f32> = (0..3 * 2 * e.image_len()).map(|i| (0.5 + 0.5 * (0.11 * i as f64).sin()) as f32).collect();
     (e, enc, dec, frames)
-}
-
-fn stats(v: &[f32]) -> [f64; 3] {
-    let mut s = [0.0; 3];
-    for (i, &x) in v.iter().enumerate() {
-        let x = f64::from(x);
-        s[0] += x;
-        s[1] += x * (i + 1) as f64;
-        s[2] += x * x;
-    }
-    s
-}
-
-fn close(name: &str, got: [f64; 3], want: [f64; 3]) {
-    for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!((g - w).abs() <= 2e-4 * w.abs().max(1.0), "{name} statistic {k}: {g} vs PyTorch {w}");
-    }
 }
 
 #[test]

@@ -5,6 +5,12 @@
 
 use coadapt_latent::{LatentDynamics, ValueLosses};
 use coadapt_nn::Mlp;
+use coadapt_test_support::reference::{self as reference, stats};
+
+/// Within 0.0001 of PyTorch's statistics (f32 against float64).
+fn close(name: &str, got: [f64; 3], want: [f64; 3]) {
+    reference::close(name, got, want, 0.0001);
+}
 
 const LATENT: usize = 2;
 const FRAMES: usize = 3;
@@ -47,23 +53,6 @@ fn nets() -> Nets {
 
 const R: [f32; N] = [0.5, -0.2, 1.0];
 const DONE: [bool; N] = [false, true, false];
-
-fn stats(v: &[f32]) -> [f64; 3] {
-    let mut s = [0.0; 3];
-    for (i, &x) in v.iter().enumerate() {
-        let x = f64::from(x);
-        s[0] += x;
-        s[1] += x * (i + 1) as f64;
-        s[2] += x * x;
-    }
-    s
-}
-
-fn close(name: &str, got: [f64; 3], want: [f64; 3]) {
-    for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        assert!((g - w).abs() <= 1e-4 * w.abs().max(1.0), "{name} statistic {k}: {g} vs PyTorch {w}");
-    }
-}
 
 #[test]
 fn losses_and_gradients_match_pytorch() {

@@ -97,9 +97,7 @@ struct Run {
 }
 
 fn tmpdir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coadapt-prototype-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+    coadapt_test_support::scratch("prototype", name)
 }
 
 /// What the operator thread gets: the run directory, the resets so far, and whether the run

@@ -56,6 +56,10 @@ fn problems(rows: &BTreeMap<String, Row>, crates: &[(String, String, BTreeSet<St
             problems.push(format!("{name}: the table says {}, the workspace {dir}", row.dir));
         }
         for dep in deps {
+            if dep == "coadapt-test-support" {
+                problems.push(format!("{name} imports coadapt-test-support outside its tests"));
+                continue;
+            }
             let Some(d) = rows.get(dep) else {
                 problems.push(format!("{name} imports {dep}, which has no row"));
                 continue;
@@ -106,6 +110,9 @@ fn the_checker_refuses_an_import_from_above_or_beside() {
     assert_eq!(problems(&rows, &up).len(), 1, "a ground-floor crate importing one above");
     let beside = [("a".into(), "x".into(), set(&[])), ("b".into(), "y".into(), set(&["c"])), ("c".into(), "z".into(), set(&[]))];
     assert_eq!(problems(&rows, &beside).len(), 1, "an unlisted import on the same floor");
+    let support =
+        [("a".into(), "x".into(), set(&["coadapt-test-support"])), ("b".into(), "y".into(), set(&[])), ("c".into(), "z".into(), set(&[]))];
+    assert_eq!(problems(&rows, &support).len(), 1, "the test support in a library");
 }
 
 /// The modules of `cli/src` each file names with `crate::<module>`.

@@ -25,6 +25,24 @@ fn rt() -> &'static Runtime {
     RT.get_or_init(|| tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime"))
 }
 
+/// Every acknowledgement of a push stream until it ends, and the error that ended it (a stream
+/// that says nothing for 5 s ends with DEADLINE_EXCEEDED).
+async fn acks(opened: Result<tonic::Response<tonic::Streaming<pb::Ack>>, Status>) -> (Vec<u64>, Option<Status>) {
+    let mut acks = match opened {
+        Ok(r) => r.into_inner(),
+        Err(s) => return (Vec::new(), Some(s)),
+    };
+    let mut got = Vec::new();
+    loop {
+        match tokio::time::timeout(Duration::from_secs(5), acks.message()).await {
+            Ok(Ok(Some(a))) => got.push(a.acked),
+            Ok(Ok(None)) => return (got, None),
+            Ok(Err(s)) => return (got, Some(s)),
+            Err(_) => return (got, Some(Status::deadline_exceeded("no answer in 5 s"))),
+        }
+    }
+}
+
 /// A raw client on a connection of its own, presenting `session` in every call.
 struct Peer {
     client: FleetClient<Channel>,
@@ -93,41 +111,13 @@ impl Peer {
     fn push(&self, frames: Vec<pb::ExperienceFrame>) -> (Vec<u64>, Option<Status>) {
         let mut c = self.client.clone();
         let req = self.with_session(tokio_stream::iter(frames));
-        rt().block_on(async move {
-            let mut acks = match c.push_experience(req).await {
-                Ok(r) => r.into_inner(),
-                Err(s) => return (Vec::new(), Some(s)),
-            };
-            let mut got = Vec::new();
-            loop {
-                match tokio::time::timeout(Duration::from_secs(5), acks.message()).await {
-                    Ok(Ok(Some(a))) => got.push(a.acked),
-                    Ok(Ok(None)) => return (got, None),
-                    Ok(Err(s)) => return (got, Some(s)),
-                    Err(_) => return (got, Some(Status::deadline_exceeded("no answer in 5 s"))),
-                }
-            }
-        })
+        rt().block_on(async move { acks(c.push_experience(req).await).await })
     }
 
     fn push_replies(&self, frames: Vec<pb::DesignReplyFrame>) -> (Vec<u64>, Option<Status>) {
         let mut c = self.client.clone();
         let req = self.with_session(tokio_stream::iter(frames));
-        rt().block_on(async move {
-            let mut acks = match c.push_design_replies(req).await {
-                Ok(r) => r.into_inner(),
-                Err(s) => return (Vec::new(), Some(s)),
-            };
-            let mut got = Vec::new();
-            loop {
-                match tokio::time::timeout(Duration::from_secs(5), acks.message()).await {
-                    Ok(Ok(Some(a))) => got.push(a.acked),
-                    Ok(Ok(None)) => return (got, None),
-                    Ok(Err(s)) => return (got, Some(s)),
-                    Err(_) => return (got, Some(Status::deadline_exceeded("no answer in 5 s"))),
-                }
-            }
-        })
+        rt().block_on(async move { acks(c.push_design_replies(req).await).await })
     }
 }
 

@@ -4,28 +4,11 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
 use coadapt_nn::{Conv2d, ConvScratch, ConvTranspose2d};
+use coadapt_test_support::reference::{self as reference, fill, stats};
 
-fn fill(n: usize, f: impl Fn(usize) -> f64) -> Vec<f32> {
-    (0..n).map(|i| f(i) as f32).collect()
-}
-
-/// sum, sum of v (i + 1), sum of squares: as the reference script prints them.
-fn stats(v: &[f32]) -> [f64; 3] {
-    let mut s = [0.0; 3];
-    for (i, &x) in v.iter().enumerate() {
-        let x = f64::from(x);
-        s[0] += x;
-        s[1] += x * (i + 1) as f64;
-        s[2] += x * x;
-    }
-    s
-}
-
+/// Within 0.0001 of PyTorch's statistics (f32 against float64).
 fn close(name: &str, got: [f64; 3], want: [f64; 3]) {
-    for (k, (g, w)) in got.iter().zip(want).enumerate() {
-        // f32 arithmetic against float64: relative 1e-4 of the statistic's scale.
-        assert!((g - w).abs() <= 1e-4 * w.abs().max(1.0), "{name} statistic {k}: {g} vs PyTorch {w}");
-    }
+    reference::close(name, got, want, 0.0001);
 }
 
 /// One layer's forward and backward on the reference inputs.
