@@ -28,8 +28,9 @@ impl Children {
 
     /// `Some(why)` once every process has ended (a robot unreachable, a bad config): the
     /// learner should stop waiting for them.
-    pub fn all_ended_check(&self, what: &'static str, logs: &Path) -> Box<dyn Fn() -> Option<String> + Send + Sync> {
+    pub fn all_ended_check(&self, what: &str, logs: &Path) -> Box<dyn Fn() -> Option<String> + Send + Sync> {
         let kids = self.0.clone();
+        let what = what.to_string();
         let logs = logs.display().to_string();
         Box::new(move || {
             let mut kids = kids.lock().unwrap_or_else(|e| e.into_inner());
@@ -111,7 +112,7 @@ pub fn spawn(
 #[allow(missing_debug_implementations)] // holds a closure
 pub struct ProcessFleet<'a> {
     /// `search`, `latent`: the learner's name in messages and in a default fleet name.
-    pub role: &'a str,
+    pub role: &'static str,
     /// The actors' subcommand.
     pub subcommand: &'a str,
     pub actors: usize,
@@ -159,5 +160,60 @@ impl ProcessFleet<'_> {
             Children::new(Vec::new())
         };
         Ok((links, guard, children))
+    }
+}
+
+/// A learner's actors started by the learner itself, over any transport: threads of this
+/// process (in-process links), or processes ([`ProcessFleet`]) that end when the assignment
+/// queue closes. What latent planning and policy search share; the co-adaptation's local
+/// fleet is the supervisor's ([`crate::supervise`]).
+#[derive(Debug)]
+pub struct LocalActors<E> {
+    guard: LearnerGuard,
+    threads: Vec<std::thread::JoinHandle<Result<u64, E>>>,
+    children: Children,
+    /// Names the actors in messages (`latent`, `search`).
+    role: &'static str,
+    logs: std::path::PathBuf,
+}
+
+impl<E: std::fmt::Display> LocalActors<E> {
+    /// The learner's links over `fleet` and its `procs.actors` actors: for `in-process`, one
+    /// thread each made by `thread(i, links)`; otherwise `procs`' processes (or none, waiting for
+    /// actors started elsewhere).
+    #[allow(clippy::type_complexity)]
+    pub fn start<X: From<SetupError>>(
+        fleet: &FleetConfig,
+        procs: &ProcessFleet<'_>,
+        dims: coadapt_transport::messages::Dims,
+        max_episode_steps: usize,
+        security: &SecurityConfig,
+        mut thread: impl FnMut(usize, coadapt_transport::ActorLinks) -> Result<std::thread::JoinHandle<Result<u64, E>>, X>,
+    ) -> Result<(coadapt_transport::LearnerLinks, Self), X> {
+        let role = procs.role;
+        let logs = procs.out.join("logs");
+        if fleet.transport == TransportKind::InProcess {
+            let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(procs.actors);
+            let threads = actors.into_iter().enumerate().map(|(i, links)| thread(i, links)).collect::<Result<Vec<_>, X>>()?;
+            let me = Self { guard: LearnerGuard::None, threads, children: Children::new(Vec::new()), role, logs };
+            return Ok((learner, me));
+        }
+        let (links, guard, children) = procs.start(fleet, dims, max_episode_steps, security)?;
+        Ok((links, Self { guard, threads: Vec::new(), children, role, logs }))
+    }
+
+    /// For the dispatcher's `abort`: `Some(why)` once every actor process started here has
+    /// ended (none started: never).
+    pub fn all_ended_check(&self) -> Option<Box<dyn Fn() -> Option<String> + Send + Sync>> {
+        (!self.children.is_empty()).then(|| self.children.all_ended_check(&format!("{} actor", self.role), &self.logs))
+    }
+
+    /// After the learner's links are dropped (the queue closed, the actors end by themselves):
+    /// stops serving, and waits for the threads and processes.
+    pub fn finish(self) {
+        let Self { guard, threads, children, role, .. } = self;
+        drop(guard);
+        join_threads(role, threads);
+        children.finish();
     }
 }

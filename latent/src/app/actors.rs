@@ -11,8 +11,7 @@ use std::io::Write;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use coadapt_fleet::procs::Children;
-use coadapt_fleet::{LearnerGuard, TransportKind};
+use coadapt_fleet::procs::{LocalActors, ProcessFleet};
 
 use super::config::LatentConfig;
 use super::error::{LatentError, Within};
@@ -22,9 +21,7 @@ use crate::{ActorEpisode, Embedding, EpisodeRunner, FleetError, LatentActor};
 /// The learner's fleet: the episode runner over its links, and what keeps them up.
 pub(crate) struct Fleet {
     pub(crate) runner: EpisodeRunner,
-    guard: LearnerGuard,
-    threads: Vec<std::thread::JoinHandle<Result<u64, FleetError>>>,
-    children: Children,
+    actors: LocalActors<FleetError>,
 }
 
 /// One actor: its networks, sized from the config alone.
@@ -105,56 +102,34 @@ impl Fleet {
         let lease = std::time::Duration::from_secs_f64(cfg.episode_lease_secs);
         let deadline = std::time::Duration::from_secs_f64(cfg.episode_deadline_secs);
         let csv = |i: usize| out.join("actors").join(format!("actor-{i}.csv"));
-        let (links, guard, threads, children) = match cfg.fleet.transport {
-            TransportKind::InProcess => {
-                let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
-                let threads = actors
-                    .into_iter()
-                    .enumerate()
-                    .map(|(i, mut links)| {
-                        let mut source = camera_env(cfg)?;
-                        let mut actor = latent_actor(cfg, act, i as u64)?;
-                        let mut log = latency_log(Some(&csv(i)), i as u64)?;
-                        let steps = cfg.episode_steps;
-                        Ok(std::thread::spawn(move || {
-                            let stop = std::sync::atomic::AtomicBool::new(false);
-                            crate::run_actor(&mut actor, source.env(), steps, i as u64, &mut links, &stop, &mut log)
-                        }))
-                    })
-                    .collect::<Result<Vec<_>, LatentError>>()?;
-                (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
-            }
-            _ => {
-                let extra = |i: usize| vec!["--latency-csv".into(), csv(i).into_os_string()];
-                let procs = coadapt_fleet::procs::ProcessFleet {
-                    role: "latent",
-                    subcommand: "latent-actor",
-                    actors: cfg.actors,
-                    start: cfg.start_actors,
-                    out,
-                    extra: &extra,
-                };
-                let (links, guard, children) = procs.start(&cfg.fleet, dims, cfg.episode_steps, &cfg.security)?;
-                (links, guard, Vec::new(), children)
-            }
-        };
+        let extra = |i: usize| vec!["--latency-csv".into(), csv(i).into_os_string()];
+        let procs =
+            ProcessFleet { role: "latent", subcommand: "latent-actor", actors: cfg.actors, start: cfg.start_actors, out, extra: &extra };
+        let (links, actors) = LocalActors::start(&cfg.fleet, &procs, dims, cfg.episode_steps, &cfg.security, |i, mut links| {
+            let mut source = camera_env(cfg)?;
+            let mut actor = latent_actor(cfg, act, i as u64)?;
+            let mut log = latency_log(Some(&csv(i)), i as u64)?;
+            let steps = cfg.episode_steps;
+            Ok::<_, LatentError>(std::thread::spawn(move || {
+                let stop = std::sync::atomic::AtomicBool::new(false);
+                crate::run_actor(&mut actor, source.env(), steps, i as u64, &mut links, &stop, &mut log)
+            }))
+        })?;
         let mut runner = EpisodeRunner::new(links, state, act, cfg.episode_steps);
         runner.set_lease(lease);
         runner.set_deadline(deadline);
-        if !children.is_empty() {
-            // Actors started here that have all ended will never bring an episode back.
-            runner.set_abort(children.all_ended_check("latent actor", &out.join("logs")));
+        // Actors started here that have all ended will never bring an episode back.
+        if let Some(check) = actors.all_ended_check() {
+            runner.set_abort(check);
         }
-        Ok(Self { runner, guard, threads, children })
+        Ok(Self { runner, actors })
     }
 
     /// Closes the assignment queue (the actors end by themselves) and waits for them.
     pub(crate) fn finish(self) {
-        let Self { runner, guard, threads, children } = self;
+        let Self { runner, actors } = self;
         drop(runner);
-        drop(guard);
-        coadapt_fleet::procs::join_threads("latent", threads);
-        children.finish();
+        actors.finish();
     }
 }
 

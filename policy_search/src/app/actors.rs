@@ -4,8 +4,7 @@
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use coadapt_fleet::procs::Children;
-use coadapt_fleet::{LearnerGuard, TransportKind};
+use coadapt_fleet::procs::{LocalActors, ProcessFleet};
 
 use super::config::SearchConfig;
 use super::error::{SearchError, Within};
@@ -14,9 +13,7 @@ use crate::{FleetRunner, PlanarEnv};
 /// The search's fleet: the runner over the learner's links, and what keeps them up.
 pub(crate) struct Fleet {
     pub(crate) runner: FleetRunner,
-    guard: LearnerGuard,
-    threads: Vec<std::thread::JoinHandle<Result<u64, crate::RolloutError>>>,
-    children: Children,
+    actors: LocalActors<crate::RolloutError>,
 }
 
 impl Fleet {
@@ -26,54 +23,38 @@ impl Fleet {
         let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
         let lease = std::time::Duration::from_secs_f64(cfg.rollout_lease_secs);
         let deadline = std::time::Duration::from_secs_f64(cfg.iteration_deadline_secs);
-        let (links, guard, threads, children) = match cfg.fleet.transport {
-            TransportKind::InProcess => {
-                let (learner, actors, _optimizer) = coadapt_transport::in_process::fleet(cfg.actors);
-                let threads = actors
-                    .into_iter()
-                    .enumerate()
-                    .map(|(i, mut links)| {
-                        let mut robot = robot(cfg, &cfg.security)?;
-                        let steps = spec.max_episode_steps;
-                        Ok(std::thread::spawn(move || {
-                            let stop = std::sync::atomic::AtomicBool::new(false);
-                            crate::run_actor(&mut *robot, steps, i as u64, &mut links, &stop)
-                        }))
-                    })
-                    .collect::<Result<Vec<_>, SearchError>>()?;
-                (learner, LearnerGuard::None, threads, Children::new(Vec::new()))
-            }
-            _ => {
-                let procs = coadapt_fleet::procs::ProcessFleet {
-                    role: "search",
-                    subcommand: "search-actor",
-                    actors: cfg.actors,
-                    start: cfg.start_actors,
-                    out,
-                    extra: &|_| vec![],
-                };
-                let (links, guard, children) = procs.start(&cfg.fleet, dims, spec.max_episode_steps, &cfg.security)?;
-                (links, guard, Vec::new(), children)
-            }
+        let procs = ProcessFleet {
+            role: "search",
+            subcommand: "search-actor",
+            actors: cfg.actors,
+            start: cfg.start_actors,
+            out,
+            extra: &|_| vec![],
         };
+        let steps = spec.max_episode_steps;
+        let (links, actors) = LocalActors::start(&cfg.fleet, &procs, dims, steps, &cfg.security, |i, mut links| {
+            let mut robot = robot(cfg, &cfg.security)?;
+            Ok::<_, SearchError>(std::thread::spawn(move || {
+                let stop = std::sync::atomic::AtomicBool::new(false);
+                crate::run_actor(&mut *robot, steps, i as u64, &mut links, &stop)
+            }))
+        })?;
         let mut runner = FleetRunner::new(links, spec.max_episode_steps, spec.act_dim(), spec.obs_dim(), PlanarEnv::step_cost);
         runner.set_lease(lease);
         runner.set_deadline(deadline);
-        if !children.is_empty() {
-            // Actors started here that have all ended will never bring the rollouts back: say
-            // so instead of waiting for the deadline.
-            runner.set_abort(children.all_ended_check("search actor", &out.join("logs")));
+        // Actors started here that have all ended will never bring the rollouts back: say so
+        // instead of waiting for the deadline.
+        if let Some(check) = actors.all_ended_check() {
+            runner.set_abort(check);
         }
-        Ok(Self { runner, guard, threads, children })
+        Ok(Self { runner, actors })
     }
 
     /// Closes the assignment queue (the actors end by themselves) and waits for them.
     pub(crate) fn finish(self) {
-        let Self { runner, guard, threads, children } = self;
+        let Self { runner, actors } = self;
         drop(runner);
-        drop(guard);
-        coadapt_fleet::procs::join_threads("search", threads);
-        children.finish();
+        actors.finish();
     }
 }
 
