@@ -412,18 +412,18 @@ impl Sac {
         let (np, nc) = (self.phi.len(), self.critics[0].theta.len());
         self.phi = inp.f32s(&format!("{prefix}.policy"), np)?;
         let (m, v) = (inp.f32s(&format!("{prefix}.policy.adam.m"), np)?, inp.f32s(&format!("{prefix}.policy.adam.v"), np)?);
-        self.phi_adam.restore(&m, &v, s.adam_steps[0]).map_err(mismatch)?;
+        self.phi_adam.restore(&m, &v, s.adam_steps[0]).map_err(|e| mismatch(e.to_string()))?;
         for i in 0..2 {
             let theta = inp.f32s(&format!("{prefix}.q{}", i + 1), nc)?;
             let theta_bar = inp.f32s(&format!("{prefix}.q{}.target", i + 1), nc)?;
             let m = inp.f32s(&format!("{prefix}.q{}.adam.m", i + 1), nc)?;
             let v = inp.f32s(&format!("{prefix}.q{}.adam.v", i + 1), nc)?;
             let c = &mut self.critics[i];
-            c.adam.restore(&m, &v, s.adam_steps[1 + i]).map_err(mismatch)?;
+            c.adam.restore(&m, &v, s.adam_steps[1 + i]).map_err(|e| mismatch(e.to_string()))?;
             (c.theta, c.theta_bar) = (theta, theta_bar);
         }
         let (m, v) = (inp.f32s(&format!("{prefix}.log_alpha.adam.m"), 1)?, inp.f32s(&format!("{prefix}.log_alpha.adam.v"), 1)?);
-        self.alpha_adam.restore(&m, &v, s.adam_steps[3]).map_err(mismatch)?;
+        self.alpha_adam.restore(&m, &v, s.adam_steps[3]).map_err(|e| mismatch(e.to_string()))?;
         if !s.log_alpha.is_finite() {
             return Err(mismatch(format!("log alpha {} is not finite", s.log_alpha)));
         }

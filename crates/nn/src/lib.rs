@@ -3,7 +3,8 @@
 //! # Layout
 //! - [`mlp`]: the network shape ([`Mlp`]), allocation-free forward and backward passes over
 //!   row-major batches into preallocated [`Activations`].
-//! - [`optim`]: [`Adam`], element-wise gradient clamping and Polyak averaging on flat buffers.
+//! - [`optim`]: [`Adam`] (and [`MomentsMismatch`], restoring it from another size), element-wise
+//!   gradient clamping and Polyak averaging on flat buffers.
 //! - [`squashed`]: the tanh-squashed Gaussian of the SAC policy (sample, log-probability, backward).
 //! - [`io`]: save and load networks as safetensors, in PyTorch's `nn.Sequential` naming.
 //! - [`conv`]: [`Conv2d`] and [`ConvTranspose2d`] over NCHW batches (im2col and faer GEMM, in
@@ -23,7 +24,7 @@ pub mod squashed;
 pub use conv::{Conv2d, ConvScratch, ConvTranspose2d};
 pub use io::{NamedNetwork, load_networks, save_networks};
 pub use mlp::{Activations, HiddenInit, Layer, Mlp};
-pub use optim::{Adam, AdamConfig, clamp_elementwise, polyak};
+pub use optim::{Adam, AdamConfig, MomentsMismatch, clamp_elementwise, polyak};
 
 /// Errors of network construction and weight files.
 #[derive(Debug, thiserror::Error)]

@@ -15,6 +15,17 @@ impl Default for AdamConfig {
     }
 }
 
+/// Moments saved from an optimiser of another size (a snapshot of another network).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("Adam moments of {m} and {v} values for {params} parameters")]
+pub struct MomentsMismatch {
+    /// Values of the first and second moment estimates given.
+    pub m: usize,
+    pub v: usize,
+    /// The optimiser's parameters.
+    pub params: usize,
+}
+
 /// Adam (Kingma & Ba) with bias correction, as `torch.optim.Adam` computes it.
 #[derive(Clone, Debug)]
 pub struct Adam {
@@ -47,9 +58,9 @@ impl Adam {
     }
 
     /// Restores moments and step count saved from an optimiser of the same size.
-    pub fn restore(&mut self, m: &[f32], v: &[f32], t: u32) -> Result<(), String> {
+    pub fn restore(&mut self, m: &[f32], v: &[f32], t: u32) -> Result<(), MomentsMismatch> {
         if m.len() != self.m.len() || v.len() != self.v.len() {
-            return Err(format!("Adam moments of {} and {} values for {} parameters", m.len(), v.len(), self.m.len()));
+            return Err(MomentsMismatch { m: m.len(), v: v.len(), params: self.m.len() });
         }
         self.m.copy_from_slice(m);
         self.v.copy_from_slice(v);
