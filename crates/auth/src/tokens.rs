@@ -56,6 +56,13 @@ pub enum TokenError {
     File { path: String, why: String },
     #[error("{path} line {line}: {why}")]
     Line { path: String, line: usize, why: String },
+    /// A token's text is shorter than 16 characters (trimmed); the length it has.
+    #[error("a token is at least 16 characters, this one {0}")]
+    TooShort(usize),
+    /// A token's text holds a space or a byte that is not printable ASCII (it could not travel
+    /// as an HTTP header value).
+    #[error("a token is printable ASCII without spaces")]
+    NotPrintable,
 }
 
 /// A secret token. Its `Debug` and `Display` never show it.
@@ -65,13 +72,13 @@ pub struct Token(String);
 impl Token {
     /// A token from its text (a file's content, trimmed). Refuses what could not travel as an
     /// HTTP header value.
-    pub fn new(text: &str) -> Result<Self, String> {
+    pub fn new(text: &str) -> Result<Self, TokenError> {
         let t = text.trim();
         if t.len() < 16 {
-            return Err(format!("a token is at least 16 characters, this one {}", t.len()));
+            return Err(TokenError::TooShort(t.len()));
         }
         if !t.bytes().all(|b| b.is_ascii_graphic()) {
-            return Err("a token is printable ASCII without spaces".into());
+            return Err(TokenError::NotPrintable);
         }
         Ok(Self(t.to_string()))
     }
@@ -182,6 +189,7 @@ mod tests {
         assert!(e.contains("tokens line 1") && e.contains("64 hex digits"), "{e}");
         let e = TokenTable::parse(&format!("\nadmin {}\n", hash_token("x")), "tokens").unwrap_err().to_string();
         assert!(e.contains("line 2") && e.contains("\"admin\" is not a role"), "{e}");
-        assert!(Token::new("short").is_err() && Token::new("has a space in it ok").is_err());
+        assert!(matches!(Token::new("short"), Err(TokenError::TooShort(5))));
+        assert!(matches!(Token::new("has a space in it ok"), Err(TokenError::NotPrintable)));
     }
 }
