@@ -24,7 +24,7 @@ pub mod space;
 
 pub use env::{Env, EnvError, EnvSpec, Shape, Step, TimeLimit};
 pub use pixels::{Pixels, PixelsConfig};
-pub use replay::{Batch, ReplayBuffer, ReplayError, Transition};
+pub use replay::{Batch, ReplayBuffer, ReplayError, ReplayRestoreError, Transition};
 pub use space::{BoxSpace, SpaceError};
 
 /// The project's random number generator.

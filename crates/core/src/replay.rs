@@ -27,6 +27,30 @@ pub enum ReplayError {
     Empty,
 }
 
+/// Why arrays saved by [`ReplayBuffer::raw`] do not fit the buffer they are restored into.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ReplayRestoreError {
+    #[error(
+        "replay arrays of {transitions} transitions do not fit widths {obs_dim}/{act_dim} and capacity {capacity} (obs {obs}, act {act}, next_obs {next_obs}, done {done})"
+    )]
+    Shape {
+        transitions: usize,
+        obs_dim: usize,
+        act_dim: usize,
+        capacity: usize,
+        /// Lengths of the arrays given.
+        obs: usize,
+        act: usize,
+        next_obs: usize,
+        done: usize,
+    },
+    #[error("replay write position {next} does not fit {transitions} transitions and capacity {capacity}")]
+    Position { next: usize, transitions: usize, capacity: usize },
+    /// The first non-finite value, counted within its array.
+    #[error("replay arrays hold a non-finite value (at {index})")]
+    NonFinite { index: usize },
+}
+
 /// A ring buffer of transitions with fixed observation and action widths.
 #[derive(Clone, Debug)]
 pub struct ReplayBuffer {
@@ -160,24 +184,26 @@ impl ReplayBuffer {
     }
 
     /// Restores arrays saved by [`Self::raw`] from a buffer of the same widths and capacity.
-    pub fn restore_raw(&mut self, [obs, act, rew, next_obs, done]: [Vec<f32>; 5], next: usize) -> Result<(), String> {
+    pub fn restore_raw(&mut self, [obs, act, rew, next_obs, done]: [Vec<f32>; 5], next: usize) -> Result<(), ReplayRestoreError> {
         let n = rew.len();
         let (o, a) = (self.obs_dim, self.act_dim);
         if n > self.capacity || obs.len() != n * o || act.len() != n * a || next_obs.len() != n * o || done.len() != n {
-            return Err(format!(
-                "replay arrays of {n} transitions do not fit widths {o}/{a} and capacity {} (obs {}, act {}, next_obs {}, done {})",
-                self.capacity,
-                obs.len(),
-                act.len(),
-                next_obs.len(),
-                done.len()
-            ));
+            return Err(ReplayRestoreError::Shape {
+                transitions: n,
+                obs_dim: o,
+                act_dim: a,
+                capacity: self.capacity,
+                obs: obs.len(),
+                act: act.len(),
+                next_obs: next_obs.len(),
+                done: done.len(),
+            });
         }
         if next >= self.capacity || (n < self.capacity && next != n % self.capacity) {
-            return Err(format!("replay write position {next} does not fit {n} transitions and capacity {}", self.capacity));
+            return Err(ReplayRestoreError::Position { next, transitions: n, capacity: self.capacity });
         }
-        if let Some(i) = [&obs, &act, &rew, &next_obs, &done].iter().find_map(|v| v.iter().position(|x| !x.is_finite())) {
-            return Err(format!("replay arrays hold a non-finite value (at {i})"));
+        if let Some(index) = [&obs, &act, &rew, &next_obs, &done].iter().find_map(|v| v.iter().position(|x| !x.is_finite())) {
+            return Err(ReplayRestoreError::NonFinite { index });
         }
         (self.obs, self.act, self.rew, self.next_obs, self.done, self.next) = (obs, act, rew, next_obs, done, next);
         Ok(())
