@@ -26,6 +26,9 @@ use crate::{RemoteOptions, block};
 /// Why a remote environment failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RemoteError {
+    /// The name is not a `dm-env-rpc://HOST:PORT` address (a setting to fix, not a fault).
+    #[error("{url}: {error}")]
+    Address { url: String, error: crate::AddressError },
     #[error("{url}: {what}")]
     Connect { url: String, what: String },
     #[error("{url}: no answer to {request} within {timeout:?}")]
@@ -179,7 +182,7 @@ impl std::fmt::Debug for RemoteEnv {
 impl RemoteEnv {
     /// Connects to `url` (`dm-env-rpc://HOST:PORT`) and reads the environment's specs.
     pub fn connect(url: &str, opts: RemoteOptions) -> Result<Self, RemoteError> {
-        let endpoint = crate::endpoint(url).map_err(|what| RemoteError::Connect { url: url.to_string(), what })?;
+        let endpoint = crate::endpoint(url).map_err(|error| RemoteError::Address { url: url.to_string(), error })?;
         let (conn, profile, uids, default_design) = block(open(url.to_string(), endpoint.clone(), opts.clone()))
             .map_err(|what| RemoteError::Connect { url: url.to_string(), what })??;
         let spec = EnvSpec {

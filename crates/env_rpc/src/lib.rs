@@ -9,8 +9,9 @@
 //! - [`server`]: the `Environment` service over any coadapt `Env` factory (`coadapt
 //!   env-serve`), and a background server for tests and benchmarks.
 //!
-//! Environment names of the form `dm-env-rpc://HOST:PORT` ([`is_remote`]) select a
-//! [`RemoteEnv`] wherever coadapt takes an environment name.
+//! Environment names of the form `dm-env-rpc://HOST:PORT` ([`is_remote`]; [`endpoint`], or an
+//! [`AddressError`] naming what is wrong with one) select a [`RemoteEnv`] wherever coadapt takes
+//! an environment name.
 
 pub mod client;
 pub mod profile;
@@ -31,14 +32,28 @@ pub fn is_remote(name: &str) -> bool {
     name.starts_with(SCHEME)
 }
 
+/// Why an environment name is not a `dm-env-rpc://HOST:PORT` address.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum AddressError {
+    #[error("`{url}` is not a {}HOST:PORT address", SCHEME)]
+    NotRemote { url: String },
+    #[error("`{url}`: no port (expected {}HOST:PORT)", SCHEME)]
+    NoPort { url: String },
+    /// No host, or a path after the port.
+    #[error("`{url}`: expected {}HOST:PORT", SCHEME)]
+    Malformed { url: String },
+    #[error("`{url}`: port `{port}` is not a number in 1-65535")]
+    BadPort { url: String, port: String },
+}
+
 /// `dm-env-rpc://HOST:PORT` to the HTTP/2 endpoint `http://HOST:PORT`.
-pub fn endpoint(url: &str) -> Result<String, String> {
-    let rest = url.strip_prefix(SCHEME).ok_or_else(|| format!("`{url}` is not a {SCHEME}HOST:PORT address"))?;
-    let (host, port) = rest.rsplit_once(':').ok_or_else(|| format!("`{url}`: no port (expected {SCHEME}HOST:PORT)"))?;
+pub fn endpoint(url: &str) -> Result<String, AddressError> {
+    let rest = url.strip_prefix(SCHEME).ok_or_else(|| AddressError::NotRemote { url: url.to_string() })?;
+    let (host, port) = rest.rsplit_once(':').ok_or_else(|| AddressError::NoPort { url: url.to_string() })?;
     if host.is_empty() || rest.contains('/') {
-        return Err(format!("`{url}`: expected {SCHEME}HOST:PORT"));
+        return Err(AddressError::Malformed { url: url.to_string() });
     }
-    port.parse::<u16>().map_err(|_| format!("`{url}`: port `{port}` is not a number in 1-65535"))?;
+    port.parse::<u16>().map_err(|_| AddressError::BadPort { url: url.to_string(), port: port.to_string() })?;
     Ok(format!("http://{rest}"))
 }
 
