@@ -182,8 +182,8 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> crate::Result<()> {
     for (i, d) in cfg.schedule.initial_designs.iter().enumerate() {
         spec.design.check("design", d).map_err(|e| crate::Error::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
     }
-    cfg.flow.lease().map_err(crate::Error::Config)?;
-    cfg.schedule.poll_interval().map_err(crate::Error::Config)?;
+    cfg.flow.lease()?;
+    cfg.schedule.poll_interval()?;
     cfg.remote.options(&cfg.security)?;
     if cfg.fleet.transport == TransportKind::Shm && cfg.actors > cfg.fleet.max_actors {
         crate::error::bail_config!(

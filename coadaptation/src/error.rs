@@ -51,6 +51,13 @@ impl Error {
     }
 }
 
+/// A run's setting the learner refuses: a setting, so the run stops for good (exit 78).
+impl From<coadapt_learner::ConfigError> for Error {
+    fn from(e: coadapt_learner::ConfigError) -> Self {
+        Self::Config(e.to_string())
+    }
+}
+
 /// Errors of other libraries that carry no kind a caller branches on: their message is kept.
 macro_rules! failed_from {
     ($($t:ty),* $(,)?) => {$(

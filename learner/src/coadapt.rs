@@ -39,6 +39,7 @@ use coadapt_transport::messages::Dims;
 use coadapt_transport::{DesignKind, EpisodeMode, LearnerLinks, TransportError};
 use serde::{Deserialize, Serialize};
 
+use crate::ConfigError;
 use crate::fear::{FearLearner, FearLearnerConfig};
 use crate::flow::{Completed, FlowConfig, LearnerTime};
 use crate::prototype::{Outcome, ResetMode};
@@ -129,11 +130,11 @@ impl ScheduleConfig {
     }
 
     /// `confirm-poll-secs` as a duration, refusing what is not a positive number of seconds.
-    pub fn poll_interval(&self) -> Result<Duration, String> {
+    pub fn poll_interval(&self) -> Result<Duration, ConfigError> {
         let t = self.confirm_poll_secs;
         match Duration::try_from_secs_f64(t) {
             Ok(d) if t > 0.0 => Ok(d),
-            _ => Err(format!("schedule.confirm-poll-secs: {t} is not a positive number of seconds")),
+            _ => Err(ConfigError::NotPositiveSeconds { key: "schedule.confirm-poll-secs", value: t }),
         }
     }
 
@@ -191,6 +192,12 @@ from_without_source!(
     Checkpoint(coadapt_nn::NnError),
     Snapshot(SnapshotError)
 );
+
+impl From<ConfigError> for CoadaptError {
+    fn from(e: ConfigError) -> Self {
+        Self::Config(e.to_string())
+    }
+}
 
 impl CoadaptError {
     /// The I/O error underneath, if any (a full disk is told apart by its kind).
@@ -344,7 +351,7 @@ pub fn run(
     for (i, d) in cfg.initial_designs.iter().enumerate() {
         spec.design.check("design", d).map_err(|e| CoadaptError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
     }
-    cfg.poll_interval().map_err(CoadaptError::Config)?;
+    cfg.poll_interval()?;
     for (name, v) in
         [("design-request-resend-secs", cfg.design_request_resend_secs), ("design-request-timeout-secs", cfg.design_request_timeout_secs)]
     {
@@ -352,9 +359,9 @@ pub fn run(
             return Err(CoadaptError::Config(format!("schedule.{name}: {v} is not a positive number of seconds")));
         }
     }
-    snaps.cfg.validate().map_err(CoadaptError::Config)?;
+    snaps.cfg.validate()?;
     let fear = FearLearner::new(dims.obs, dims.act, fear_cfg.clone(), seed).map_err(|e| CoadaptError::Config(e.to_string()))?;
-    let lease = flow.lease().map_err(CoadaptError::Config)?;
+    let lease = flow.lease()?;
     let in_flight = flow.in_flight(actors);
     let dir = out.dir().to_path_buf();
     let mut l = Learner {

@@ -1,7 +1,21 @@
-//! Learner hyper-parameters. Defaults are the reference settings (DESIGN.md section 2).
+//! Learner hyper-parameters. Defaults are the reference settings (DESIGN.md section 2). And
+//! [`ConfigError`], a run's setting that cannot work.
 
 use coadapt_nn::HiddenInit;
 use serde::{Deserialize, Serialize};
+
+/// A setting of a co-adaptation run (`[schedule]`, `[flow]`, `[snapshot]`) that cannot work;
+/// the message names its key as a config file spells it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ConfigError {
+    /// A duration that is not a positive number of seconds; `key` is e.g.
+    /// `flow.assignment-lease-secs`.
+    #[error("{key}: {value} is not a positive number of seconds")]
+    NotPositiveSeconds { key: &'static str, value: f64 },
+    /// `snapshot.keep` below 2.
+    #[error("snapshot.keep: {0} is fewer than 2 (a damaged newest snapshot needs one to fall back to)")]
+    TooFewSnapshots(usize),
+}
 
 /// Soft Actor-Critic settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -22,6 +22,8 @@ use std::time::Duration;
 use coadapt_transport::{EpisodeEnd, EpisodeMode, ExperienceChunk};
 use serde::{Deserialize, Serialize};
 
+use crate::ConfigError;
+
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FlowMode {
@@ -67,11 +69,11 @@ impl FlowConfig {
     }
 
     /// Checks the fields a user can get wrong.
-    pub fn lease(&self) -> Result<Duration, String> {
+    pub fn lease(&self) -> Result<Duration, ConfigError> {
         let t = self.assignment_lease_secs;
         match Duration::try_from_secs_f64(t) {
             Ok(d) if t > 0.0 => Ok(d),
-            _ => Err(format!("flow.assignment-lease-secs: {t} is not a positive number of seconds")),
+            _ => Err(ConfigError::NotPositiveSeconds { key: "flow.assignment-lease-secs", value: t }),
         }
     }
 }

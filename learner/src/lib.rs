@@ -1,7 +1,8 @@
 //! The coadapt learner: reinforcement learning on faer networks.
 //!
 //! # Layout
-//! - [`config`]: [`SacConfig`] and [`DdpgConfig`], the reference hyper-parameters as defaults.
+//! - [`config`]: [`SacConfig`] and [`DdpgConfig`], the reference hyper-parameters as defaults;
+//!   [`ConfigError`], a run's setting (schedule, flow, snapshots) that cannot work.
 //! - [`networks`]: network shapes (critic `[obs, action] -> 1`, Gaussian and deterministic
 //!   policies).
 //! - [`sac`]: Soft Actor-Critic, the update in the paper's notation.
@@ -38,6 +39,6 @@ pub mod snapshot;
 pub mod train;
 
 pub use agent::{Agent, Algo};
-pub use config::{DdpgConfig, Exploration, SacConfig};
+pub use config::{ConfigError, DdpgConfig, Exploration, SacConfig};
 pub use ddpg::{Ddpg, DdpgLosses, ExplorationNoise};
 pub use sac::{Sac, SacLosses};

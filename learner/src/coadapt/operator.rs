@@ -26,7 +26,7 @@ impl Learner<'_> {
     /// Calls `take` every `confirm-poll-secs` until it yields, training the population networks
     /// in between if configured; `None` on shutdown.
     fn wait_for<T>(&mut self, mut take: impl FnMut() -> Result<Option<T>, CoadaptError>) -> Result<Option<T>, CoadaptError> {
-        let poll = self.cfg.poll_interval().map_err(CoadaptError::Config)?;
+        let poll = self.cfg.poll_interval()?;
         let rate = self.cfg.train_while_waiting as f64;
         // At most one poll interval's updates at a time, so the decision is still read promptly
         // when updates are slower than asked for (the rate is then a ceiling).

@@ -25,6 +25,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::ConfigError;
+
 pub use state::{ArrayEntry, StateIn, StateIndex, StateOut};
 
 /// When snapshots are taken and how many are kept.
@@ -47,9 +49,9 @@ impl Default for SnapshotConfig {
 }
 
 impl SnapshotConfig {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if self.keep < 2 {
-            return Err(format!("snapshot.keep: {} is fewer than 2 (a damaged newest snapshot needs one to fall back to)", self.keep));
+            return Err(ConfigError::TooFewSnapshots(self.keep));
         }
         Ok(())
     }
