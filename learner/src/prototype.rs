@@ -141,6 +141,11 @@ pub struct ResetDecision {
     pub decision: Verdict,
 }
 
+/// What is said of a rejected fixed initial design, after `design N` (by `coadapt confirm`, and
+/// by the learner when a decision file says it).
+const FIXED_DESIGN: &str =
+    "is a fixed initial design: there is no next-best design to build instead; build it, or give what was built with --as-built";
+
 /// Why `coadapt confirm` refused.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfirmError {
@@ -149,14 +154,51 @@ pub enum ConfirmError {
     #[error("{}: {why}", .path.display())]
     Unreadable { path: PathBuf, why: String },
     #[error("--as-built: {0}")]
-    AsBuilt(String),
-    #[error(
-        "design {} is a fixed initial design: there is no next-best design to build instead; build it, or give what was \
-         built with --as-built", .index + 1
-    )]
+    AsBuilt(AsBuiltError),
+    #[error("design {} {}", .index + 1, FIXED_DESIGN)]
     FixedDesign { index: usize },
     #[error("writing {}: {source}", .path.display())]
     Write { path: PathBuf, source: io::Error },
+}
+
+/// Why measured dimensions do not fit a prototype: the first bad entry (`entry` counts from 0,
+/// the message from 1, as an operator counts).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum AsBuiltError {
+    /// Not one value per design entry; `names` lists the entries.
+    #[error("{got} values, but the design has {expected} ({names})")]
+    Count { got: usize, expected: usize, names: String },
+    #[error("entry {} ({name}) is {value}, not a finite number", .entry + 1)]
+    NotFinite { entry: usize, name: String, value: f32 },
+    #[error("entry {} ({name}) = {value} is outside the design box [{low}, {high}]", .entry + 1)]
+    OutsideBox { entry: usize, name: String, value: f32, low: f32, high: f32 },
+}
+
+/// Why the learner ignored an operator's decision file (it says so and keeps waiting).
+#[derive(Debug, thiserror::Error)]
+pub enum DecisionError {
+    /// The file is not a decision; `file` is its name.
+    #[error("{file}: {error}")]
+    Unreadable { file: String, error: serde_json::Error },
+    /// It answers another design or proposal than the one awaiting (indices from 0).
+    #[error(
+        "it answers design {} (proposal {proposal}), but design {} (proposal {awaiting_proposal}) awaits its prototype",
+        .index + 1,
+        .awaiting_index + 1
+    )]
+    OtherPrototype { index: usize, proposal: usize, awaiting_index: usize, awaiting_proposal: usize },
+    #[error("a rejection with as-built dimensions")]
+    RejectionAsBuilt,
+    /// A rejection of a fixed initial design (said as [`ConfirmError::FixedDesign`] says it).
+    #[error("design {} {}", .index + 1, FIXED_DESIGN)]
+    FixedDesign { index: usize },
+    #[error("as_built: {0}")]
+    AsBuilt(AsBuiltError),
+    /// It answers another reset than the one awaiting; both as [`reset_name`] says them.
+    #[error("it answers {answers}, but {awaiting} awaits a reset")]
+    OtherReset { answers: String, awaiting: String },
+    #[error("a reset cannot be rejected")]
+    ResetRejected,
 }
 
 /// What `coadapt confirm` answered.
@@ -194,18 +236,18 @@ pub fn describe(dimensions: &[(String, f32)]) -> String {
 
 /// Checks measured dimensions against the prototype: one per design entry, finite, inside the
 /// box; the message names the first bad entry.
-pub fn check_as_built(p: &Prototype, v: &[f32]) -> Result<(), String> {
+pub fn check_as_built(p: &Prototype, v: &[f32]) -> Result<(), AsBuiltError> {
     if v.len() != p.design.len() {
-        return Err(format!("{} values, but the design has {} ({})", v.len(), p.design.len(), names(p)));
+        return Err(AsBuiltError::Count { got: v.len(), expected: p.design.len(), names: names(p) });
     }
     for (i, &x) in v.iter().enumerate() {
         let name = p.dimensions.get(i).map_or_else(|| format!("design[{i}]"), |d| d.0.clone());
         if !x.is_finite() {
-            return Err(format!("entry {} ({name}) is {x}, not a finite number", i + 1));
+            return Err(AsBuiltError::NotFinite { entry: i, name, value: x });
         }
         let (lo, hi) = (p.low.get(i).copied().unwrap_or(f32::NEG_INFINITY), p.high.get(i).copied().unwrap_or(f32::INFINITY));
         if !(lo..=hi).contains(&x) {
-            return Err(format!("entry {} ({name}) = {x} is outside the design box [{lo}, {hi}]", i + 1));
+            return Err(AsBuiltError::OutsideBox { entry: i, name, value: x, low: lo, high: hi });
         }
     }
     Ok(())
@@ -236,7 +278,7 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<Option<T>, ConfirmE
 
 /// Reads and deletes the decision file `name` in `dir`: `None` while there is none, else the
 /// decision or why it could not be read.
-pub fn take_decision<T: DeserializeOwned>(dir: &Path, name: &str) -> io::Result<Option<Result<T, String>>> {
+pub fn take_decision<T: DeserializeOwned>(dir: &Path, name: &str) -> io::Result<Option<Result<T, DecisionError>>> {
     let path = dir.join(name);
     let text = match std::fs::read_to_string(&path) {
         Ok(t) => t,
@@ -244,44 +286,42 @@ pub fn take_decision<T: DeserializeOwned>(dir: &Path, name: &str) -> io::Result<
         Err(e) => return Err(e),
     };
     std::fs::remove_file(&path)?;
-    Ok(Some(serde_json::from_str(&text).map_err(|e| format!("{name}: {e}"))))
+    Ok(Some(serde_json::from_str(&text).map_err(|error| DecisionError::Unreadable { file: name.to_string(), error })))
 }
 
 /// What `decision` means for the awaiting prototype `p`, or why it does not apply to it.
-pub fn accept(p: &Prototype, decision: &PrototypeDecision) -> Result<Outcome, String> {
+pub fn accept(p: &Prototype, decision: &PrototypeDecision) -> Result<Outcome, DecisionError> {
     if (decision.index, decision.proposal) != (p.index, p.proposal) {
-        return Err(format!(
-            "it answers design {} (proposal {}), but design {} (proposal {}) awaits its prototype",
-            decision.index + 1,
-            decision.proposal,
-            p.index + 1,
-            p.proposal
-        ));
+        return Err(DecisionError::OtherPrototype {
+            index: decision.index,
+            proposal: decision.proposal,
+            awaiting_index: p.index,
+            awaiting_proposal: p.proposal,
+        });
     }
     match (decision.decision, &decision.as_built) {
-        (Verdict::Reject, Some(_)) => Err("a rejection with as-built dimensions".into()),
-        (Verdict::Reject, None) if p.is_fixed() => Err(ConfirmError::FixedDesign { index: p.index }.to_string()),
+        (Verdict::Reject, Some(_)) => Err(DecisionError::RejectionAsBuilt),
+        (Verdict::Reject, None) if p.is_fixed() => Err(DecisionError::FixedDesign { index: p.index }),
         (Verdict::Reject, None) => Ok(Outcome::Rejected),
         (Verdict::Confirm, None) => Ok(Outcome::Confirmed),
         (Verdict::Confirm, Some(v)) => {
-            check_as_built(p, v).map_err(|e| format!("as_built: {e}"))?;
+            check_as_built(p, v).map_err(DecisionError::AsBuilt)?;
             Ok(Outcome::AsBuilt(v.clone()))
         }
     }
 }
 
 /// Whether `decision` answers the awaiting reset `r`, or why not.
-pub fn accept_reset(r: &ResetRequest, decision: &ResetDecision) -> Result<(), String> {
+pub fn accept_reset(r: &ResetRequest, decision: &ResetDecision) -> Result<(), DecisionError> {
     if (decision.design_index, decision.episode, decision.mode) != (r.design_index, r.episode, r.mode) {
-        return Err(format!(
-            "it answers {}, but {} awaits a reset",
-            reset_name(decision.mode, decision.episode, decision.design_index),
-            reset_name(r.mode, r.episode, r.design_index)
-        ));
+        return Err(DecisionError::OtherReset {
+            answers: reset_name(decision.mode, decision.episode, decision.design_index),
+            awaiting: reset_name(r.mode, r.episode, r.design_index),
+        });
     }
     match decision.decision {
         Verdict::Confirm => Ok(()),
-        Verdict::Reject => Err("a reset cannot be rejected".into()),
+        Verdict::Reject => Err(DecisionError::ResetRejected),
     }
 }
 
