@@ -11,7 +11,7 @@ use crate::error::Context;
 use coadapt_actors::{Actor, PolicyKind};
 use coadapt_core::{Env, EnvSpec};
 use coadapt_design_optimizer::resume::StateFile;
-use coadapt_design_optimizer::role::{self as optimizer, Optimizer, OptimizerSpec, RolloutEvaluator};
+use coadapt_design_optimizer::role::{self as optimizer, Optimizer, OptimizerSpec, RolloutError, RolloutEvaluator};
 use coadapt_fleet::make_env_with;
 use coadapt_learner::coadapt::{self, RunEvent};
 use coadapt_learner::networks;
@@ -42,7 +42,7 @@ impl SimEvaluator {
         steps: usize,
         out: &mut [f32],
         score: fn(&coadapt_actors::EpisodeStats) -> f32,
-    ) -> Result<(), String> {
+    ) -> Result<(), RolloutError> {
         self.version += 1;
         let dim = designs.len() / out.len().max(1);
         let per = out.len().div_ceil(self.actors.len());
@@ -55,32 +55,32 @@ impl SimEvaluator {
                 .zip(designs.chunks(per.max(1) * dim))
                 .zip(seeds.chunks(per.max(1)))
                 .map(|(((actor, fit), des), seeds)| {
-                    s.spawn(move || -> Result<(), String> {
-                        actor.set_weights(version, policy).map_err(|e| e.to_string())?;
+                    s.spawn(move || -> Result<(), RolloutError> {
+                        actor.set_weights(version, policy).map_err(|e| RolloutError::Failed(e.into()))?;
                         for ((f, d), &seed) in fit.iter_mut().zip(des.chunks_exact(dim)).zip(seeds) {
                             let mut taken = 0usize;
                             let mut cut = |_: &coadapt_core::Transition<'_>| {
                                 taken += 1;
                                 if steps > 0 && taken >= steps { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
                             };
-                            let st = actor.run_episode(seed, d, false, &mut cut).map_err(|e| e.to_string())?;
+                            let st = actor.run_episode(seed, d, false, &mut cut).map_err(|e| RolloutError::Failed(e.into()))?;
                             *f = score(&st);
                         }
                         Ok(())
                     })
                 })
                 .collect();
-            jobs.into_iter().try_for_each(|j| j.join().map_err(|_| "a rollout thread panicked".to_string())?)
+            jobs.into_iter().try_for_each(|j| j.join().map_err(|_| RolloutError::Panicked)?)
         })
     }
 }
 
 impl RolloutEvaluator for SimEvaluator {
-    fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String> {
+    fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), RolloutError> {
         self.rollouts(policy, designs, seeds, 0, fitness, |st| st.episode_return / st.length.max(1) as f32)
     }
 
-    fn returns(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], steps: usize, returns: &mut [f32]) -> Result<(), String> {
+    fn returns(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], steps: usize, returns: &mut [f32]) -> Result<(), RolloutError> {
         self.rollouts(policy, designs, seeds, steps, returns, |st| st.episode_return)
     }
 }

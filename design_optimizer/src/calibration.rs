@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use coadapt_transport::{DesignKind, DesignReply, DesignRequest, Weights};
 
 use crate::role::{ExploreMethod, Optimizer};
-use crate::{CriticObjective, SwarmObjective};
+use crate::{CriticObjective, ObjectiveError, SwarmObjective};
 
 /// Which design a calibration row scores.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,7 +45,7 @@ pub struct CalibrationRow {
 
 impl Optimizer<'_> {
     /// The calibration rows of an answered request: none for exploration requests.
-    pub fn calibration(&self, req: &DesignRequest, w: &Weights, reply: &DesignReply) -> Result<Vec<CalibrationRow>, String> {
+    pub fn calibration(&self, req: &DesignRequest, w: &Weights, reply: &DesignReply) -> Result<Vec<CalibrationRow>, ObjectiveError> {
         if req.kind != DesignKind::Exploit {
             return Ok(Vec::new());
         }

@@ -137,10 +137,11 @@ pub trait AskTell {
     fn population(&self) -> usize;
     /// The distribution's mean in design units, inside the box.
     fn mean_design(&self) -> Vec<f32>;
-    /// The whole state (distribution, generator, counters), for the optimiser's state file.
-    fn save(&self) -> Result<String, String>;
+    /// The whole state (distribution, generator, counters) as JSON, for the optimiser's state
+    /// file.
+    fn save(&self) -> Result<String, serde_json::Error>;
     /// Restores what [`AskTell::save`] returned.
-    fn load(&mut self, v: &str) -> Result<(), String>;
+    fn load(&mut self, v: &str) -> Result<(), serde_json::Error>;
 }
 
 /// One generation of `es` over `objective` (Ha's baseline step): asks, scores every candidate in
@@ -364,12 +365,12 @@ impl AskTell for OpenAiEs {
     fn ask(&mut self) -> &[f32] {
         OpenAiEs::ask(self)
     }
-    fn save(&self) -> Result<String, String> {
+    fn save(&self) -> Result<String, serde_json::Error> {
         // A string, not a `serde_json::Value`: the generator's state is a u128.
-        serde_json::to_string(self).map_err(|e| e.to_string())
+        serde_json::to_string(self)
     }
-    fn load(&mut self, v: &str) -> Result<(), String> {
-        *self = serde_json::from_str(v).map_err(|e| e.to_string())?;
+    fn load(&mut self, v: &str) -> Result<(), serde_json::Error> {
+        *self = serde_json::from_str(v)?;
         Ok(())
     }
     fn tell(&mut self, scores: &[f32]) -> Result<(), SearchError> {
@@ -390,12 +391,12 @@ impl AskTell for Cmaes {
     fn ask(&mut self) -> &[f32] {
         Cmaes::ask(self)
     }
-    fn save(&self) -> Result<String, String> {
+    fn save(&self) -> Result<String, serde_json::Error> {
         // A string, not a `serde_json::Value`: the generator's state is a u128.
-        serde_json::to_string(self).map_err(|e| e.to_string())
+        serde_json::to_string(self)
     }
-    fn load(&mut self, v: &str) -> Result<(), String> {
-        *self = serde_json::from_str(v).map_err(|e| e.to_string())?;
+    fn load(&mut self, v: &str) -> Result<(), serde_json::Error> {
+        *self = serde_json::from_str(v)?;
         Ok(())
     }
     fn tell(&mut self, scores: &[f32]) -> Result<(), SearchError> {

@@ -22,8 +22,10 @@
 //! - [`reject`]: designs an operator rejected as prototypes, and the radius around each that
 //!   no proposal may enter (an objective wrapper scoring it minus infinity).
 //! - [`role`]: the optimiser role: design requests in, designs out, by PSO/CMA-ES over Q,
-//!   the simulation baselines (through a [`role::RolloutEvaluator`]), ES or random; and
+//!   the simulation baselines (through a [`rollout::RolloutEvaluator`]), ES or random; and
 //!   exploration by random designs or novelty.
+//! - [`rollout`]: [`rollout::RolloutEvaluator`], what scores designs by simulation for the
+//!   baselines and the screened rollouts, and [`rollout::RolloutError`], why it could not.
 //! - [`calibration`]: at each exploitation request, the objective's value for the chosen design,
 //!   the next random design and every design trained before, with that request's networks
 //!   (`calibration.csv`: does the critic order bodies as the robot does?).
@@ -47,6 +49,7 @@ pub mod pso;
 pub mod reject;
 pub mod resume;
 pub mod role;
+pub mod rollout;
 pub mod screen;
 pub mod swarm;
 pub mod trust;

@@ -12,6 +12,14 @@ use coadapt_core::BoxSpace;
 
 use crate::SwarmObjective;
 
+/// `random` drew `draws` designs and every one fell near a rejected design.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("{draws} random designs all fell within optimizer.reject-radius ({radius}) of a rejected design; lower the radius")]
+pub struct AllRejected {
+    pub draws: usize,
+    pub radius: f32,
+}
+
 /// The rejected designs of a run, with the radius around each that no proposal may enter.
 #[derive(Clone, Debug)]
 pub struct Rejected {

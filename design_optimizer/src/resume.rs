@@ -87,9 +87,22 @@ pub type Replies = BTreeMap<RequestKey, StoredReply>;
 /// what was wrong on the way.
 pub type Loaded = (Option<(OptimizerState, Replies)>, Vec<String>);
 
+/// Why a state cannot be continued from.
+#[derive(Debug, thiserror::Error)]
+pub enum ResumeError {
+    /// The state is another run's (another seed or exploitation method).
+    #[error("the state is of seed {state_seed} and exploit {state_exploit}, this optimiser runs seed {seed} and exploit {exploit}")]
+    OtherRun { state_seed: u64, state_exploit: String, seed: u64, exploit: &'static str },
+    /// The ES baseline's state does not load (the cause is in the message, not a `source`).
+    #[error("es: {0}")]
+    Es(serde_json::Error),
+    #[error("es: the state and this optimiser disagree on whether an ES runs")]
+    EsDisagrees,
+}
+
 impl Optimizer<'_> {
-    /// The state to write.
-    pub fn state(&self) -> Result<OptimizerState, String> {
+    /// The state to write (it fails only if the ES baseline's state cannot be written as JSON).
+    pub fn state(&self) -> Result<OptimizerState, serde_json::Error> {
         Ok(OptimizerState {
             seed: self.seed,
             exploit: self.cfg.exploit.name().into(),
@@ -101,20 +114,19 @@ impl Optimizer<'_> {
     }
 
     /// Continues from `s` and its `replies`, refusing a state of another seed or method.
-    pub fn restore(&mut self, s: OptimizerState, replies: Replies) -> Result<(), String> {
+    pub fn restore(&mut self, s: OptimizerState, replies: Replies) -> Result<(), ResumeError> {
         if s.seed != self.seed || s.exploit != self.cfg.exploit.name() {
-            return Err(format!(
-                "the state is of seed {} and exploit {}, this optimiser runs seed {} and exploit {}",
-                s.seed,
-                s.exploit,
-                self.seed,
-                self.cfg.exploit.name()
-            ));
+            return Err(ResumeError::OtherRun {
+                state_seed: s.seed,
+                state_exploit: s.exploit,
+                seed: self.seed,
+                exploit: self.cfg.exploit.name(),
+            });
         }
         match (&mut self.es, s.es) {
-            (Some(es), Some(v)) => es.load(&v).map_err(|e| format!("es: {e}"))?,
+            (Some(es), Some(v)) => es.load(&v).map_err(ResumeError::Es)?,
             (None, None) => {}
-            _ => return Err("es: the state and this optimiser disagree on whether an ES runs".into()),
+            _ => return Err(ResumeError::EsDisagrees),
         }
         self.requests = s.requests;
         self.rng = s.rng;

@@ -37,8 +37,12 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::es::{AskTell, OpenAiEs, OpenAiEsConfig, one_generation};
-use crate::reject::Rejected;
-use crate::{Cmaes, CmaesConfig, CriticObjective, DesignObjective, NoveltyConfig, PsoConfig, QMode, SearchResult, cmaes, novelty, pso};
+use crate::reject::{AllRejected, Rejected};
+pub use crate::rollout::{RolloutError, RolloutEvaluator};
+use crate::{
+    Cmaes, CmaesConfig, CriticObjective, DesignObjective, NoveltyConfig, ObjectiveError, PsoConfig, QMode, SearchResult, cmaes, novelty,
+    pso,
+};
 
 /// How exploitation designs are chosen.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -169,19 +173,6 @@ impl Default for OptimizerConfig {
     }
 }
 
-/// Scores designs by simulation: one rollout of `policy` per design, started from reset seed
-/// `seeds[k]` for design `k`, fitness the mean per-step reward (higher is better).
-pub trait RolloutEvaluator {
-    fn evaluate(&mut self, policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String>;
-
-    /// The return of one rollout of `policy` per design from `seeds[k]`, over at most `steps`
-    /// steps (the whole episode when 0), for the critic-screened rollouts. An evaluator that
-    /// cannot cut an episode short says so.
-    fn returns(&mut self, _policy: &[f32], _designs: &[f32], _seeds: &[u64], _steps: usize, _returns: &mut [f32]) -> Result<(), String> {
-        Err("this rollout evaluator cannot run the short rollouts of exploit = \"screened\"".into())
-    }
-}
-
 /// Which candidate of the ES baselines is trained on.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -284,7 +275,7 @@ impl<'a> Optimizer<'a> {
         if !(cfg.trust_growth.is_finite() && cfg.trust_growth >= 0.0) {
             return Err(OptimizerError::Config(format!("optimizer.trust-growth: {} is not a finite number >= 0", cfg.trust_growth)));
         }
-        cfg.screen.check().map_err(OptimizerError::Config)?;
+        cfg.screen.check().map_err(|e| OptimizerError::Config(e.to_string()))?;
         if cfg.exploit.needs_rollouts() && evaluator.is_none() {
             return Err(OptimizerError::Config(format!("optimizer.exploit = {} needs simulation rollouts", cfg.exploit.name())));
         }
@@ -325,7 +316,7 @@ impl<'a> Optimizer<'a> {
         &self.spec.bounds
     }
 
-    pub(crate) fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, String> {
+    pub(crate) fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, ObjectiveError> {
         let thetas: Vec<&[f32]> = match self.cfg.q {
             QModeConfig::Q1 => vec![&w.q1],
             QModeConfig::MinOfTwin | QModeConfig::Pessimistic => vec![&w.q1, &w.q2],
@@ -339,7 +330,6 @@ impl<'a> Optimizer<'a> {
             self.spec.design_at,
             self.spec.bounds.dim(),
         )
-        .map_err(|e| e.to_string())
     }
 
     /// The counters for `/metrics`.
@@ -352,14 +342,14 @@ impl<'a> Optimizer<'a> {
         let err = |why: String| OptimizerError::Design { index: req.index, why };
         self.requests += 1;
         let seed = self.seed.wrapping_add(self.requests.wrapping_mul(0x9E37_79B9));
-        let objective = self.objective(w, &req.start_states).map_err(err)?;
+        let objective = self.objective(w, &req.start_states).map_err(|e| err(e.to_string()))?;
         let mut q = CriticObjective::new(&objective, self.q_mode(), self.cfg.cores);
         let bounds = self.spec.bounds.clone();
         let rejected = Rejected::new(&req.rejected, &bounds, self.cfg.reject_radius);
         let trust = crate::trust::TrustRegion::new(&req.chosen, &bounds, self.cfg.trust_radius, self.cfg.trust_growth);
         let (method, result, rollouts): (&str, SearchResult, u64) = match req.kind {
             DesignKind::Explore => match self.cfg.explore {
-                ExploreMethod::Random => ("random", self.random(&rejected).map_err(err)?, 0),
+                ExploreMethod::Random => ("random", self.random(&rejected).map_err(|e| err(e.to_string()))?, 0),
                 ExploreMethod::Novelty => {
                     // A rejected body is one to move away from, like a chosen one.
                     let seen = [req.chosen.as_slice(), req.rejected.as_slice()].concat();
@@ -381,7 +371,7 @@ impl<'a> Optimizer<'a> {
                     ExploitMethod::PsoQ | ExploitMethod::CmaesQ | ExploitMethod::Screened => {
                         self.over_q(m, &mut q, &w.policy, &bounds, &rejected, seed)
                     }
-                    ExploitMethod::Random => self.random(&rejected).map_err(crate::SearchError::Config),
+                    ExploitMethod::Random => self.random(&rejected).map_err(|e| crate::SearchError::Config(e.to_string())),
                     ExploitMethod::SimPso | ExploitMethod::SimCmaes | ExploitMethod::OpenaiEs | ExploitMethod::CmaesEs => {
                         self.by_simulation(m, &w.policy, &bounds, &rejected, seed)
                     }
@@ -413,7 +403,7 @@ impl<'a> Optimizer<'a> {
 
     /// Uniform in the box, drawn again while it falls near a rejected design (at most
     /// [`RANDOM_DRAWS`] times).
-    fn random(&mut self, rejected: &Rejected) -> Result<SearchResult, String> {
+    fn random(&mut self, rejected: &Rejected) -> Result<SearchResult, AllRejected> {
         random_design(&self.spec.bounds, &mut self.rng, rejected, self.cfg.reject_radius)
     }
 
@@ -451,7 +441,7 @@ impl<'a> Optimizer<'a> {
     /// `screened`: `screen.rollouts` rollouts of each candidate from the same reset seeds; the
     /// highest mean return wins (its score is that mean return).
     fn screen(&mut self, policy: &[f32], candidates: Vec<Vec<f32>>, best: SearchResult) -> Result<SearchResult, crate::SearchError> {
-        let fail = |e: String| crate::SearchError::Config(format!("screening rollouts failed: {e}"));
+        let fail = |e: RolloutError| crate::SearchError::Config(format!("screening rollouts failed: {e}"));
         if candidates.len() < 2 {
             return Ok(SearchResult { evaluations: 0, ..best });
         }
@@ -486,7 +476,7 @@ impl<'a> Optimizer<'a> {
         let Some(ev) = self.evaluator.as_deref_mut() else {
             return Err(crate::SearchError::Config(format!("{} needs simulation rollouts", m.name())));
         };
-        let mut failure: Option<String> = None;
+        let mut failure: Option<RolloutError> = None;
         let (mode, fixed, rng) = (self.cfg.sim_seed, self.seed, &mut self.rng);
         let mut seeds = Vec::new();
         let mut sim = |designs: &[f32], fitness: &mut [f32]| {
@@ -538,7 +528,7 @@ impl CriticObjective<'_> {
 
 /// [`Optimizer::random`] drawing from `rng` (the calibration passes a copy of the optimiser's
 /// generator, to see the next random design without drawing it).
-pub(crate) fn random_design(bounds: &BoxSpace, rng: &mut Rng64, rejected: &Rejected, radius: f32) -> Result<SearchResult, String> {
+pub(crate) fn random_design(bounds: &BoxSpace, rng: &mut Rng64, rejected: &Rejected, radius: f32) -> Result<SearchResult, AllRejected> {
     let mut d = vec![0.0; bounds.dim()];
     for _ in 0..RANDOM_DRAWS {
         bounds.sample(rng, &mut d);
@@ -546,7 +536,7 @@ pub(crate) fn random_design(bounds: &BoxSpace, rng: &mut Rng64, rejected: &Rejec
             return Ok(SearchResult { design: d, score: f32::NAN, history: vec![], evaluations: 0 });
         }
     }
-    Err(format!("{RANDOM_DRAWS} random designs all fell within optimizer.reject-radius ({radius}) of a rejected design; lower the radius"))
+    Err(AllRejected { draws: RANDOM_DRAWS, radius })
 }
 
 /// Random draws before `random` gives up finding a design away from every rejected one.
@@ -604,7 +594,7 @@ pub fn run(
         }
         let stored = crate::resume::StoredReply::of(&reply);
         if let Some(s) = store {
-            s.append(key, &stored, &opt.state().map_err(OptimizerError::Config)?)
+            s.append(key, &stored, &opt.state().map_err(|e| OptimizerError::Config(e.to_string()))?)
                 .map_err(|e| OptimizerError::Config(format!("writing {}: {e}", s.path().display())))?;
         }
         opt.replies.insert(key, stored);

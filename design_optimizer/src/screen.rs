@@ -39,16 +39,28 @@ impl Default for ScreenConfig {
     }
 }
 
+/// A setting of `[optimizer.screen]` that cannot work; the message names its key.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum ScreenConfigError {
+    #[error("optimizer.screen.candidates: 0; at least 1 (1 is FEAR without rollouts)")]
+    NoCandidates,
+    /// Several candidates and no rollout to choose between them.
+    #[error("optimizer.screen.rollouts: 0 cannot decide between {candidates} candidates; at least 1")]
+    NoRollouts { candidates: usize },
+    #[error("optimizer.screen.separation: {0} is not a finite number >= 0")]
+    Separation(f32),
+}
+
 impl ScreenConfig {
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), ScreenConfigError> {
         if self.candidates == 0 {
-            return Err("optimizer.screen.candidates: 0; at least 1 (1 is FEAR without rollouts)".into());
+            return Err(ScreenConfigError::NoCandidates);
         }
         if self.candidates > 1 && self.rollouts == 0 {
-            return Err(format!("optimizer.screen.rollouts: 0 cannot decide between {} candidates; at least 1", self.candidates));
+            return Err(ScreenConfigError::NoRollouts { candidates: self.candidates });
         }
         if !(self.separation.is_finite() && self.separation >= 0.0) {
-            return Err(format!("optimizer.screen.separation: {} is not a finite number >= 0", self.separation));
+            return Err(ScreenConfigError::Separation(self.separation));
         }
         Ok(())
     }

@@ -6,7 +6,9 @@
 
 use coadapt_core::BoxSpace;
 use coadapt_design_optimizer::reject::Rejected;
-use coadapt_design_optimizer::role::{ExploitMethod, ExploreMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutEvaluator, SimSeed};
+use coadapt_design_optimizer::role::{
+    ExploitMethod, ExploreMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutError, RolloutEvaluator, SimSeed,
+};
 use coadapt_nn::Mlp;
 use coadapt_transport::{DesignKind, DesignReply, DesignRequest, Weights};
 
@@ -17,7 +19,7 @@ const ACT: usize = 1;
 struct Fake;
 
 impl RolloutEvaluator for Fake {
-    fn evaluate(&mut self, _policy: &[f32], designs: &[f32], _seeds: &[u64], fitness: &mut [f32]) -> Result<(), String> {
+    fn evaluate(&mut self, _policy: &[f32], designs: &[f32], _seeds: &[u64], fitness: &mut [f32]) -> Result<(), RolloutError> {
         for (d, f) in designs.chunks_exact(2).zip(fitness.iter_mut()) {
             *f = -(d[0] - 1.5).powi(2) - (d[1] - 1.0).powi(2);
         }

@@ -4,7 +4,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
 use coadapt_core::BoxSpace;
-use coadapt_design_optimizer::role::{EsTrainOn, ExploitMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutEvaluator, SimSeed};
+use coadapt_design_optimizer::role::{
+    EsTrainOn, ExploitMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutError, RolloutEvaluator, SimSeed,
+};
 use coadapt_nn::Mlp;
 use coadapt_transport::{DesignKind, DesignRequest, Weights};
 
@@ -19,7 +21,7 @@ struct Fake {
 }
 
 impl RolloutEvaluator for Fake {
-    fn evaluate(&mut self, _policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), String> {
+    fn evaluate(&mut self, _policy: &[f32], designs: &[f32], seeds: &[u64], fitness: &mut [f32]) -> Result<(), RolloutError> {
         assert_eq!(seeds.len(), fitness.len(), "one seed per rollout");
         for ((d, &seed), f) in designs.chunks_exact(2).zip(seeds).zip(fitness.iter_mut()) {
             let noise = (seed % 1000) as f32 / 1000.0;

@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
 use coadapt_core::BoxSpace;
-use coadapt_design_optimizer::role::{ExploitMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutEvaluator};
+use coadapt_design_optimizer::role::{ExploitMethod, Optimizer, OptimizerConfig, OptimizerSpec, RolloutError, RolloutEvaluator};
 use coadapt_design_optimizer::screen::diverse_best;
 use coadapt_design_optimizer::trust::TrustRegion;
 use coadapt_nn::Mlp;
@@ -48,11 +48,11 @@ struct Robot {
 }
 
 impl RolloutEvaluator for Robot {
-    fn evaluate(&mut self, _: &[f32], _: &[f32], _: &[u64], _: &mut [f32]) -> Result<(), String> {
+    fn evaluate(&mut self, _: &[f32], _: &[f32], _: &[u64], _: &mut [f32]) -> Result<(), RolloutError> {
         panic!("screened rollouts use returns(), not the baselines' evaluate()")
     }
 
-    fn returns(&mut self, _policy: &[f32], designs: &[f32], seeds: &[u64], steps: usize, returns: &mut [f32]) -> Result<(), String> {
+    fn returns(&mut self, _policy: &[f32], designs: &[f32], seeds: &[u64], steps: usize, returns: &mut [f32]) -> Result<(), RolloutError> {
         for ((d, &seed), r) in designs.chunks_exact(2).zip(seeds).zip(returns.iter_mut()) {
             *r = 100.0 - 50.0 * ((d[0] - 1.0).powi(2) + (d[1] - 1.0).powi(2)) - (seed % 7) as f32;
             self.rollouts.push((d.to_vec(), seed, steps));
