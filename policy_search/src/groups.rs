@@ -98,6 +98,21 @@ pub struct Sample {
     pub cost: f64,
 }
 
+/// Why [`Groups::new`] refuses its groups or settings.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum GroupsError {
+    /// A group names an action index beyond the `actions` there are.
+    #[error("group action {action} is beyond the {actions} actions")]
+    ActionBeyond { action: usize, actions: usize },
+    /// An action in no group or in several (`groups` is how many).
+    #[error("action {action} is in {groups} groups; every action belongs to exactly one")]
+    NotAPartition { action: usize, groups: usize },
+    #[error("initial-variance, resize and sigma2 must be positive")]
+    NotPositive,
+    #[error("best = {best}: between 1 and the rollouts an iteration has (rollouts {rollouts} + pool {pool})")]
+    Best { best: usize, rollouts: usize, pool: usize },
+}
+
 /// The learner's state: the posterior means and covariances, per group.
 #[derive(Clone, Debug)]
 pub struct Groups {
@@ -127,24 +142,21 @@ pub struct Groups {
 impl Groups {
     /// A learner for `d` actions in `groups` (each action in exactly one), `p` features: M = 0,
     /// W ~ N(0, 1), alpha = 1, tau = 1 / initial variance.
-    pub fn new(cfg: GroupsConfig, groups: Vec<Vec<usize>>, d: usize, p: usize, seed: u64) -> Result<Self, String> {
+    pub fn new(cfg: GroupsConfig, groups: Vec<Vec<usize>>, d: usize, p: usize, seed: u64) -> Result<Self, GroupsError> {
         let mut seen = vec![0usize; d];
         for g in &groups {
             for &j in g {
-                *seen.get_mut(j).ok_or_else(|| format!("group action {j} is beyond the {d} actions"))? += 1;
+                *seen.get_mut(j).ok_or(GroupsError::ActionBeyond { action: j, actions: d })? += 1;
             }
         }
         if let Some(j) = seen.iter().position(|&c| c != 1) {
-            return Err(format!("action {j} is in {} groups; every action belongs to exactly one", seen[j]));
+            return Err(GroupsError::NotAPartition { action: j, groups: seen[j] });
         }
         if !(cfg.initial_variance > 0.0 && cfg.resize > 0.0 && cfg.sigma2 > 0.0) {
-            return Err("initial-variance, resize and sigma2 must be positive".into());
+            return Err(GroupsError::NotPositive);
         }
         if cfg.best == 0 || cfg.best > cfg.rollouts + cfg.pool {
-            return Err(format!(
-                "best = {}: between 1 and the rollouts an iteration has (rollouts {} + pool {})",
-                cfg.best, cfg.rollouts, cfg.pool
-            ));
+            return Err(GroupsError::Best { best: cfg.best, rollouts: cfg.rollouts, pool: cfg.pool });
         }
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         let k = cfg.latent;
@@ -506,10 +518,11 @@ mod tests {
 
     #[test]
     fn groups_must_partition_the_actions() {
-        let e = Groups::new(GroupsConfig::default(), vec![vec![0, 1], vec![1]], 3, 11, 0).err().unwrap_or_default();
-        assert!(e.contains("action 1 is in 2 groups"), "{e}");
-        let e = Groups::new(GroupsConfig::default(), vec![vec![0, 5]], 3, 11, 0).err().unwrap_or_default();
-        assert!(e.contains("beyond the 3 actions"), "{e}");
+        let e = Groups::new(GroupsConfig::default(), vec![vec![0, 1], vec![1]], 3, 11, 0).err();
+        assert_eq!(e, Some(GroupsError::NotAPartition { action: 1, groups: 2 }));
+        assert_eq!(e.map(|e| e.to_string()).as_deref(), Some("action 1 is in 2 groups; every action belongs to exactly one"));
+        let e = Groups::new(GroupsConfig::default(), vec![vec![0, 5]], 3, 11, 0).err();
+        assert_eq!(e.map(|e| e.to_string()).as_deref(), Some("group action 5 is beyond the 3 actions"));
     }
 
     #[test]

@@ -41,17 +41,28 @@ impl Default for NacConfig {
     }
 }
 
+/// A setting of `[nac]` that cannot work; the message names its key.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum NacConfigError {
+    #[error("nac.rollouts = {0}: at least 2 (the fit has a baseline)")]
+    Rollouts(usize),
+    #[error("nac.variance = {0}: must be positive")]
+    Variance(f64),
+    #[error("nac.learning-rate = {0}: must be positive")]
+    LearningRate(f64),
+}
+
 impl NacConfig {
     /// Refuses settings that cannot work, naming the key.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), NacConfigError> {
         if self.rollouts < 2 {
-            return Err(format!("nac.rollouts = {}: at least 2 (the fit has a baseline)", self.rollouts));
+            return Err(NacConfigError::Rollouts(self.rollouts));
         }
         if !(self.variance > 0.0 && self.variance.is_finite()) {
-            return Err(format!("nac.variance = {}: must be positive", self.variance));
+            return Err(NacConfigError::Variance(self.variance));
         }
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return Err(format!("nac.learning-rate = {}: must be positive", self.learning_rate));
+            return Err(NacConfigError::LearningRate(self.learning_rate));
         }
         Ok(())
     }
@@ -66,7 +77,7 @@ pub struct Nac {
 }
 
 impl Nac {
-    pub fn new(policy: LinearPolicy, cfg: NacConfig, seed: u64) -> Result<Self, String> {
+    pub fn new(policy: LinearPolicy, cfg: NacConfig, seed: u64) -> Result<Self, NacConfigError> {
         cfg.check()?;
         Ok(Self { policy, cfg, rng: rand::rngs::StdRng::seed_from_u64(seed) })
     }
@@ -306,7 +317,7 @@ mod tests {
 
     #[test]
     fn settings_that_cannot_work_are_refused_naming_the_key() {
-        let bad = |c: NacConfig| Nac::new(LinearPolicy::zeros(1, 1), c, 0).unwrap_err();
+        let bad = |c: NacConfig| Nac::new(LinearPolicy::zeros(1, 1), c, 0).unwrap_err().to_string();
         assert!(bad(NacConfig { variance: 0.0, ..NacConfig::default() }).contains("nac.variance"));
         assert!(bad(NacConfig { learning_rate: -1.0, ..NacConfig::default() }).contains("nac.learning-rate"));
         assert!(bad(NacConfig { rollouts: 1, ..NacConfig::default() }).contains("nac.rollouts"));

@@ -198,7 +198,7 @@ fn check(cfg: &SearchConfig) -> Result<(), SearchError> {
         }
     }
     if cfg.method == "nac" {
-        cfg.nac.check().map_err(SearchError::Config)?;
+        cfg.nac.check().map_err(|e| SearchError::Config(e.to_string()))?;
     }
     if cfg.runs == 0 || cfg.iterations == 0 {
         return bad("runs and iterations: at least 1 each".into());

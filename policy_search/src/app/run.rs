@@ -104,9 +104,9 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
                 let g = Groups::new(settings, vec![all], d, phi.len(), seed).map_err(|e| SearchError::Config(format!("pepper: {e}")))?;
                 Learner::Groups(Box::new(g))
             }
-            "nac" => {
-                Learner::Nac(Box::new(Nac::new(LinearPolicy::zeros(d, phi.len()), cfg.nac.clone(), seed).map_err(SearchError::Config)?))
-            }
+            "nac" => Learner::Nac(Box::new(
+                Nac::new(LinearPolicy::zeros(d, phi.len()), cfg.nac.clone(), seed).map_err(|e| SearchError::Config(e.to_string()))?,
+            )),
             _ => Learner::Power(Box::new(Power::new(LinearPolicy::zeros(d, phi.len()), cfg.power.clone(), seed))),
         };
         let mut curve = Vec::with_capacity(cfg.iterations + 1);
