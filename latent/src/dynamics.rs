@@ -90,6 +90,11 @@ pub enum CriticKind {
     V,
 }
 
+/// The reward-plus-Q objective asked of a [`Planner`] without a reward model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("planner: the reward-plus-q objective needs a reward model")]
+pub struct NoRewardModel;
+
 /// Plans `H + 1` actions from a latent state through a frozen model and critic (Eq. 4.11, 4.12).
 #[derive(Debug)]
 pub struct Planner<'a> {
@@ -172,9 +177,9 @@ impl<'a> Planner<'a> {
 
     /// The same planner with another objective, critic kind and (for f_{r+Q}) reward model.
     /// Fails when f_{r+Q} has no reward model.
-    pub fn with(mut self, objective: Objective, kind: CriticKind, reward: Option<(&'a Mlp, &'a [f32])>) -> Result<Self, String> {
+    pub fn with(mut self, objective: Objective, kind: CriticKind, reward: Option<(&'a Mlp, &'a [f32])>) -> Result<Self, NoRewardModel> {
         if objective == Objective::RewardPlusQ && reward.is_none() {
-            return Err("planner: the reward-plus-q objective needs a reward model".into());
+            return Err(NoRewardModel);
         }
         self.objective = objective;
         self.kind = kind;

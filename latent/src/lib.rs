@@ -40,11 +40,11 @@ mod value_ddpg;
 
 pub use actor::{ActingWeightsError, FrameStack, LatentActor, PlanNets, PlanScratch};
 pub use agent::{AgentConfig, Critic, Explore, LatentAgent, RewardModel};
-pub use dynamics::{CriticKind, LatentDynamics, Objective, PlanWork, Planner};
+pub use dynamics::{CriticKind, LatentDynamics, NoRewardModel, Objective, PlanWork, Planner};
 pub use embedding::{Embedding, EmbeddingConfig, EmbeddingWork, LossParts};
 pub use embedding_io::{EmbeddingFileError, load_embedding, save_embedding};
 pub use fleet::{ActorEpisode, CHUNK_STEPS, EpisodeRunner, FleetEpisode, FleetError, run_actor};
 pub use lbfgsb::{Lbfgsb, LbfgsbResult};
-pub use train_embedding::{EmbeddingTrainer, FrameSet};
+pub use train_embedding::{EmbeddingTrainer, FrameSet, NotFrames};
 pub use value::ValueLosses;
 pub use value_ddpg::{ValueDdpg, ValueParams};

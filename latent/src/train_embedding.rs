@@ -7,6 +7,14 @@ use rand::Rng;
 
 use crate::{Embedding, EmbeddingWork, LossParts};
 
+/// An episode that is not at least two whole frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("an episode of {values} values is not at least two frames of {image_len}")]
+pub struct NotFrames {
+    pub values: usize,
+    pub image_len: usize,
+}
+
 /// Single frames (`image_len` values each) of whole episodes, in order.
 #[derive(Clone, Debug, Default)]
 pub struct FrameSet {
@@ -23,9 +31,9 @@ impl FrameSet {
 
     /// Adds an episode of `frames.len() / image_len` consecutive frames (two at least, for a
     /// consecutive pair).
-    pub fn push_episode(&mut self, frames: &[f32]) -> Result<(), String> {
+    pub fn push_episode(&mut self, frames: &[f32]) -> Result<(), NotFrames> {
         if self.image_len == 0 || !frames.len().is_multiple_of(self.image_len) || frames.len() < 2 * self.image_len {
-            return Err(format!("an episode of {} values is not at least two frames of {}", frames.len(), self.image_len));
+            return Err(NotFrames { values: frames.len(), image_len: self.image_len });
         }
         let start = self.frames.len() / self.image_len;
         self.frames.extend_from_slice(frames);

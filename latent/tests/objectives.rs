@@ -143,7 +143,7 @@ fn the_objectives_differ_where_they_should() {
     assert!((rq - last - rewards).abs() < 1e-5, "{rq} - {last} != {rewards}");
     // A reward-plus-q planner without a reward model is refused.
     let err = Planner::new(&n.model, &n.mp, &n.q, &n.qp, h).with(Objective::RewardPlusQ, CriticKind::Q, None).unwrap_err();
-    assert!(err.contains("reward model"), "{err}");
+    assert!(err.to_string().contains("reward model"), "{err}");
 }
 
 #[test]
