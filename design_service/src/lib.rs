@@ -8,7 +8,8 @@
 //! - `model`: [`DesignModel`], the thesis's Eq. 5.6 over fixed population networks and a fixed
 //!   start-state batch (the optimiser's [`DesignObjective`](coadapt_design_optimizer::objective::DesignObjective)),
 //!   with its spread over the start states; [`ModelSource`], where a server gets the current
-//!   model and the run's history: [`StaticSource`] (a finished run's files) or, in `live`,
+//!   model and the run's history ([`HistoryError`] when it cannot read it): [`StaticSource`]
+//!   (a finished run's files) or, in `live`,
 //!   [`LiveSource`] (fed by a running learner at each design request and design row).
 //! - `design`: the DesignService handlers (`optimize`: the streamed search; `landscape`: Fig.
 //!   5.9's grid; `watch`: the design stream); `inference`: the Open Inference Protocol handlers.
@@ -32,7 +33,7 @@ mod shared;
 mod watch;
 
 pub use live::LiveSource;
-pub use model::{DesignEvent, DesignModel, HistoryPage, HistoryRow, ModelSource, StaticSource};
+pub use model::{DesignEvent, DesignModel, HistoryError, HistoryPage, HistoryRow, ModelSource, StaticSource};
 pub use server::{DesignServer, ServeConfig, serve};
 
 /// The model name of the design critic in the Open Inference Protocol.

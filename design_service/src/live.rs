@@ -4,7 +4,7 @@ use std::sync::{Arc, Mutex, RwLock};
 
 use tokio::sync::broadcast;
 
-use crate::model::{DesignEvent, DesignModel, HistoryPage, HistoryRow, ModelSource};
+use crate::model::{DesignEvent, DesignModel, HistoryError, HistoryPage, HistoryRow, ModelSource};
 
 /// Design changes a slow Watch stream may fall behind by before it is sent the history again.
 const EVENTS: usize = 1024;
@@ -77,7 +77,7 @@ impl ModelSource for LiveSource {
         self.model.read().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
-    fn history(&self, from: usize, max: usize) -> Result<HistoryPage, String> {
+    fn history(&self, from: usize, max: usize) -> Result<HistoryPage, HistoryError> {
         let rows = self.rows.lock().unwrap_or_else(|e| e.into_inner());
         let (closed, open) = (&rows.closed, &rows.open);
         // The closed rows then the open ones: ordered by index.

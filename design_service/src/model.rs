@@ -106,13 +106,24 @@ pub enum DesignEvent {
     Ended,
 }
 
+/// Why a [`ModelSource`] could not read the design history (the server answers INTERNAL,
+/// "reading the history: ..."). A `from` past the last design is not an error: its page is
+/// empty.
+#[derive(Debug, thiserror::Error)]
+pub enum HistoryError {
+    /// A source that reads its rows from files could not; `what` names the file and what was
+    /// done with it (the cause is in the message, not a `source`).
+    #[error("{what}: {error}")]
+    Io { what: String, error: std::io::Error },
+}
+
 /// Where a server finds the current model and the run's designs.
 pub trait ModelSource: Send + Sync + std::fmt::Debug {
     /// The current model (`None`: not ready, no networks yet).
     fn model(&self) -> Option<Arc<DesignModel>>;
     /// The rows of the design history from index `from` on: at most `max` (at least one),
     /// and more only to end on a whole design (every row of its index).
-    fn history(&self, from: usize, max: usize) -> Result<HistoryPage, String>;
+    fn history(&self, from: usize, max: usize) -> Result<HistoryPage, HistoryError>;
     /// The changes from now on; `None` once the run has ended (a finished run's files).
     fn subscribe(&self) -> Option<tokio::sync::broadcast::Receiver<DesignEvent>>;
 }
@@ -142,7 +153,7 @@ impl ModelSource for StaticSource {
         Some(self.model.clone())
     }
 
-    fn history(&self, from: usize, max: usize) -> Result<HistoryPage, String> {
+    fn history(&self, from: usize, max: usize) -> Result<HistoryPage, HistoryError> {
         Ok(page(&self.history, from, max))
     }
 
