@@ -38,6 +38,9 @@ pub enum ActorError {
     Env(#[from] EnvError),
 }
 
+/// Weights that do not fit, or a robot that failed: a restart may mend it.
+impl coadapt_fleet::supervise::exit::ExitCode for ActorError {}
+
 /// Return and length of one episode.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EpisodeStats {

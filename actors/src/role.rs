@@ -21,6 +21,9 @@ pub enum ActorRoleError {
     Transport(#[from] TransportError),
 }
 
+/// A robot that failed or a link that broke may do better after a restart.
+impl coadapt_fleet::supervise::exit::ExitCode for ActorRoleError {}
+
 impl From<ActorLoopError<ActorError>> for ActorRoleError {
     fn from(e: ActorLoopError<ActorError>) -> Self {
         match e {

@@ -24,8 +24,8 @@ use coadapt_nn::{Conv2d, ConvScratch, ConvTranspose2d, NnError};
 use rand::Rng;
 use serde_json::json;
 
-use crate::BenchError;
 use crate::figure::percentile;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -283,13 +283,13 @@ pub fn figures(layers: &[Layer]) -> Vec<(String, std::ops::Range<usize>)> {
     v
 }
 
-pub fn run(a: &ConvOptions) -> Result<(), BenchError> {
+pub fn run(a: &ConvOptions) -> Result<(), AppError> {
     if a.repetitions == 0 {
-        return Err(BenchError::Config("--repetitions must be at least 1".into()));
+        return Err(AppError::Config("--repetitions must be at least 1".into()));
     }
     let layers = embedding_layers(&EmbeddingConfig::default())?;
     if let Some(path) = &a.dump {
-        std::fs::write(path, dump(&layers, 2, a.seed).to_string()).map_err(BenchError::io(format!("writing {}", path.display())))?;
+        std::fs::write(path, dump(&layers, 2, a.seed).to_string()).map_err(AppError::io(format!("writing {}", path.display())))?;
         coadapt_log::logln!("bench conv: shapes, inputs and outputs written to {}", path.display());
         if a.dump_only {
             return Ok(());

@@ -23,9 +23,9 @@ use coadapt_wire::pb;
 use coadapt_wire::pb::design_service_client::DesignServiceClient;
 use rand::Rng;
 
-use crate::BenchError;
 use crate::figure::{emit, rate};
 use crate::nn::random_batch;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -49,7 +49,7 @@ const DESIGN: usize = 6;
 const ACT: usize = 6;
 const STATES: usize = 32;
 
-fn model(sac: &Sac) -> Result<DesignModel, BenchError> {
+fn model(sac: &Sac) -> Result<DesignModel, AppError> {
     let mut r = rng(11, 0);
     let starts: Vec<f32> = (0..STATES * (STATE + DESIGN)).map(|_| r.random_range(-1.0..1.0)).collect();
     let names = (0..DESIGN).map(|i| format!("d{i}")).collect();
@@ -63,7 +63,8 @@ fn model(sac: &Sac) -> Result<DesignModel, BenchError> {
         &starts,
         STATE,
         QMode::First,
-    )?)
+    )
+    .map_err(AppError::library)?)
 }
 
 fn designs(n: usize, seed: u64) -> Vec<f32> {
@@ -80,8 +81,8 @@ fn time_calls<T>(
     batch: usize,
     seconds: f64,
     mut prepare: impl FnMut() -> T,
-    mut f: impl FnMut(T) -> Result<(), BenchError>,
-) -> Result<(), BenchError> {
+    mut f: impl FnMut(T) -> Result<(), AppError>,
+) -> Result<(), AppError> {
     f(prepare())?;
     f(prepare())?;
     let mut lat = Vec::new();
@@ -106,11 +107,11 @@ fn time_calls<T>(
     Ok(())
 }
 
-fn serve(m: DesignModel, tls: Option<&std::path::Path>) -> Result<coadapt_design_service::DesignServer, BenchError> {
+fn serve(m: DesignModel, tls: Option<&std::path::Path>) -> Result<coadapt_design_service::DesignServer, AppError> {
     serve_with(m, tls, 1.0)
 }
 
-fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> Result<coadapt_design_service::DesignServer, BenchError> {
+fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> Result<coadapt_design_service::DesignServer, AppError> {
     let mut cfg = ServeConfig { max_busy_share: share, ..ServeConfig::default() };
     if let Some(dir) = tls {
         let f = |n: &str| dir.join(n).display().to_string();
@@ -119,13 +120,13 @@ fn serve_with(m: DesignModel, tls: Option<&std::path::Path>, share: f64) -> Resu
     }
     let source = StaticSource { model: Arc::new(m), history: Vec::<HistoryRow>::new() };
     let loopback = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
-    coadapt_design_service::serve(loopback, cfg, Arc::new(source)).map_err(BenchError::io("starting the design server"))
+    coadapt_design_service::serve(loopback, cfg, Arc::new(source)).map_err(AppError::io("starting the design server"))
 }
 
 async fn client(
     addr: std::net::SocketAddr,
     tls: Option<&std::path::Path>,
-) -> Result<DesignServiceClient<coadapt_auth::AuthChannel>, BenchError> {
+) -> Result<DesignServiceClient<coadapt_auth::AuthChannel>, AppError> {
     let mut sec = coadapt_fleet::SecurityConfig::default();
     if let Some(dir) = tls {
         sec.tls_ca = dir.join("ca.pem").display().to_string();
@@ -139,15 +140,15 @@ async fn client(
 }
 
 /// The client's runtime: one thread, as `coadapt score`'s.
-fn runtime() -> Result<tokio::runtime::Runtime, BenchError> {
-    tokio::runtime::Builder::new_current_thread().enable_all().build().map_err(BenchError::io("starting the Tokio runtime"))
+fn runtime() -> Result<tokio::runtime::Runtime, AppError> {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().map_err(AppError::io("starting the Tokio runtime"))
 }
 
 fn request(d: &[f32]) -> pb::ScoreRequest {
     pb::ScoreRequest { designs: d.chunks_exact(DESIGN).map(|v| pb::Design { values: v.to_vec() }).collect() }
 }
 
-pub fn run(a: &DesignOptions) -> Result<(), BenchError> {
+pub fn run(a: &DesignOptions) -> Result<(), AppError> {
     let sac = Sac::new(STATE + DESIGN, ACT, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 5)?;
     let rt = runtime()?;
     for &n in &a.batches {
@@ -181,7 +182,7 @@ pub fn run(a: &DesignOptions) -> Result<(), BenchError> {
                 |req| {
                     let got = rt.block_on(c.score(req))?.get_ref().scores.len();
                     if got != n {
-                        return Err(BenchError::Failed(format!("a Score call answered {got} scores for {n} designs")));
+                        return Err(AppError::Failed(format!("a Score call answered {got} scores for {n} designs")));
                     }
                     Ok(())
                 },
@@ -195,7 +196,7 @@ pub fn run(a: &DesignOptions) -> Result<(), BenchError> {
 }
 
 /// SAC updates/s alone, then with a client scoring batches of 100 in a loop.
-fn learner_rates(a: &DesignOptions, sac: &Sac) -> Result<(), BenchError> {
+fn learner_rates(a: &DesignOptions, sac: &Sac) -> Result<(), AppError> {
     let (obs, batch) = (STATE + DESIGN, random_batch(256, STATE + DESIGN, ACT, 2));
     let mut learner = Sac::new(obs, ACT, SacConfig { hidden: vec![256; 3], auto_alpha: true, ..SacConfig::default() }, 1)?;
     let alone = rate(a.seconds, || {
@@ -216,13 +217,13 @@ fn beside_learner(
     batch: &coadapt_core::Batch,
     alone: f64,
     share: f64,
-) -> Result<(), BenchError> {
+) -> Result<(), AppError> {
     let server = serve_with(model(sac)?, None, share)?;
     let addr = server.local_addr();
     let stop = Arc::new(AtomicBool::new(false));
     let calls = Arc::new(AtomicU64::new(0));
     let (s, k) = (stop.clone(), calls.clone());
-    let scorer = std::thread::spawn(move || -> Result<(), BenchError> {
+    let scorer = std::thread::spawn(move || -> Result<(), AppError> {
         let rt = runtime()?;
         let mut c = rt.block_on(client(addr, None))?;
         let req = request(&designs(100, 7));
@@ -240,7 +241,7 @@ fn beside_learner(
     });
     let scored = (calls.load(Ordering::Relaxed) - before) as f64 * 100.0 / t.elapsed().as_secs_f64();
     stop.store(true, Ordering::Relaxed);
-    scorer.join().map_err(|_| BenchError::Failed("the scoring client panicked".into()))??;
+    scorer.join().map_err(|_| AppError::Failed("the scoring client panicked".into()))??;
     let tag = format!("score-client-batch100-busy-share{share}");
     emit("learner_updates", &format!("3x256-obs23-with-{tag}"), busy, "updates/s");
     emit("learner_updates_kept", &format!("with-{tag}"), busy / alone * 100.0, "%");

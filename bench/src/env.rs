@@ -13,7 +13,7 @@ use coadapt_env_rpc::{BackgroundServer, RemoteEnv, RemoteOptions};
 use rand::Rng;
 use serde_json::json;
 
-use crate::BenchError;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -37,7 +37,7 @@ struct Timing {
 }
 
 /// Steps `env` for `seconds` with pre-drawn uniform actions, timing each step.
-fn time_env(env: &mut dyn Env, seconds: f64) -> Result<Timing, BenchError> {
+fn time_env(env: &mut dyn Env, seconds: f64) -> Result<Timing, AppError> {
     let spec = env.spec().clone();
     let mut r = rng(1, 0x454e_5642);
     let n_actions = 4096;
@@ -88,14 +88,14 @@ fn emit(name: &str, transport: &str, t: &mut Timing) {
     }
 }
 
-pub fn run(a: &EnvOptions) -> Result<(), BenchError> {
+pub fn run(a: &EnvOptions) -> Result<(), AppError> {
     for name in &a.env {
         let mut local = coadapt_robots::make(name)?;
         emit(name, "in-process", &mut time_env(&mut *local, a.seconds)?);
         let n = name.clone();
         let server =
             BackgroundServer::start("127.0.0.1:0", std::sync::Arc::new(move || coadapt_robots::make(&n).map_err(|e| e.to_string())))
-                .map_err(BenchError::io(format!("serving {name} on loopback")))?;
+                .map_err(AppError::io(format!("serving {name} on loopback")))?;
         let mut remote = RemoteEnv::connect(&server.url(), RemoteOptions::default())?;
         emit(name, "dm_env_rpc loopback", &mut time_env(&mut remote, a.seconds)?);
     }

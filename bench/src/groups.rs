@@ -16,8 +16,8 @@ use std::time::Instant;
 use coadapt_policy_search::{EpisodicTask, Groups, GroupsConfig, PlanarReaching, Sample, TimeFeatures};
 use serde_json::json;
 
-use crate::BenchError;
 use crate::figure::percentile;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -59,11 +59,11 @@ pub fn one_update(g: &mut Groups, best: &[Sample], phi: &TimeFeatures) {
 
 /// The learner after `train` iterations and one iteration's rollouts sampled from it, evaluated
 /// on the planar task, best first.
-pub fn inputs(train: usize, seed: u64) -> Result<(Groups, Vec<Sample>, TimeFeatures), BenchError> {
+pub fn inputs(train: usize, seed: u64) -> Result<(Groups, Vec<Sample>, TimeFeatures), AppError> {
     let task = PlanarReaching::default();
     let phi = TimeFeatures::thesis(task.steps());
     let (cfg, groups) = setting();
-    let mut g = Groups::new(cfg, groups, task.action_dim(), phi.len(), seed).map_err(|e| BenchError::Failed(format!("groups: {e}")))?;
+    let mut g = Groups::new(cfg, groups, task.action_dim(), phi.len(), seed).map_err(|e| AppError::Failed(format!("groups: {e}")))?;
     for _ in 0..train {
         g.iterate(&task, &phi)?;
     }
@@ -75,7 +75,7 @@ pub fn inputs(train: usize, seed: u64) -> Result<(Groups, Vec<Sample>, TimeFeatu
     samples.sort_by(|a, b| b.ret.total_cmp(&a.ret));
     let total: f64 = samples[..g.cfg.best].iter().map(|s| s.ret.max(0.0)).sum();
     if !(total > 0.0 && total.is_finite()) {
-        return Err(BenchError::Failed(format!("the best rollouts' returns sum to {total}")));
+        return Err(AppError::Failed(format!("the best rollouts' returns sum to {total}")));
     }
     Ok((g, samples, phi))
 }
@@ -85,17 +85,16 @@ pub fn copy_of(g: &Groups) -> Groups {
     g.clone()
 }
 
-pub fn run(a: &GroupsOptions) -> Result<(), BenchError> {
+pub fn run(a: &GroupsOptions) -> Result<(), AppError> {
     if a.repetitions == 0 {
-        return Err(BenchError::Config("--repetitions must be at least 1".into()));
+        return Err(AppError::Config("--repetitions must be at least 1".into()));
     }
     let (state, samples, phi) = inputs(a.train_iterations, a.seed)?;
     let best = &samples[..state.cfg.best];
     if let Some(path) = &a.dump {
         let mut g = copy_of(&state);
         one_update(&mut g, best, &phi);
-        std::fs::write(path, dump(&state, &samples, &phi, &g).to_string())
-            .map_err(BenchError::io(format!("writing {}", path.display())))?;
+        std::fs::write(path, dump(&state, &samples, &phi, &g).to_string()).map_err(AppError::io(format!("writing {}", path.display())))?;
         coadapt_log::logln!("bench groups: inputs and outputs written to {}", path.display());
     }
     for _ in 0..a.warmup {

@@ -2,7 +2,7 @@
 //! stdout (`{"bench": ..., "config": ..., "value": ..., "unit": ...}`, some with more keys),
 //! the lines BENCHMARKS.md, `bench/compare_*.sh` and `bench/ratios.py` read. Each benchmark
 //! takes its options struct (a clap `Args` with the `clap` feature, for the binary) and returns
-//! a [`BenchError`].
+//! the fleet's [`AppError`](coadapt_fleet::app::AppError): a bad option exits 78, a full disk 73.
 //!
 //! # Layout
 //! - [`nn`]: SAC updates/s and the design objective's forward throughput.
@@ -17,12 +17,11 @@
 //! - [`groups`]: one GrouPS update; [`conv`]: the image embedding's convolutions; [`plan`]: one
 //!   planning step of Alg. 3 (each with percentiles and, for the first two, a `--dump` for the
 //!   Python peer's check).
-//! - [`figure`]: the one-line figure, rates and percentiles they share; [`error`]: [`BenchError`].
+//! - [`figure`]: the one-line figure, rates and percentiles they share.
 
 pub mod conv;
 pub mod design;
 pub mod env;
-pub mod error;
 pub mod figure;
 pub mod groups;
 pub mod nn;
@@ -31,5 +30,3 @@ pub mod pso;
 pub mod sim;
 pub mod snapshot;
 pub mod transport;
-
-pub use error::BenchError;

@@ -6,8 +6,8 @@ use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
 use coadapt_learner::{Sac, SacConfig};
 use rand::Rng;
 
-use crate::BenchError;
 use crate::figure::{emit, rate};
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -26,7 +26,7 @@ pub struct NnOptions {
     pub only: Option<String>,
 }
 
-pub fn run(a: &NnOptions) -> Result<(), BenchError> {
+pub fn run(a: &NnOptions) -> Result<(), AppError> {
     let wanted = |bench: &str| a.only.as_deref().is_none_or(|o| bench.contains(o));
     if wanted("sac_update") {
         sac_updates(a)?;
@@ -50,7 +50,7 @@ pub fn random_batch(rows: usize, obs: usize, act: usize, seed: u64) -> Batch {
     b
 }
 
-fn sac_updates(a: &NnOptions) -> Result<(), BenchError> {
+fn sac_updates(a: &NnOptions) -> Result<(), AppError> {
     for (config, hidden, obs) in [("3x256-obs17", vec![256; 3], 17), ("3x200-obs23", vec![200; 3], 23), ("2x256-obs17", vec![256; 2], 17)] {
         let act = 6;
         let cfg = SacConfig { hidden, auto_alpha: true, ..SacConfig::default() };
@@ -64,7 +64,7 @@ fn sac_updates(a: &NnOptions) -> Result<(), BenchError> {
     Ok(())
 }
 
-fn forward(a: &NnOptions) -> Result<(), BenchError> {
+fn forward(a: &NnOptions) -> Result<(), AppError> {
     let states = if a.large { vec![32, 256] } else { vec![32] };
     for n_states in states {
         let (obs, act, design) = (23, 6, 6);
@@ -72,7 +72,8 @@ fn forward(a: &NnOptions) -> Result<(), BenchError> {
         let mut r = rng(4, 0);
         let start: Vec<f32> = (0..n_states * obs).map(|_| r.random_range(-1.0..1.0)).collect();
         let (q1, _) = sac.critic_params(0);
-        let objective = DesignObjective::new(sac.policy(), sac.policy_params(), sac.critic(), &[q1], &start, obs - design, design)?;
+        let objective = DesignObjective::new(sac.policy(), sac.policy_params(), sac.critic(), &[q1], &start, obs - design, design)
+            .map_err(AppError::library)?;
         let particles = 700;
         let designs: Vec<f32> = (0..particles * design).map(|_| r.random_range(0.8..2.0)).collect();
         let mut out = vec![0.0; particles];

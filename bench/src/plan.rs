@@ -21,8 +21,8 @@ use coadapt_nn::Mlp;
 use rand::Rng;
 use serde_json::json;
 
-use crate::BenchError;
 use crate::figure::percentile;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -51,7 +51,7 @@ pub const MODEL_HIDDEN: [usize; 2] = [400, 400];
 pub const CRITIC_HIDDEN: [usize; 2] = [400, 300];
 
 /// The model and critic with their parameters.
-pub fn networks(seed: u64) -> Result<(LatentDynamics, Vec<f32>, Mlp, Vec<f32>), BenchError> {
+pub fn networks(seed: u64) -> Result<(LatentDynamics, Vec<f32>, Mlp, Vec<f32>), AppError> {
     let model = LatentDynamics::new(LATENT, FRAMES, ACT, &MODEL_HIDDEN)?;
     let critic = Mlp::new(&[FRAMES * LATENT + ACT, CRITIC_HIDDEN[0], CRITIC_HIDDEN[1], 1])?;
     let mut r = coadapt_core::rng(seed, 10);
@@ -106,9 +106,9 @@ pub fn config_name(horizon: usize, iterations: usize) -> String {
     )
 }
 
-pub fn run(a: &PlanOptions) -> Result<(), BenchError> {
+pub fn run(a: &PlanOptions) -> Result<(), AppError> {
     if a.repetitions == 0 {
-        return Err(BenchError::Config("--repetitions must be at least 1".into()));
+        return Err(AppError::Config("--repetitions must be at least 1".into()));
     }
     let (model, mp, critic, cp) = networks(a.seed)?;
     let mut opt = Lbfgsb::default();
@@ -147,7 +147,7 @@ pub fn run(a: &PlanOptions) -> Result<(), BenchError> {
             actions.copy_from_slice(warm);
             let (f, it, ev) = plan_counted(&mut planner, z0, &mut actions, a.iterations, &mut opt);
             if f.to_bits() != v.to_bits() {
-                return Err(BenchError::Failed(format!("the counting pass ended at f_Q {f}, plan at {v}")));
+                return Err(AppError::Failed(format!("the counting pass ended at f_Q {f}, plan at {v}")));
             }
             evals.push(ev as f64);
             iters.push(it as f64);

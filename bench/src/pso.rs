@@ -8,8 +8,8 @@ use coadapt_design_optimizer::{CriticObjective, DesignObjective, PsoConfig, QMod
 use coadapt_learner::{Sac, SacConfig};
 use rand::Rng;
 
-use crate::BenchError;
 use crate::figure::emit;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -26,7 +26,7 @@ pub struct PsoOptions {
     pub q: String,
 }
 
-pub fn run(a: &PsoOptions) -> Result<(), BenchError> {
+pub fn run(a: &PsoOptions) -> Result<(), AppError> {
     let (obs, act, design) = (23, 6, 6);
     let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 3)?;
     let bounds = coadapt_core::BoxSpace::uniform(design, 0.8, 2.0);
@@ -35,11 +35,12 @@ pub fn run(a: &PsoOptions) -> Result<(), BenchError> {
         let start: Vec<f32> = (0..n_states * obs).map(|_| r.random_range(-1.0..1.0)).collect();
         let ((q1, _), (q2, _)) = (sac.critic_params(0), sac.critic_params(1));
         let (critics, mode) = if a.q == "pessimistic" { (vec![q1, q2], QMode::MeanMinusKStd(2.0)) } else { (vec![q1], QMode::First) };
-        let f = DesignObjective::new(sac.policy(), sac.policy_params(), sac.critic(), &critics, &start, obs - design, design)?;
+        let f = DesignObjective::new(sac.policy(), sac.policy_params(), sac.critic(), &critics, &start, obs - design, design)
+            .map_err(AppError::library)?;
         let mut objective = CriticObjective::new(&f, mode, rayon::current_num_threads());
         let cfg = PsoConfig { iterations: a.iterations, ..PsoConfig::default() };
         let t = Instant::now();
-        let result = pso::maximise(&mut objective, &bounds, &cfg, 1)?;
+        let result = pso::maximise(&mut objective, &bounds, &cfg, 1).map_err(AppError::library)?;
         let secs = t.elapsed().as_secs_f64();
         let suffix = if a.q == "pessimistic" { "-pessimistic" } else { "" };
         let config = format!("{}x{}x{n_states}{suffix}", cfg.particles, cfg.iterations);

@@ -1,8 +1,8 @@
 //! `coadapt bench sim`: env steps per second of each robot on one core, random actions, resets
 //! included, and the simulated seconds per wall second.
 
-use crate::BenchError;
 use crate::figure::emit;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -15,7 +15,7 @@ pub struct SimOptions {
     pub env: Option<Vec<String>>,
 }
 
-pub fn run(a: &SimOptions) -> Result<(), BenchError> {
+pub fn run(a: &SimOptions) -> Result<(), AppError> {
     let names: Vec<String> = match &a.env {
         Some(n) => n.clone(),
         None => coadapt_robots::ENV_NAMES.iter().map(|s| s.to_string()).collect(),

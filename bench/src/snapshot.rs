@@ -11,7 +11,7 @@ use coadapt_learner::snapshot;
 use rand::Rng;
 use serde_json::json;
 
-use crate::BenchError;
+use coadapt_fleet::app::AppError;
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
@@ -30,7 +30,7 @@ pub struct SnapshotOptions {
     pub drop_caches: bool,
 }
 
-pub fn run(a: &SnapshotOptions) -> Result<(), BenchError> {
+pub fn run(a: &SnapshotOptions) -> Result<(), AppError> {
     // HalfCheetah: 17 state + 6 design observation columns, 6 actions.
     let (obs, act) = (23, 6);
     for &n in &a.transitions {
@@ -58,21 +58,21 @@ pub fn run(a: &SnapshotOptions) -> Result<(), BenchError> {
                 .map_err(snapshot::SnapshotError::Io)?;
             let write = t.elapsed().as_secs_f64();
             let bytes: u64 = std::fs::read_dir(&dir)
-                .map_err(BenchError::io(format!("reading {}", dir.display())))?
+                .map_err(AppError::io(format!("reading {}", dir.display())))?
                 .filter_map(|e| e.ok()?.metadata().ok())
                 .map(|m| m.len())
                 .sum();
             let mut fresh = FearLearner::new(obs, act, cfg.clone(), 2)?;
             if a.drop_caches {
                 std::fs::write("/proc/sys/vm/drop_caches", "3\n")
-                    .map_err(|e| BenchError::Failed(format!("--drop-caches: {e} (needs root)")))?;
+                    .map_err(|e| AppError::Failed(format!("--drop-caches: {e} (needs root)")))?;
             }
             let t = Instant::now();
             let (_, mut state) = snapshot::load(&dir)?;
             fresh.load_state(&mut state)?;
             let read = t.elapsed().as_secs_f64();
             if fresh.population_transitions() != n {
-                return Err(BenchError::Failed(format!("read back {} transitions of {n}", fresh.population_transitions())));
+                return Err(AppError::Failed(format!("read back {} transitions of {n}", fresh.population_transitions())));
             }
             let mb = bytes as f64 / 1e6;
             for (what, s) in [("write", write), ("read", read)] {
@@ -80,7 +80,7 @@ pub fn run(a: &SnapshotOptions) -> Result<(), BenchError> {
                 coadapt_log::print_stdout_line(&line.to_string());
             }
         }
-        std::fs::remove_dir_all(&root).map_err(BenchError::io(format!("removing {}", root.display())))?;
+        std::fs::remove_dir_all(&root).map_err(AppError::io(format!("removing {}", root.display())))?;
     }
     Ok(())
 }

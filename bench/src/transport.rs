@@ -19,8 +19,8 @@ use std::time::{Duration, Instant};
 use coadapt_fleet::{FleetConfig, TransportKind};
 use coadapt_transport::{ExperienceChunk, Weights};
 
-use crate::BenchError;
 use crate::figure::emit;
+use coadapt_fleet::app::AppError;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
@@ -127,15 +127,15 @@ fn fleet_config(kind: TransportKind, fleet: &str, connect: &str) -> FleetConfig 
 
 /// Times every figure `a` asks for, starting peers with `peers`; with `a.peer`, runs as one
 /// of those peers instead.
-pub fn run(a: &TransportOptions, peers: &PeerCommand) -> Result<(), BenchError> {
+pub fn run(a: &TransportOptions, peers: &PeerCommand) -> Result<(), AppError> {
     if let Some(peer) = a.peer {
-        let kind = *a.transport.first().ok_or_else(|| BenchError::Config("--peer needs --transport".into()))?;
+        let kind = *a.transport.first().ok_or_else(|| AppError::Config("--peer needs --transport".into()))?;
         return run_peer(peer, &fleet_config(kind, &a.fleet, &a.connect), a);
     }
     let b = Bench { tls: a.tls.as_deref(), peers, seconds: a.seconds };
     for &kind in &a.transport {
         if kind == TransportKind::InProcess {
-            return Err(BenchError::Config("--transport: in-process has nothing to time here; use shm or grpc".into()));
+            return Err(AppError::Config("--transport: in-process has nothing to time here; use shm or grpc".into()));
         }
         for &n in &a.actors {
             broadcast(&b, kind, n)?;
@@ -162,7 +162,7 @@ struct Learner {
     connect: String,
 }
 
-fn learner(b: &Bench<'_>, kind: TransportKind, tag: &str) -> Result<Learner, BenchError> {
+fn learner(b: &Bench<'_>, kind: TransportKind, tag: &str) -> Result<Learner, AppError> {
     let fleet = format!("coadapt-bench-{}-{tag}", std::process::id());
     let cfg = fleet_config(kind, &fleet, "");
     let (links, guard) = cfg.learner_links(None, None, &security(b.tls))?;
@@ -173,7 +173,7 @@ fn learner(b: &Bench<'_>, kind: TransportKind, tag: &str) -> Result<Learner, Ben
     Ok(Learner { links, _guard: guard, fleet, connect })
 }
 
-fn spawn_peers(b: &Bench<'_>, kind: TransportKind, l: &Learner, peer: &str, n: usize) -> Result<Vec<Child>, BenchError> {
+fn spawn_peers(b: &Bench<'_>, kind: TransportKind, l: &Learner, peer: &str, n: usize) -> Result<Vec<Child>, AppError> {
     (0..n)
         .map(|i| {
             Command::new(&b.peers.program)
@@ -184,7 +184,7 @@ fn spawn_peers(b: &Bench<'_>, kind: TransportKind, l: &Learner, peer: &str, n: u
                 .stdin(Stdio::null())
                 .stdout(Stdio::null())
                 .spawn()
-                .map_err(BenchError::io("starting a peer process"))
+                .map_err(AppError::io("starting a peer process"))
         })
         .collect()
 }
@@ -200,13 +200,13 @@ fn reap(children: Vec<Child>) {
     }
 }
 
-fn broadcast(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchError> {
+fn broadcast(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), AppError> {
     let seconds = b.seconds;
     let mut l = learner(b, kind, &format!("w{n}"))?;
     let peers = spawn_peers(b, kind, &l, "echo", n)?;
     let len = policy_len();
     let mut version = 0u64;
-    let publish = |l: &mut Learner, version: u64| -> Result<(), BenchError> {
+    let publish = |l: &mut Learner, version: u64| -> Result<(), AppError> {
         let policy = (0..len).map(|i| (i as f32 * 1e-4) + version as f32).collect();
         l.links.acting_weights.publish(Weights { version, policy, q1: vec![], q2: vec![] })?;
         Ok(())
@@ -226,7 +226,7 @@ fn broadcast(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchEr
             }
         }
         if Instant::now() > ready_by {
-            return Err(BenchError::Failed(format!("the {n} peer processes did not all answer within 60 s")));
+            return Err(AppError::Failed(format!("the {n} peer processes did not all answer within 60 s")));
         }
     }
     let mut times = Vec::new();
@@ -240,7 +240,7 @@ fn broadcast(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchEr
             match l.links.experience.recv_timeout(Duration::from_secs(10))? {
                 Some(c) if c.weights_version == version => got += 1,
                 Some(_) => {}
-                None => return Err(BenchError::Failed(format!("a peer did not answer version {version} within 10 s"))),
+                None => return Err(AppError::Failed(format!("a peer did not answer version {version} within 10 s"))),
             }
         }
         times.push(t.elapsed().as_secs_f64() * 1e3);
@@ -256,7 +256,7 @@ fn broadcast(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchEr
     Ok(())
 }
 
-fn experience(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchError> {
+fn experience(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), AppError> {
     let mut l = learner(b, kind, &format!("e{n}"))?;
     let peers = spawn_peers(b, kind, &l, "flood", n)?;
     let bytes_per_row = (2 * OBS + ACT + 1) * 4 + 1;
@@ -285,7 +285,7 @@ fn experience(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchE
     }
     drop(l);
     reap(peers);
-    let Some(first) = first else { return Err(BenchError::Failed(format!("no experience arrived from {n} peer processes"))) };
+    let Some(first) = first else { return Err(AppError::Failed(format!("no experience arrived from {n} peer processes"))) };
     let secs = last.duration_since(first).as_secs_f64().max(1e-9);
     let config = format!("{}-{n}senders-{ROWS}rows{}", kind.name(), tls_suffix(b.tls));
     emit("experience", &config, rows as f64 / secs, "transitions/s");
@@ -293,7 +293,7 @@ fn experience(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), BenchE
     Ok(())
 }
 
-fn run_peer(peer: Peer, cfg: &FleetConfig, a: &TransportOptions) -> Result<(), BenchError> {
+fn run_peer(peer: Peer, cfg: &FleetConfig, a: &TransportOptions) -> Result<(), AppError> {
     let mut links = cfg.actor_links(a.id, &security(a.tls.as_deref()))?;
     match peer {
         Peer::Echo => {

@@ -2,6 +2,7 @@
 //! `--connect` flags over the config's `[fleet]`.
 
 use coadapt_fleet::FleetConfig;
+use coadapt_fleet::app::AppError;
 
 /// How an actor process joins its learner's fleet (over the config's `[fleet]`).
 #[derive(Debug, clap::Args)]
@@ -18,8 +19,9 @@ pub struct JoinArgs {
 }
 
 impl JoinArgs {
-    /// `fleet` with the overrides; an actor process cannot join threads of another process.
-    pub fn apply(&self, fleet: &mut FleetConfig) -> anyhow::Result<()> {
+    /// `fleet` with the overrides; an actor process cannot join threads of another process (a
+    /// setting: exit 78).
+    pub fn apply(&self, fleet: &mut FleetConfig) -> Result<(), AppError> {
         if let Some(t) = self.transport {
             fleet.transport = t;
         }
@@ -30,7 +32,7 @@ impl JoinArgs {
             fleet.connect = c.clone();
         }
         if fleet.transport == coadapt_fleet::TransportKind::InProcess {
-            anyhow::bail!("fleet.transport: an actor process talks shm or grpc (--transport)");
+            return Err(AppError::Config("fleet.transport: an actor process talks shm or grpc (--transport)".into()));
         }
         Ok(())
     }

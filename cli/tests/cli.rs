@@ -292,3 +292,72 @@ fn off_loopback_every_server_needs_tls_and_tokens() {
     let _ = child.wait();
     assert!(line.contains("env-serve: serving"), "{line}");
 }
+
+/// `coadapt ARGS`, killed if it has not ended within `secs` (a restart loop would not end).
+fn coadapt_within(args: &[&str], secs: u64) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("coadapt runs");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            child.kill().unwrap();
+            let o = child.wait_with_output().unwrap();
+            panic!("{args:?} still ran after {secs} s: {}", String::from_utf8_lossy(&o.stderr));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// A setting that cannot work fails the same way every time: every command exits 78
+/// (`EX_CONFIG`) for it, so a supervisor (the local fleet's, systemd's, Slurm's) does not start
+/// it again, whichever process meets it (the optimiser's settings are read by the optimiser).
+#[test]
+fn a_setting_that_cannot_work_exits_78_from_any_role() {
+    let dir = tmpdir("exit78");
+    std::fs::create_dir_all(&dir).unwrap();
+    let tiny = std::fs::read_to_string(coadapt_test_support::workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
+    let bad = dir.join("pessimism.toml");
+    std::fs::write(&bad, tiny.replace("[optimizer]\n", "[optimizer]\npessimism = -1.0\n")).unwrap();
+    let bad = bad.to_str().unwrap();
+    let good = coadapt_test_support::workspace_file("configs/half-cheetah-tiny.toml");
+    let good = good.to_str().unwrap();
+    let search = coadapt_test_support::workspace_file("configs/search/planar-groups1.toml");
+    let search = search.to_str().unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec!["train".into(), "--steps".into(), "0".into()], "steps"),
+        (
+            vec![
+                "search-actor".into(),
+                "--config".into(),
+                search.into(),
+                "--id".into(),
+                "0".into(),
+                "--transport".into(),
+                "in-process".into(),
+            ],
+            "fleet.transport",
+        ),
+        (vec!["run".into(), "--config".into(), bad.into(), "--transport".into(), "in-process".into()], "optimizer.pessimism"),
+        (
+            vec!["run".into(), "--config".into(), bad.into(), "--transport".into(), "shm".into(), "--actors".into(), "1".into()],
+            "optimizer.pessimism",
+        ),
+        (vec!["run".into(), "--config".into(), good.into(), "--serve".into(), "not-an-address".into()], "design-service.listen"),
+    ];
+    for (i, (args, needle)) in cases.iter().enumerate() {
+        let out = dir.join(format!("run{i}"));
+        let mut args: Vec<&str> = args.iter().map(String::as_str).collect();
+        if args[0] == "run" {
+            args.extend(["--out", out.to_str().unwrap()]);
+        }
+        let o = coadapt_within(&args, 120);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(78), "{args:?}: {err}");
+        assert!(err.contains(needle), "{args:?}: stderr `{err}` does not mention `{needle}`");
+    }
+}

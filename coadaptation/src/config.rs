@@ -83,7 +83,7 @@ impl Default for RunConfig {
 
 fn parse_enum<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> crate::Result<T> {
     T::deserialize(serde::de::value::StrDeserializer::<serde::de::value::Error>::new(v))
-        .map_err(|e| crate::Error::Config(format!("--{flag} {v}: {e}")))
+        .map_err(|e| crate::AppError::Config(format!("--{flag} {v}: {e}")))
 }
 
 /// What a command line may change in a config (each `None`/`false`: as the config says).
@@ -120,7 +120,7 @@ pub fn resolve(config: Option<&Path>, resume: Option<&Path>, o: &Overrides) -> c
         ),
         None => (DEFAULT_CONFIG.to_string(), "half-cheetah-reference".into()),
     };
-    let mut cfg: RunConfig = toml::from_str(&text).map_err(|e| crate::Error::Config(format!("parsing config {name}: {e}")))?;
+    let mut cfg: RunConfig = toml::from_str(&text).map_err(|e| crate::AppError::Config(format!("parsing config {name}: {e}")))?;
     if let Some(s) = o.seed {
         cfg.seed = s;
     }
@@ -180,7 +180,7 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> crate::Result<()> {
         crate::error::bail_config!("env {}: has no design parameters to optimise", cfg.env);
     }
     for (i, d) in cfg.schedule.initial_designs.iter().enumerate() {
-        spec.design.check("design", d).map_err(|e| crate::Error::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
+        spec.design.check("design", d).map_err(|e| crate::AppError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
     }
     cfg.flow.lease()?;
     cfg.schedule.poll_interval()?;

@@ -188,8 +188,9 @@ pub fn start(
     if listen.is_empty() {
         return Ok(None);
     }
-    let addr: SocketAddr =
-        listen.parse().with_context(|| format!("design-service.listen: {listen:?} is not an address like 127.0.0.1:50061"))?;
+    let addr: SocketAddr = listen
+        .parse()
+        .map_err(|_| crate::AppError::Config(format!("design-service.listen: {listen:?} is not an address like 127.0.0.1:50061")))?;
     coadapt_fleet::check_listen("design-service.listen", addr, &cfg.security)?;
     let mut serve_cfg = cfg.design_service.serve_config()?;
     serve_cfg.auth = cfg.security.server_auth()?;

@@ -9,6 +9,7 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
+use crate::AppError;
 use crate::error::{Context, bail};
 use coadapt_fleet::supervise::{Plan, Role, supervise};
 use coadapt_fleet::{TransportKind, clean_stale};
@@ -67,7 +68,7 @@ pub fn launch(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) 
     let logs = dir.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("creating {}", logs.display()))?;
     let config = dir.join("fleet.toml");
-    std::fs::write(&config, toml::to_string(&cfg)?).with_context(|| format!("writing {}", config.display()))?;
+    std::fs::write(&config, toml::to_string(&cfg).map_err(AppError::library)?).with_context(|| format!("writing {}", config.display()))?;
     let config = config.display().to_string();
     let common = ["--config".to_string(), config.clone(), "--transport".into(), cfg.fleet.transport.name().into()];
 

@@ -19,7 +19,7 @@
 //! - [`serve`]: a run's design critic for the design service (a running learner's, or a
 //!   finished run's for `coadapt serve`).
 //! - [`plot`]: the run directory's SVG plots (`coadapt plot`, and at the end of a run).
-//! - [`error`]: [`Error`], with the kind a caller branches on and [`Error::exit_code`].
+//! - `error`: the short forms of the fleet's [`AppError`] this crate writes (`bail!`, `bail_config!`).
 
 pub mod config;
 pub mod design_live;
@@ -34,5 +34,5 @@ pub mod roles;
 pub mod run;
 pub mod serve;
 
+pub use coadapt_fleet::app::{AppError, Result};
 pub use config::{DEFAULT_CONFIG, Overrides, RunConfig};
-pub use error::{Error, Result};

@@ -38,7 +38,7 @@ pub fn learner(cfg: &RunConfig, name: &str, out: Option<PathBuf>, resume: bool, 
     let health = match &guard {
         coadapt_fleet::LearnerGuard::Grpc(server) => {
             let stall = Duration::try_from_secs_f64(cfg.fleet.health_stall_secs).ok().filter(|d| !d.is_zero()).ok_or_else(|| {
-                crate::Error::Config(format!(
+                crate::AppError::Config(format!(
                     "fleet.health-stall-secs: {} is not a positive number of seconds",
                     cfg.fleet.health_stall_secs
                 ))

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::AppError;
 use crate::error::{Context, bail};
 
 use crate::config::RunConfig;
@@ -53,8 +54,8 @@ fn first_difference(prefix: &str, a: &toml::Value, b: &toml::Value) -> Option<St
 /// Refuses `new` when it differs from the run's `stored` config in a key that decides what the
 /// run learns, naming the key and both values.
 pub fn check_compatible(stored: &RunConfig, new: &RunConfig) -> crate::Result<()> {
-    let a = toml::Value::try_from(stored)?;
-    let b = toml::Value::try_from(new)?;
+    let a = toml::Value::try_from(stored).map_err(AppError::library)?;
+    let b = toml::Value::try_from(new).map_err(AppError::library)?;
     if let Some(key) = first_difference("", &a, &b) {
         let get = |v: &toml::Value| key.split('.').try_fold(v, |v, k| v.get(k)).map_or("(absent)".to_string(), |v| v.to_string());
         bail!(
@@ -72,7 +73,7 @@ pub fn stored_config(dir: &Path) -> crate::Result<RunConfig> {
     let path = dir.join("config.toml");
     let text =
         std::fs::read_to_string(&path).with_context(|| format!("reading {} (is {} a run directory?)", path.display(), dir.display()))?;
-    toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+    toml::from_str(&text).map_err(AppError::library).with_context(|| format!("parsing {}", path.display()))
 }
 
 /// Where a run keeps its learner snapshots.

@@ -7,6 +7,7 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+use crate::AppError;
 use crate::error::Context;
 use coadapt_actors::{Actor, PolicyKind};
 use coadapt_core::{Env, EnvSpec};
@@ -22,6 +23,15 @@ use coadapt_transport::{ActorLinks, LearnerLinks, OptimizerLinks};
 
 use crate::config::RunConfig;
 use coadapt_log::duration;
+
+/// The optimiser's error: its settings fail the same way every time (exit 78, not restarted);
+/// the rest (a link, a design) may pass.
+fn optimizer_error(e: optimizer::OptimizerError) -> AppError {
+    match e {
+        optimizer::OptimizerError::Config(_) => AppError::Config(e.to_string()),
+        e => AppError::library(e),
+    }
+}
 
 /// Simulation rollouts for the baselines: one deterministic episode of the population policy
 /// per design from its reset seed, fitness the mean per-step reward; designs are shared out
@@ -243,7 +253,7 @@ pub fn learner(
     } else {
         RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
     };
-    std::fs::write(dir.join("config.toml"), toml::to_string(cfg)?).context("writing config.toml")?;
+    std::fs::write(dir.join("config.toml"), toml::to_string(cfg).map_err(AppError::library)?).context("writing config.toml")?;
     // Dropped when the run returns: Watch streams end, the server stops.
     let design_service = crate::design_live::start(cfg, spec, &run_id, links, &mut writer)?;
     // The operator may answer from another directory: name the run directory in full.
@@ -344,7 +354,8 @@ pub fn optimizer(
     } else {
         None
     };
-    let mut opt = Optimizer::new(cfg.optimizer.clone(), ospec, sim.as_mut().map(|s| s as &mut dyn RolloutEvaluator), cfg.seed)?;
+    let mut opt = Optimizer::new(cfg.optimizer.clone(), ospec, sim.as_mut().map(|s| s as &mut dyn RolloutEvaluator), cfg.seed)
+        .map_err(optimizer_error)?;
     if !cfg.metrics.optimizer_listen.is_empty() {
         let at = crate::metrics::serve(&cfg.metrics.optimizer_listen, crate::metrics::Source::Optimizer(opt.counters()))?;
         coadapt_log::logln!("optimizer: metrics on http://{at}/metrics");
@@ -365,6 +376,6 @@ pub fn optimizer(
         }
         None => None,
     };
-    optimizer::run(&mut opt, links, shutdown, store.as_ref()).context("design optimiser")?;
+    optimizer::run(&mut opt, links, shutdown, store.as_ref()).map_err(optimizer_error).context("design optimiser")?;
     Ok(())
 }

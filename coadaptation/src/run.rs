@@ -16,6 +16,7 @@ use coadapt_learner::fear::{ActingPolicy, FearLearner};
 use coadapt_log::print_stdout_line;
 use coadapt_transport::in_process;
 
+use crate::AppError;
 use crate::config::{RunConfig, check, default_out, resolve_initial_designs};
 use crate::error::bail;
 use crate::roles;
@@ -78,13 +79,14 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
     let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
     let dim = spec.design_dim();
     let designs: Vec<f32> = outcome.designs.iter().flat_map(|d| d.design.clone()).collect();
-    let pca = Pca2::fit(&designs, dim)?;
-    let grid = landscape::grid(&pca, &designs, &spec.design, n)?;
+    let pca = Pca2::fit(&designs, dim).map_err(AppError::library)?;
+    let grid = landscape::grid(&pca, &designs, &spec.design, n).map_err(AppError::library)?;
     let learner: &mut FearLearner = &mut outcome.learner;
     let Some(states) = learner.sample_start_states(cfg.landscape_start_states.max(1)) else { return Ok(()) };
     let pop = learner.agent(ActingPolicy::Population);
     let objective =
-        DesignObjective::new(pop.policy(), pop.policy_params(), pop.critic(), &[pop.critic_params(0).0], &states, spec.state_dim, dim)?;
+        DesignObjective::new(pop.policy(), pop.policy_params(), pop.critic(), &[pop.critic_params(0).0], &states, spec.state_dim, dim)
+            .map_err(AppError::library)?;
     let mut scores = vec![0.0; n * n];
     CriticObjective::new(&objective, QMode::First, 2).evaluate(&grid.designs, &mut scores);
     let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("landscape.csv"))?);

@@ -45,7 +45,8 @@ pub fn design_model(
         start_states,
         spec.state_dim,
         mode,
-    )?)
+    )
+    .map_err(crate::AppError::library)?)
 }
 
 /// A designs.csv row as the service's history row.

@@ -20,6 +20,16 @@ pub enum EmbeddingFileError {
     Corrupt { path: String, why: String },
 }
 
+/// An embedding that cannot be written to a full disk cannot be written after a restart either.
+impl coadapt_fleet::supervise::exit::ExitCode for EmbeddingFileError {
+    fn exit_code(&self) -> Option<u8> {
+        match self {
+            Self::Io { source, .. } => source.exit_code(),
+            Self::Corrupt { .. } => None,
+        }
+    }
+}
+
 /// Writes `emb`'s shape and parameters to `path` (atomically: a temporary file renamed).
 pub fn save_embedding(path: &Path, emb: &Embedding, enc: &[f32], dec: &[f32]) -> Result<(), EmbeddingFileError> {
     let p = path.display().to_string();

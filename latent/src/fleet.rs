@@ -42,6 +42,9 @@ pub enum FleetError {
     Learner(String),
 }
 
+/// A fleet that failed may come back after a restart.
+impl coadapt_fleet::supervise::exit::ExitCode for FleetError {}
+
 impl From<DispatchError> for FleetError {
     fn from(e: DispatchError) -> Self {
         match e {

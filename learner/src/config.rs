@@ -17,6 +17,13 @@ pub enum ConfigError {
     TooFewSnapshots(usize),
 }
 
+/// A setting fails the same way every time.
+impl coadapt_fleet::supervise::exit::ExitCode for ConfigError {
+    fn exit_code(&self) -> Option<u8> {
+        Some(coadapt_fleet::supervise::exit::CONFIG)
+    }
+}
+
 /// Soft Actor-Critic settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]

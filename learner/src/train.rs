@@ -147,6 +147,18 @@ pub enum TrainError {
     Io { path: PathBuf, source: std::io::Error },
 }
 
+/// A setting, or a full disk, fails the same way after a restart.
+impl coadapt_fleet::supervise::exit::ExitCode for TrainError {
+    fn exit_code(&self) -> Option<u8> {
+        match self {
+            Self::Config { .. } => Some(coadapt_fleet::supervise::exit::CONFIG),
+            Self::Nn(e) => e.exit_code(),
+            Self::Io { source, .. } => source.exit_code(),
+            Self::Env(_) | Self::Replay(_) => None,
+        }
+    }
+}
+
 /// One finished episode.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct EpisodeRecord {

@@ -68,6 +68,9 @@ pub trait EpisodicTask {
 #[error("running rollouts: {0}")]
 pub struct RolloutError(pub String);
 
+/// A fleet that failed may come back: a restart may mend it.
+impl coadapt_fleet::supervise::exit::ExitCode for RolloutError {}
+
 /// What runs an iteration's rollouts: every rollout's actions (`steps x action_dim`) at once,
 /// so a fleet of actors can run them side by side; gives back each one's (return, cost) in
 /// order. Every [`EpisodicTask`] runs them one after the other in process.

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::AppError;
 use crate::error::{Context, bail};
 
 /// A row of `designs.csv`.
@@ -115,7 +116,7 @@ impl Table {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
         };
-        let text = String::from_utf8(bytes).with_context(|| format!("{} is not UTF-8 text", path.display()))?;
+        let text = String::from_utf8(bytes).map_err(AppError::library).with_context(|| format!("{} is not UTF-8 text", path.display()))?;
         let last_unterminated = !text.is_empty() && !text.ends_with('\n');
         let mut header = None;
         let mut rows = Vec::new();
@@ -183,7 +184,7 @@ impl Row<'_> {
         self.fields.get(col).map(String::as_str).unwrap_or("")
     }
 
-    fn err(&self, col: usize, what: &str) -> crate::Error {
+    fn err(&self, col: usize, what: &str) -> crate::AppError {
         let name = self.table.header.get(col).map(String::as_str).unwrap_or("?");
         crate::error::failed!(
             "{}: line {}, column {} ({name}): cannot read {:?} as {what}",

@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::error::Context;
+use coadapt_fleet::app::{AppError, Context};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
@@ -12,14 +12,17 @@ use super::{DesignBest, EpisodeRow, LandscapeDesign, LandscapePoint, best_so_far
 
 type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 
+/// What drawing can fail with: plotters' own error (into a string: only a bug);
+/// [`write_svg`] says which figure.
+type Drawn<T = ()> = Result<T, DrawingAreaErrorKind<std::io::Error>>;
+
 /// Draws into an SVG string with `draw`, then writes it to `path`.
-pub(super) fn write_svg(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> crate::Result<()>) -> crate::Result<()> {
+pub(super) fn write_svg(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> Drawn) -> crate::Result<()> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        root.fill(&WHITE)?;
-        draw(&root).with_context(|| format!("drawing {}", path.display()))?;
-        root.present()?;
+        let drawn = root.fill(&WHITE).and_then(|()| draw(&root)).and_then(|()| root.present());
+        drawn.map_err(|e| AppError::failed(e).context(format!("drawing {}", path.display())))?;
     }
     std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))
 }
@@ -79,7 +82,7 @@ fn fmt_num(v: f64) -> String {
 }
 
 /// A vertical colour bar in `area` (pixel coordinates) from `lo` (bottom) to `hi` (top).
-fn colour_bar(area: &Area, title: &str, lo: &str, hi: &str) -> crate::Result<()> {
+fn colour_bar(area: &Area, title: &str, lo: &str, hi: &str) -> Drawn {
     let h = area.dim_in_pixel().1;
     let (x0, x1) = (10i32, 34i32);
     let (top, bottom) = (60i32, h as i32 - 60);
@@ -99,7 +102,7 @@ fn colour_bar(area: &Area, title: &str, lo: &str, hi: &str) -> crate::Result<()>
     Ok(())
 }
 
-pub(super) fn learning_curves(root: &Area, episodes: &[EpisodeRow]) -> crate::Result<()> {
+pub(super) fn learning_curves(root: &Area, episodes: &[EpisodeRow]) -> Drawn {
     let mut by_design: BTreeMap<usize, Vec<&EpisodeRow>> = BTreeMap::new();
     for e in episodes {
         by_design.entry(e.design).or_default().push(e);
@@ -166,7 +169,7 @@ fn design_index_chart<'a, 'b>(
     x: std::ops::Range<f64>,
     y: std::ops::Range<f64>,
     y_desc: &str,
-) -> crate::Result<XyChart<'a, 'b>> {
+) -> Drawn<XyChart<'a, 'b>> {
     let mut chart = ChartBuilder::on(root)
         .caption(caption, ("sans-serif", 20))
         .margin(12)
@@ -197,7 +200,7 @@ fn step_path(steps: &[(f64, f64)]) -> Vec<(f64, f64)> {
     path
 }
 
-pub(super) fn best_return(root: &Area, best: &[DesignBest]) -> crate::Result<()> {
+pub(super) fn best_return(root: &Area, best: &[DesignBest]) -> Drawn {
     let steps = best_so_far(best);
     let x_max = best.iter().map(|b| b.index).max().unwrap_or(0) as f64;
     let x_min = best.iter().map(|b| b.index).min().unwrap_or(0) as f64;
@@ -262,7 +265,7 @@ fn distinct(mut v: Vec<f64>) -> Vec<f64> {
     v
 }
 
-pub(super) fn landscape_plot(root: &Area, points: &[LandscapePoint], tried: &[LandscapeDesign]) -> crate::Result<()> {
+pub(super) fn landscape_plot(root: &Area, points: &[LandscapePoint], tried: &[LandscapeDesign]) -> Drawn {
     let t1 = distinct(points.iter().map(|p| p.pc[0]).collect());
     let t2 = distinct(points.iter().map(|p| p.pc[1]).collect());
     let (e1, e2) = (cell_edges(&t1), cell_edges(&t2));
@@ -327,7 +330,7 @@ fn bounds(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
     }
 }
 
-pub(super) fn compare_plot(root: &Area, curves: &[(String, Vec<(f64, f64)>)]) -> crate::Result<()> {
+pub(super) fn compare_plot(root: &Area, curves: &[(String, Vec<(f64, f64)>)]) -> Drawn {
     let (x0, x1) = bounds(curves.iter().flat_map(|(_, c)| c.iter().map(|p| p.0)));
     let (y0, y1) = range(curves.iter().flat_map(|(_, c)| c.iter().map(|p| p.1))).unwrap_or((0.0, 1.0));
     let mut chart = design_index_chart(root, "Best evaluation return so far", (x0 - 0.5)..(x1 + 0.5), y0..y1, "best evaluation return")?;

@@ -20,11 +20,14 @@
 //! - [`procs`]: actor processes a learner starts itself; [`supervise`]: the local fleet's
 //!   supervisor with its restart budgets and the exit codes that say a restart cannot help.
 //! - [`error`]: [`SetupError`], what callers branch on when a fleet cannot be set up.
+//! - [`app`]: [`AppError`](app::AppError), why an application (any experiment family, a
+//!   benchmark) stopped, and whether a restart could mend it.
 //!
 //! The experiment's own checks (shapes, magnitudes, the episode's length) plug into the
 //! dispatcher as a [`Check`]; everything else is the same for every family.
 
 pub mod actor;
+pub mod app;
 pub mod conformance;
 pub mod dispatch;
 pub mod env;

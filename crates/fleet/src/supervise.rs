@@ -39,8 +39,13 @@ pub mod exit {
     /// An error that can say whether a restart could mend it: `Some(code)` ([`DISK`],
     /// [`CONFIG`]) when it cannot. A binary maps its error to an exit code with it, and the
     /// supervisor reads the code.
+    ///
+    /// Every error an application converts with `?` says it (the default: a restart may mend
+    /// it); the libraries below the fleet, which do not know this trait, say it here.
     pub trait ExitCode {
-        fn exit_code(&self) -> Option<u8>;
+        fn exit_code(&self) -> Option<u8> {
+            None
+        }
     }
 
     impl ExitCode for crate::SetupError {

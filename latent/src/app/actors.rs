@@ -14,9 +14,9 @@ use std::sync::atomic::AtomicBool;
 use coadapt_fleet::procs::{LocalActors, ProcessFleet};
 
 use super::config::LatentConfig;
-use super::error::{LatentError, Within};
 use super::run::{camera_env, latency};
 use crate::{ActorEpisode, Embedding, EpisodeRunner, FleetError, LatentActor};
+use coadapt_fleet::app::{AppError, Context};
 
 /// The learner's fleet: the episode runner over its links, and what keeps them up.
 pub(crate) struct Fleet {
@@ -25,28 +25,25 @@ pub(crate) struct Fleet {
 }
 
 /// One actor: its networks, sized from the config alone.
-fn latent_actor(cfg: &LatentConfig, act: usize, id: u64) -> Result<LatentActor, LatentError> {
-    let emb = Embedding::new(cfg.embedding.shape).within(|| "embedding.shape")?;
+fn latent_actor(cfg: &LatentConfig, act: usize, id: u64) -> Result<LatentActor, AppError> {
+    let emb = Embedding::new(cfg.embedding.shape).with_context(|| "embedding.shape")?;
     LatentActor::new(cfg.agent.clone(), emb, cfg.camera.frames, act, cfg.seed.wrapping_mul(1_000_003).wrapping_add(id))
-        .within(|| "building the actor's networks")
+        .with_context(|| "building the actor's networks")
 }
 
 /// Writes each episode's figures to `path` (CSV, appended).
-fn latency_log(path: Option<&Path>, id: u64) -> Result<impl FnMut(&ActorEpisode) + Send + use<>, LatentError> {
+fn latency_log(path: Option<&Path>, id: u64) -> Result<impl FnMut(&ActorEpisode) + Send + use<>, AppError> {
     let mut file = match path {
         Some(p) => {
             if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).map_err(LatentError::io(format!("creating {}", dir.display())))?;
+                std::fs::create_dir_all(dir).map_err(AppError::io(format!("creating {}", dir.display())))?;
             }
             let new = !p.exists();
-            let mut f = std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(p)
-                .map_err(LatentError::io(format!("opening {}", p.display())))?;
+            let mut f =
+                std::fs::OpenOptions::new().create(true).append(true).open(p).map_err(AppError::io(format!("opening {}", p.display())))?;
             if new {
                 writeln!(f, "assignment,train,steps,return,plan_ms_mean,plan_ms_p90,seconds")
-                    .map_err(LatentError::io(format!("writing {}", p.display())))?;
+                    .map_err(AppError::io(format!("writing {}", p.display())))?;
             }
             Some(f)
         }
@@ -96,7 +93,7 @@ impl Fleet {
     /// The learner's side over `cfg.fleet`, with `cfg.actors` actors started here (threads,
     /// or processes unless `start-actors = false`); `out` is the run directory (its
     /// `config.toml` is what started actors read).
-    pub(crate) fn start(cfg: &LatentConfig, out: &Path, act: usize) -> Result<Self, LatentError> {
+    pub(crate) fn start(cfg: &LatentConfig, out: &Path, act: usize) -> Result<Self, AppError> {
         let state = cfg.camera.frames * cfg.embedding.shape.latent;
         let dims = coadapt_transport::messages::Dims { obs: state, act, design: 0 };
         let lease = std::time::Duration::from_secs_f64(cfg.episode_lease_secs);
@@ -110,7 +107,7 @@ impl Fleet {
             let mut actor = latent_actor(cfg, act, i as u64)?;
             let mut log = latency_log(Some(&csv(i)), i as u64)?;
             let steps = cfg.episode_steps;
-            Ok::<_, LatentError>(std::thread::spawn(move || {
+            Ok::<_, AppError>(std::thread::spawn(move || {
                 let stop = std::sync::atomic::AtomicBool::new(false);
                 crate::run_actor(&mut actor, source.env(), steps, i as u64, &mut links, &stop, &mut log)
             }))
@@ -137,7 +134,7 @@ impl Fleet {
 /// gRPC) on `cfg.robot`, planning here, until the learner closes the queue or `shutdown` is
 /// set; each episode's planning latency is appended to `latency_csv`. Returns how many
 /// episodes it ran.
-pub fn actor(cfg: &LatentConfig, id: u64, latency_csv: Option<&Path>, shutdown: &AtomicBool) -> Result<u64, LatentError> {
+pub fn actor(cfg: &LatentConfig, id: u64, latency_csv: Option<&Path>, shutdown: &AtomicBool) -> Result<u64, AppError> {
     let mut source = camera_env(cfg)?;
     let act = source.env().spec().act_dim();
     let mut actor = latent_actor(cfg, act, id)?;

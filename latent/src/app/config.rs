@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::embed::EmbeddingSettings;
-use super::error::LatentError;
 use crate::{AgentConfig, Explore};
+use coadapt_fleet::app::AppError;
 
 /// The camera (the `[camera]` table).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -122,16 +122,16 @@ pub struct Overrides {
     pub transport: Option<coadapt_fleet::TransportKind>,
 }
 
-fn parse_enum<T: serde::de::DeserializeOwned>(key: &str, v: &str, choices: &str) -> Result<T, LatentError> {
+fn parse_enum<T: serde::de::DeserializeOwned>(key: &str, v: &str, choices: &str) -> Result<T, AppError> {
     T::deserialize(serde::de::value::StrDeserializer::<serde::de::value::Error>::new(v))
-        .map_err(|_| LatentError::Config(format!("{key} = {v:?}: one of {choices}")))
+        .map_err(|_| AppError::Config(format!("{key} = {v:?}: one of {choices}")))
 }
 
 impl LatentConfig {
     /// The config in the TOML file at `path`.
-    pub fn load(path: &Path) -> Result<Self, LatentError> {
-        let text = std::fs::read_to_string(path).map_err(LatentError::io(format!("reading {}", path.display())))?;
-        toml::from_str(&text).map_err(|e| LatentError::Config(format!("parsing {}: {e}", path.display())))
+    pub fn load(path: &Path) -> Result<Self, AppError> {
+        let text = std::fs::read_to_string(path).map_err(AppError::io(format!("reading {}", path.display())))?;
+        toml::from_str(&text).map_err(|e| AppError::Config(format!("parsing {}: {e}", path.display())))
     }
 
     /// The run directory when none is given: `runs/latent-<method>-seed<seed>`.
@@ -141,7 +141,7 @@ impl LatentConfig {
 }
 
 /// The config in `file` (the defaults without one) with `o` over it, checked.
-pub fn resolve(file: Option<&Path>, o: &Overrides) -> Result<LatentConfig, LatentError> {
+pub fn resolve(file: Option<&Path>, o: &Overrides) -> Result<LatentConfig, AppError> {
     let mut cfg = match file {
         Some(p) => LatentConfig::load(p)?,
         None => LatentConfig::default(),
@@ -184,8 +184,8 @@ pub fn resolve(file: Option<&Path>, o: &Overrides) -> Result<LatentConfig, Laten
 }
 
 /// Refuses settings that cannot run, naming the key; fills in the default embedding path.
-fn check(cfg: &mut LatentConfig) -> Result<(), LatentError> {
-    let bad = |m: String| Err(LatentError::Config(m));
+fn check(cfg: &mut LatentConfig) -> Result<(), AppError> {
+    let bad = |m: String| Err(AppError::Config(m));
     for (key, v) in [("episode-lease-secs", cfg.episode_lease_secs), ("episode-deadline-secs", cfg.episode_deadline_secs)] {
         if !(v.is_finite() && v > 0.0 && v < 1e9) {
             return bad(format!("{key} = {v}: a positive number of seconds"));

@@ -18,8 +18,8 @@ use coadapt_learner::config::DdpgConfig;
 use coadapt_learner::ddpg::Ddpg;
 use serde::{Deserialize, Serialize};
 
-use super::error::LatentError;
 use crate::{Embedding, EmbeddingConfig, EmbeddingTrainer, FrameSet};
+use coadapt_fleet::app::AppError;
 
 /// How the embedding is built (the `[embedding]` table).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -102,8 +102,8 @@ pub fn build(
     episode_steps: usize,
     path: &Path,
     shutdown: &AtomicBool,
-) -> Result<(Embedding, Vec<f32>), LatentError> {
-    let stopped = || LatentError::Interrupted(format!("interrupted while building the embedding; {} not written", path.display()));
+) -> Result<(Embedding, Vec<f32>), AppError> {
+    let stopped = || AppError::Interrupted(format!("interrupted while building the embedding; {} not written", path.display()));
     let px_len = 3 * settings.shape.image * settings.shape.image;
     let spec = source.env().spec().clone();
     let (design, act) = (spec.default_design.clone(), spec.act_dim());
@@ -131,7 +131,7 @@ pub fn build(
         }
         let mut episode = source.env().reset(settings.seed * 1_000_003 + ep as u64, &design)?.to_vec();
         if episode.len() < px_len {
-            return Err(LatentError::Config(format!(
+            return Err(AppError::Config(format!(
                 "the robot's observation has {} values, fewer than one {px_len}-value frame",
                 episode.len()
             )));
@@ -169,7 +169,7 @@ pub fn build(
                 break;
             }
         }
-        frames.push_episode(&episode).map_err(|e| LatentError::Config(format!("frames of episode {ep}: {e}")))?;
+        frames.push_episode(&episode).map_err(|e| AppError::Config(format!("frames of episode {ep}: {e}")))?;
         coadapt_log::logln!(
             "embedding: collection episode {}/{} return {ret:.1} ({} frames, {:.0} s)",
             ep + 1,
@@ -180,7 +180,7 @@ pub fn build(
     }
     let emb = Embedding::new(settings.shape)?;
     if emb.image_len() != px_len {
-        return Err(LatentError::Config(format!(
+        return Err(AppError::Config(format!(
             "embedding.shape: {}x{} images of {} channels, but the camera gives {px_len} values",
             settings.shape.image, settings.shape.image, settings.shape.in_channels
         )));
@@ -188,11 +188,11 @@ pub fn build(
     let mut trainer = EmbeddingTrainer::new(emb, settings.lr, &mut rng);
     let log_path = path.with_extension("csv");
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(LatentError::io(format!("creating {}", dir.display())))?;
+        std::fs::create_dir_all(dir).map_err(AppError::io(format!("creating {}", dir.display())))?;
     }
-    let writing = || LatentError::io(format!("writing {}", log_path.display()));
+    let writing = || AppError::io(format!("writing {}", log_path.display()));
     let mut log =
-        std::io::BufWriter::new(std::fs::File::create(&log_path).map_err(LatentError::io(format!("creating {}", log_path.display())))?);
+        std::io::BufWriter::new(std::fs::File::create(&log_path).map_err(AppError::io(format!("creating {}", log_path.display())))?);
     writeln!(log, "step,reconstruction,pull,push").map_err(writing())?;
     for step in 1..=settings.steps {
         if shutdown.load(Ordering::Relaxed) {
@@ -221,10 +221,10 @@ pub fn build(
 /// The embedding at `path`, or a fresh one built there (see [`build`]).
 pub fn load_or_build(
     settings: &EmbeddingSettings,
-    make_env: impl FnOnce() -> Result<FrameSource, LatentError>,
+    make_env: impl FnOnce() -> Result<FrameSource, AppError>,
     episode_steps: usize,
     shutdown: &AtomicBool,
-) -> Result<(Embedding, Vec<f32>), LatentError> {
+) -> Result<(Embedding, Vec<f32>), AppError> {
     let path = Path::new(&settings.path);
     if path.exists() {
         let (emb, enc, _) = crate::load_embedding(path)?;

@@ -12,12 +12,12 @@
 //! - `actors`: the episodes on actors that plan where the robot is (threads, or `coadapt
 //!   latent-actor` processes), and [`actor`], the actor process's loop.
 //! - `plot`: `plots/returns.svg`.
-//! - `error`: [`LatentError`].
+//!
+//! Its errors are the fleet's [`AppError`](coadapt_fleet::app::AppError), as every application's.
 
 mod actors;
 mod config;
 mod embed;
-mod error;
 mod plot;
 mod resume;
 mod run;
@@ -25,5 +25,4 @@ mod run;
 pub use actors::actor;
 pub use config::{CameraSettings, LatentConfig, Overrides, resolve};
 pub use embed::{EmbeddingSettings, FrameSource, build, load_or_build};
-pub use error::LatentError;
 pub use run::{embedding, run};

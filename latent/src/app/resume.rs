@@ -9,7 +9,7 @@
 use std::path::Path;
 
 use super::config::LatentConfig;
-use super::error::LatentError;
+use coadapt_fleet::app::AppError;
 
 /// The header `coadapt latent` writes.
 pub(crate) const HEADER: &str = "run,episode,train_return,eval_return,train_steps,eval_steps,model_loss,plan_ms_mean,plan_ms_p90,seconds";
@@ -65,17 +65,16 @@ fn differing(a: &toml::Value, b: &toml::Value, prefix: &str, out: &mut Vec<Strin
 }
 
 /// Reads `out`'s config and episodes and keeps its leading finished runs.
-pub(crate) fn finished(out: &Path, cfg: &LatentConfig) -> Result<Finished, LatentError> {
+pub(crate) fn finished(out: &Path, cfg: &LatentConfig) -> Result<Finished, AppError> {
     let path = out.join("config.toml");
-    let text = std::fs::read_to_string(&path).map_err(LatentError::io(format!("--resume: reading {}", path.display())))?;
-    let theirs: LatentConfig =
-        toml::from_str(&text).map_err(|e| LatentError::Config(format!("--resume: parsing {}: {e}", path.display())))?;
+    let text = std::fs::read_to_string(&path).map_err(AppError::io(format!("--resume: reading {}", path.display())))?;
+    let theirs: LatentConfig = toml::from_str(&text).map_err(|e| AppError::Config(format!("--resume: parsing {}: {e}", path.display())))?;
     let (a, b) = (comparable(&theirs), comparable(cfg));
     if a != b {
         let mut keys = Vec::new();
-        let value = |c: &LatentConfig| toml::Value::try_from(c).map_err(|e| LatentError::Config(e.to_string()));
+        let value = |c: &LatentConfig| toml::Value::try_from(c).map_err(|e| AppError::Config(e.to_string()));
         differing(&value(&a)?, &value(&b)?, "", &mut keys);
-        return Err(LatentError::Config(format!(
+        return Err(AppError::Config(format!(
             "--resume: the config differs from the run's {} in {}; resume with --config {}",
             path.display(),
             keys.join(", "),
@@ -83,10 +82,10 @@ pub(crate) fn finished(out: &Path, cfg: &LatentConfig) -> Result<Finished, Laten
         )));
     }
     let path = out.join("episodes.csv");
-    let text = std::fs::read_to_string(&path).map_err(LatentError::io(format!("--resume: reading {}", path.display())))?;
+    let text = std::fs::read_to_string(&path).map_err(AppError::io(format!("--resume: reading {}", path.display())))?;
     let mut lines = text.lines();
     if lines.next() != Some(HEADER) {
-        return Err(LatentError::Config(format!("--resume: {} does not start with coadapt latent's header", path.display())));
+        return Err(AppError::Config(format!("--resume: {} does not start with coadapt latent's header", path.display())));
     }
     let mut f = Finished::default();
     let mut current: Vec<(String, [f64; 10])> = Vec::new();

@@ -22,18 +22,18 @@ use coadapt_core::{Env, Pixels, PixelsConfig};
 
 use super::config::LatentConfig;
 use super::embed::{FrameSource, load_or_build};
-use super::error::{LatentError, Within};
 use crate::{CriticKind, Embedding, Explore, LatentAgent, Objective};
+use coadapt_fleet::app::{AppError, Context};
 
 /// The robot seen through the camera: a built-in robot drawn by [`Pixels`] (one frame per
 /// observation; the agent stacks codes), or a served one whose observation is the frame.
-pub(crate) fn camera_env(cfg: &LatentConfig) -> Result<FrameSource, LatentError> {
+pub(crate) fn camera_env(cfg: &LatentConfig) -> Result<FrameSource, AppError> {
     let image = 3 * cfg.camera.side * cfg.camera.side;
     if coadapt_env_rpc::is_remote(&cfg.robot) {
-        let env = coadapt_fleet::make_env_with(&cfg.robot, &cfg.remote, &cfg.security).within(|| format!("robot = {}", cfg.robot))?;
+        let env = coadapt_fleet::make_env_with(&cfg.robot, &cfg.remote, &cfg.security).with_context(|| format!("robot = {}", cfg.robot))?;
         let got = env.spec().state_dim;
         if got != image {
-            return Err(LatentError::Config(format!(
+            return Err(AppError::Config(format!(
                 "robot = {}: its observation has {got} values; camera.side = {} needs one RGB frame of {image}",
                 cfg.robot, cfg.camera.side
             )));
@@ -41,9 +41,9 @@ pub(crate) fn camera_env(cfg: &LatentConfig) -> Result<FrameSource, LatentError>
         return Ok(FrameSource::Served(env));
     }
     let robot = coadapt_robots::make(&cfg.robot)
-        .map_err(|e| LatentError::Config(format!("robot = {:?}: {e}; or dm-env-rpc://HOST:PORT", cfg.robot)))?;
+        .map_err(|e| AppError::Config(format!("robot = {:?}: {e}; or dm-env-rpc://HOST:PORT", cfg.robot)))?;
     let px = PixelsConfig { width: cfg.camera.side, height: cfg.camera.side, frames: 1, action_repeat: cfg.camera.action_repeat };
-    Ok(FrameSource::Drawn(Box::new(Pixels::new(robot, px).within(|| format!("robot = {}", cfg.robot))?)))
+    Ok(FrameSource::Drawn(Box::new(Pixels::new(robot, px).with_context(|| format!("robot = {}", cfg.robot))?)))
 }
 
 /// The method's name in messages and the default run directory (`plan-h10-q-rq`, `ou-v`).
@@ -82,7 +82,7 @@ fn play<E: Env + ?Sized>(
     steps: usize,
     store: bool,
     mut choose: impl FnMut(&mut LatentAgent, &E, &mut [f32]) -> bool,
-) -> Result<Episode, LatentError> {
+) -> Result<Episode, AppError> {
     let px = agent.image_len();
     let design = env.spec().default_design.clone();
     let first = env.reset(seed, &design)?[..px].to_vec();
@@ -112,14 +112,14 @@ fn play<E: Env + ?Sized>(
 }
 
 /// One episode of `agent` on `env`: exploring and stored (training), or deterministic.
-fn episode(agent: &mut LatentAgent, env: &mut dyn Env, seed: u64, steps: usize, train: bool) -> Result<Episode, LatentError> {
+fn episode(agent: &mut LatentAgent, env: &mut dyn Env, seed: u64, steps: usize, train: bool) -> Result<Episode, AppError> {
     play(agent, env, seed, steps, train, |agent, _, a| agent.act(train, a).is_some())
 }
 
 /// `n` episodes of the reach robot's scripted demonstrator through the camera, stored in the
 /// agent's replay; how many succeeded.
-fn demonstrate(agent: &mut LatentAgent, source: &mut FrameSource, n: usize, seed: u64, steps: usize) -> Result<usize, LatentError> {
-    let FrameSource::Drawn(env) = source else { return Err(LatentError::Config("demonstrations need the built-in reach robot".into())) };
+fn demonstrate(agent: &mut LatentAgent, source: &mut FrameSource, n: usize, seed: u64, steps: usize) -> Result<usize, AppError> {
+    let FrameSource::Drawn(env) = source else { return Err(AppError::Config("demonstrations need the built-in reach robot".into())) };
     let mut ok = 0;
     for d in 0..n {
         let e = play(agent, env.as_mut(), seed * 1_000_003 + 500_000 + d as u64, steps, true, |_, env, a| {
@@ -132,17 +132,17 @@ fn demonstrate(agent: &mut LatentAgent, source: &mut FrameSource, n: usize, seed
 }
 
 /// The embedding `cfg` names: loaded, or built there first (`coadapt latent --embed-only`).
-pub fn embedding(cfg: &LatentConfig, shutdown: &AtomicBool) -> Result<(Embedding, Vec<f32>), LatentError> {
+pub fn embedding(cfg: &LatentConfig, shutdown: &AtomicBool) -> Result<(Embedding, Vec<f32>), AppError> {
     load_or_build(&cfg.embedding, || camera_env(cfg), cfg.episode_steps, shutdown)
 }
 
 /// `coadapt latent`: `cfg.runs` runs into the run directory `out` (with `resume`, the stopped
 /// run there goes on after its finished runs); stops between episodes when `shutdown` is set.
 /// Gives back the JSON summary the command prints.
-pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) -> Result<serde_json::Value, LatentError> {
+pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) -> Result<serde_json::Value, AppError> {
     let (emb, enc) = embedding(cfg, shutdown)?;
     if emb.cfg.image != cfg.camera.side || emb.cfg.in_channels != 3 {
-        return Err(LatentError::Config(format!(
+        return Err(AppError::Config(format!(
             "embedding {}: {:?} does not match the camera ({} pixels)",
             cfg.embedding.path, emb.cfg, cfg.camera.side
         )));
@@ -151,25 +151,25 @@ pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) 
         super::resume::finished(out, cfg)?
     } else {
         if out.join("episodes.csv").exists() {
-            return Err(LatentError::Config(format!(
+            return Err(AppError::Config(format!(
                 "{} already holds a run (episodes.csv); choose another --out, or --resume it",
                 out.display()
             )));
         }
         super::resume::Finished::default()
     };
-    std::fs::create_dir_all(out.join("plots")).map_err(LatentError::io(format!("creating {}", out.display())))?;
-    let text = toml::to_string(cfg).map_err(|e| LatentError::Config(e.to_string()))?;
-    std::fs::write(out.join("config.toml"), text).map_err(LatentError::io("writing config.toml"))?;
+    std::fs::create_dir_all(out.join("plots")).map_err(AppError::io(format!("creating {}", out.display())))?;
+    let text = toml::to_string(cfg).map_err(|e| AppError::Config(e.to_string()))?;
+    std::fs::write(out.join("config.toml"), text).map_err(AppError::io("writing config.toml"))?;
     // The finished runs' rows first (a resumed run), through a temporary file: a crash now
     // leaves the old file or the new one, never half of one.
     let tmp = out.join("episodes.csv.tmp");
     let mut head = super::resume::HEADER.to_string() + "\n";
     done.rows.iter().for_each(|r| head.extend([r.as_str(), "\n"]));
-    std::fs::write(&tmp, head).map_err(LatentError::io("writing episodes.csv"))?;
-    std::fs::rename(&tmp, out.join("episodes.csv")).map_err(LatentError::io("writing episodes.csv"))?;
+    std::fs::write(&tmp, head).map_err(AppError::io("writing episodes.csv"))?;
+    std::fs::rename(&tmp, out.join("episodes.csv")).map_err(AppError::io("writing episodes.csv"))?;
     let mut csv = std::io::BufWriter::new(
-        std::fs::OpenOptions::new().append(true).open(out.join("episodes.csv")).map_err(LatentError::io("opening episodes.csv"))?,
+        std::fs::OpenOptions::new().append(true).open(out.join("episodes.csv")).map_err(AppError::io("opening episodes.csv"))?,
     );
     if done.runs > 0 {
         coadapt_log::logln!("latent {}: resuming {} after its {} finished run(s)", label(cfg), out.display(), done.runs);
@@ -189,7 +189,7 @@ pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) 
         }
         let mut agent = LatentAgent::new(cfg.agent.clone(), emb.clone(), enc.clone(), cfg.camera.frames, act, seed, &mut rng)?;
         let dir = out.join(format!("run-{r}"));
-        std::fs::create_dir_all(&dir).map_err(LatentError::io(format!("creating {}", dir.display())))?;
+        std::fs::create_dir_all(&dir).map_err(AppError::io(format!("creating {}", dir.display())))?;
         if cfg.demonstrations > 0 {
             let ok = demonstrate(&mut agent, &mut env, cfg.demonstrations, seed, cfg.episode_steps)?;
             agent.train(&mut rng);
@@ -203,14 +203,14 @@ pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) 
         let (mut tc, mut ec) = (Vec::new(), Vec::new());
         for ep in 0..cfg.episodes {
             if shutdown.load(Ordering::Relaxed) {
-                return Err(LatentError::Interrupted(format!(
+                return Err(AppError::Interrupted(format!(
                     "interrupted before run {r} episode {ep}: {} keeps the episodes so far; --resume starts run {r} again",
                     out.display()
                 )));
             }
             let base = seed * 1_000_003 + 2 * ep as u64;
             let index = u32::try_from(r * cfg.episodes + ep).unwrap_or(u32::MAX);
-            let mut play = |agent: &mut LatentAgent, seed: u64, train: bool| -> Result<Episode, LatentError> {
+            let mut play = |agent: &mut LatentAgent, seed: u64, train: bool| -> Result<Episode, AppError> {
                 match fleet.as_mut() {
                     None => episode(agent, env.env(), seed, cfg.episode_steps, train),
                     Some(f) => {
@@ -219,16 +219,16 @@ pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) 
                     }
                 }
             };
-            let tr = play(&mut agent, base, true).within(|| format!("run {r} training episode {ep}"))?;
+            let tr = play(&mut agent, base, true).with_context(|| format!("run {r} training episode {ep}"))?;
             let loss = agent.train(&mut rng);
-            let ev = play(&mut agent, base + 1, false).within(|| format!("run {r} evaluation episode {ep}"))?;
+            let ev = play(&mut agent, base + 1, false).with_context(|| format!("run {r} evaluation episode {ep}"))?;
             // Through a fleet the latency is measured where the planning runs: the actors' CSVs.
             let (mean, p90) = if fleet.is_some() { (f64::NAN, f64::NAN) } else { latency(&tr.plan_ms) };
             all_plan_ms.extend_from_slice(&tr.plan_ms);
             writeln!(csv, "{r},{ep},{},{},{},{},{loss},{mean},{p90},{:.1}", tr.ret, ev.ret, tr.steps, ev.steps, t0.elapsed().as_secs_f64())
                 .and_then(|()| csv.flush())
-                .map_err(LatentError::io("writing episodes.csv"))?;
-            agent.save(&dir.join("agent.safetensors")).within(|| "writing the checkpoint")?;
+                .map_err(AppError::io("writing episodes.csv"))?;
+            agent.save(&dir.join("agent.safetensors")).with_context(|| "writing the checkpoint")?;
             let plan = if fleet.is_some() { "on the actors".to_string() } else { format!("{mean:.1} ms/step") };
             coadapt_log::logln!(
                 "latent {}: run {}/{} episode {}/{}: train {:.1} eval {:.1} model loss {loss:.4} plan {plan} ({:.0} s)",

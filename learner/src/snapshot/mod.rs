@@ -72,6 +72,16 @@ pub enum SnapshotError {
     None { dir: PathBuf, why: Vec<String> },
 }
 
+/// A snapshot that cannot be written to a full disk cannot be written after a restart either.
+impl coadapt_fleet::supervise::exit::ExitCode for SnapshotError {
+    fn exit_code(&self) -> Option<u8> {
+        match self {
+            Self::Io(e) => e.exit_code(),
+            _ => None,
+        }
+    }
+}
+
 impl From<io::Error> for SnapshotError {
     fn from(e: io::Error) -> Self {
         Self::Io(e)

@@ -7,8 +7,8 @@ use std::sync::atomic::AtomicBool;
 use coadapt_fleet::procs::{LocalActors, ProcessFleet};
 
 use super::config::SearchConfig;
-use super::error::{SearchError, Within};
 use crate::{FleetRunner, PlanarEnv};
+use coadapt_fleet::app::{AppError, Context};
 
 /// The search's fleet: the runner over the learner's links, and what keeps them up.
 pub(crate) struct Fleet {
@@ -17,7 +17,7 @@ pub(crate) struct Fleet {
 }
 
 impl Fleet {
-    pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> Result<Self, SearchError> {
+    pub(crate) fn start(cfg: &SearchConfig, out: &Path) -> Result<Self, AppError> {
         let env = PlanarEnv::new(cfg.planar());
         let spec = coadapt_core::Env::spec(&env).clone();
         let dims = coadapt_transport::messages::Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design.dim() };
@@ -34,7 +34,7 @@ impl Fleet {
         let steps = spec.max_episode_steps;
         let (links, actors) = LocalActors::start(&cfg.fleet, &procs, dims, steps, &cfg.security, |i, mut links| {
             let mut robot = robot(cfg, &cfg.security)?;
-            Ok::<_, SearchError>(std::thread::spawn(move || {
+            Ok::<_, AppError>(std::thread::spawn(move || {
                 let stop = std::sync::atomic::AtomicBool::new(false);
                 crate::run_actor(&mut *robot, steps, i as u64, &mut links, &stop)
             }))
@@ -61,7 +61,7 @@ impl Fleet {
 /// `coadapt search-actor`: runs the rollouts a search hands out over `cfg.fleet` (shm or
 /// gRPC) on `cfg.robot` (the built-in planar robot when empty), with `cfg.security`, until the
 /// search closes the queue or `shutdown` is set. Returns how many rollouts it ran.
-pub fn actor(cfg: &SearchConfig, id: u64, shutdown: &AtomicBool) -> Result<u64, SearchError> {
+pub fn actor(cfg: &SearchConfig, id: u64, shutdown: &AtomicBool) -> Result<u64, AppError> {
     let mut robot = robot(cfg, &cfg.security)?;
     let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
     let name = if cfg.robot.is_empty() { "the planar robot" } else { cfg.robot.as_str() };
@@ -74,21 +74,21 @@ pub fn actor(cfg: &SearchConfig, id: u64, shutdown: &AtomicBool) -> Result<u64, 
 
 /// The robot an actor steps: the built-in planar one, or `cfg.robot` over dm_env_rpc (which
 /// must have the planar task's shape: 12 actions, a 3-value observation, no design).
-fn robot(cfg: &SearchConfig, security: &coadapt_fleet::SecurityConfig) -> Result<Box<dyn coadapt_core::Env>, SearchError> {
+fn robot(cfg: &SearchConfig, security: &coadapt_fleet::SecurityConfig) -> Result<Box<dyn coadapt_core::Env>, AppError> {
     if cfg.robot.is_empty() {
         return Ok(Box::new(PlanarEnv::new(cfg.planar())));
     }
     if !coadapt_env_rpc::is_remote(&cfg.robot) {
-        return Err(SearchError::Config(format!("robot = {:?}: empty (the built-in planar robot) or dm-env-rpc://HOST:PORT", cfg.robot)));
+        return Err(AppError::Config(format!("robot = {:?}: empty (the built-in planar robot) or dm-env-rpc://HOST:PORT", cfg.robot)));
     }
     let remote =
-        coadapt_env_rpc::RemoteEnv::connect(&cfg.robot, cfg.remote.options(security)?).within(|| format!("robot = {}", cfg.robot))?;
+        coadapt_env_rpc::RemoteEnv::connect(&cfg.robot, cfg.remote.options(security)?).with_context(|| format!("robot = {}", cfg.robot))?;
     let env = ServerUnits::new(remote);
     let (want, got) = (PlanarEnv::new(cfg.planar()), coadapt_core::Env::spec(&env));
     let want = coadapt_core::Env::spec(&want);
     // (A remote robot need not say its episode length: the actor plays the task's steps.)
     if (got.act_dim(), got.obs_dim()) != (want.act_dim(), want.obs_dim()) {
-        return Err(SearchError::Config(format!(
+        return Err(AppError::Config(format!(
             "robot = {}: {} actions and {}-value observations; the planar task needs {} and {}",
             cfg.robot,
             got.act_dim(),

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use coadapt_fleet::{FleetConfig, TransportKind};
 use serde::{Deserialize, Serialize};
 
-use super::error::SearchError;
 use crate::{GroupsConfig, NacConfig, PlanarReaching, PowerConfig};
+use coadapt_fleet::app::AppError;
 
 /// `coadapt search`'s config (TOML, kebab-case; every key has a default).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -121,16 +121,16 @@ pub struct Overrides {
 
 impl SearchConfig {
     /// The config in the TOML file at `path`.
-    pub fn load(path: &Path) -> Result<Self, SearchError> {
-        let text = std::fs::read_to_string(path).map_err(SearchError::io(format!("reading {}", path.display())))?;
-        toml::from_str(&text).map_err(|e| SearchError::Config(format!("parsing {}: {e}", path.display())))
+    pub fn load(path: &Path) -> Result<Self, AppError> {
+        let text = std::fs::read_to_string(path).map_err(AppError::io(format!("reading {}", path.display())))?;
+        toml::from_str(&text).map_err(|e| AppError::Config(format!("parsing {}: {e}", path.display())))
     }
 
     /// The config of an actor process: the search's file, its task one an actor can step.
-    pub fn load_for_actor(path: &Path) -> Result<Self, SearchError> {
+    pub fn load_for_actor(path: &Path) -> Result<Self, AppError> {
         let cfg = Self::load(path)?;
         if cfg.task != "planar" {
-            return Err(SearchError::Config(format!("task: {:?}; only \"planar\" so far", cfg.task)));
+            return Err(AppError::Config(format!("task: {:?}; only \"planar\" so far", cfg.task)));
         }
         Ok(cfg)
     }
@@ -142,7 +142,7 @@ impl SearchConfig {
 }
 
 /// The config in `file` (the defaults without one) with `o` over it, checked.
-pub fn resolve(file: Option<&Path>, o: &Overrides) -> Result<SearchConfig, SearchError> {
+pub fn resolve(file: Option<&Path>, o: &Overrides) -> Result<SearchConfig, AppError> {
     let mut cfg = match file {
         Some(p) => SearchConfig::load(p)?,
         None => SearchConfig::default(),
@@ -170,8 +170,8 @@ pub fn resolve(file: Option<&Path>, o: &Overrides) -> Result<SearchConfig, Searc
 }
 
 /// Refuses settings that cannot run, naming the key.
-fn check(cfg: &SearchConfig) -> Result<(), SearchError> {
-    let bad = |m: String| Err(SearchError::Config(m));
+fn check(cfg: &SearchConfig) -> Result<(), AppError> {
+    let bad = |m: String| Err(AppError::Config(m));
     for (key, v) in [("rollout-lease-secs", cfg.rollout_lease_secs), ("iteration-deadline-secs", cfg.iteration_deadline_secs)] {
         if !(v > 0.0 && v.is_finite()) {
             return bad(format!("{key} = {v}: a positive number of seconds"));
@@ -198,7 +198,7 @@ fn check(cfg: &SearchConfig) -> Result<(), SearchError> {
         }
     }
     if cfg.method == "nac" {
-        cfg.nac.check().map_err(|e| SearchError::Config(e.to_string()))?;
+        cfg.nac.check().map_err(|e| AppError::Config(e.to_string()))?;
     }
     if cfg.runs == 0 || cfg.iterations == 0 {
         return bad("runs and iterations: at least 1 each".into());

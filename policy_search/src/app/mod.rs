@@ -9,15 +9,14 @@
 //! - `actors`: the rollouts on actors (threads, or `coadapt search-actor` processes), and
 //!   [`actor`], the actor process's loop on the planar robot or a served one.
 //! - `plot`: the learning curve and the synergies (thesis Fig. 3.9, 3.10).
-//! - `error`: [`SearchError`].
+//!
+//! Its errors are the fleet's [`AppError`](coadapt_fleet::app::AppError), as every application's.
 
 mod actors;
 mod config;
-mod error;
 mod plot;
 mod run;
 
 pub use actors::actor;
 pub use config::{Overrides, SearchConfig, resolve};
-pub use error::SearchError;
 pub use run::run;

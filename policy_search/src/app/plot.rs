@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use super::config::SearchConfig;
-use super::error::{SearchError, plot_error};
 use crate::{LinearPolicy, PlanarReaching, TimeFeatures};
+use coadapt_fleet::app::AppError;
 
 /// W and M after every iteration of one run (index 0: before the first).
 #[derive(Debug, Default)]
@@ -24,7 +24,7 @@ impl History {
 /// Thesis Fig. 3.9: W (`d x k`) as a Hinton diagram after chosen iterations, a square per
 /// entry whose area is its magnitude (relative to the largest entry of all panels shown), black
 /// for positive, grey for negative.
-pub(crate) fn synergies(path: &Path, h: &History, d: usize, k: usize) -> Result<(), SearchError> {
+pub(crate) fn synergies(path: &Path, h: &History, d: usize, k: usize) -> Result<(), AppError> {
     use plotters::prelude::*;
     let last = h.w.len().saturating_sub(1);
     let mut its: Vec<usize> = [1, 2, 4, 8, 16, 32, 64].into_iter().filter(|&i| i < last).collect();
@@ -33,21 +33,21 @@ pub(crate) fn synergies(path: &Path, h: &History, d: usize, k: usize) -> Result<
     let cell = 22i32;
     let (pw, ph) = (k as i32 * cell + 20, d as i32 * cell + 40);
     let root = SVGBackend::new(path, ((pw * its.len() as i32 + 80) as u32, (ph + 70) as u32)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_error)?;
+    root.fill(&WHITE).map_err(AppError::failed)?;
     root.draw(&Text::new(
         format!("synergies W (joints x latent dimensions) over the iterations; largest |w| = {max:.1}"),
         (10, 10),
         ("sans-serif", 16),
     ))
-    .map_err(plot_error)?;
+    .map_err(AppError::failed)?;
     for (n, &it) in its.iter().enumerate() {
         let x0 = 70 + n as i32 * pw;
         let y0 = 60;
-        root.draw(&Text::new(format!("iteration {it}"), (x0, y0 - 22), ("sans-serif", 13))).map_err(plot_error)?;
+        root.draw(&Text::new(format!("iteration {it}"), (x0, y0 - 22), ("sans-serif", 13))).map_err(AppError::failed)?;
         for j in 0..d {
             if n == 0 {
                 let name = if j < 6 { format!("L{}", j + 1) } else { format!("R{}", j - 5) };
-                root.draw(&Text::new(name, (x0 - 30, y0 + j as i32 * cell + 5), ("sans-serif", 12))).map_err(plot_error)?;
+                root.draw(&Text::new(name, (x0 - 30, y0 + j as i32 * cell + 5), ("sans-serif", 12))).map_err(AppError::failed)?;
             }
             for c in 0..k {
                 let v = h.w[it].get(j * k + c).copied().unwrap_or(0.0);
@@ -57,13 +57,13 @@ pub(crate) fn synergies(path: &Path, h: &History, d: usize, k: usize) -> Result<
                     [(x0 + c as i32 * cell, y0 + j as i32 * cell), (x0 + (c as i32 + 1) * cell, y0 + (j as i32 + 1) * cell)],
                     RGBColor(235, 235, 235),
                 ))
-                .map_err(plot_error)?;
+                .map_err(AppError::failed)?;
                 let colour = if v >= 0.0 { BLACK } else { RGBColor(150, 150, 150) };
-                root.draw(&Rectangle::new([(cx - half, cy - half), (cx + half, cy + half)], colour.filled())).map_err(plot_error)?;
+                root.draw(&Rectangle::new([(cx - half, cy - half), (cx + half, cy + half)], colour.filled())).map_err(AppError::failed)?;
             }
         }
     }
-    root.present().map_err(plot_error)?;
+    root.present().map_err(AppError::failed)?;
     Ok(())
 }
 
@@ -91,7 +91,7 @@ pub(crate) fn synergy_poses(
     k: usize,
     phi: &TimeFeatures,
     task: &PlanarReaching,
-) -> Result<(), SearchError> {
+) -> Result<(), AppError> {
     use plotters::prelude::*;
     let at = at.min(h.w.len().saturating_sub(1));
     let w = &h.w[at];
@@ -104,7 +104,7 @@ pub(crate) fn synergy_poses(
     // The synergies enter every step as W z phi; the features sum to 1 at each step.
     let base: Vec<f64> = mean[t * d..(t + 1) * d].iter().map(|&v| f64::from(v)).collect();
     let root = SVGBackend::new(path, (760, 800)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_error)?;
+    root.fill(&WHITE).map_err(AppError::failed)?;
     let (title, grid) = root.split_vertically(40);
     title
         .draw(&Text::new(
@@ -112,7 +112,7 @@ pub(crate) fn synergy_poses(
             (10, 12),
             ("sans-serif", 14),
         ))
-        .map_err(plot_error)?;
+        .map_err(AppError::failed)?;
     let panels = grid.split_evenly((3, 3));
     let (gl, gr) = task.goals(t);
     for (n, panel) in panels.iter().enumerate() {
@@ -122,21 +122,21 @@ pub(crate) fn synergy_poses(
             .margin(6)
             .caption(format!("z = ({z1:+.0}, {z2:+.0})"), ("sans-serif", 12))
             .build_cartesian_2d(-6.5f64..6.5, -3.0f64..6.5)
-            .map_err(plot_error)?;
-        chart.configure_mesh().disable_mesh().x_labels(3).y_labels(3).draw().map_err(plot_error)?;
+            .map_err(AppError::failed)?;
+        chart.configure_mesh().disable_mesh().x_labels(3).y_labels(3).draw().map_err(AppError::failed)?;
         for (arm_q, colour) in [(&q[..6], BLUE), (&q[6..], RED)] {
             let pts = arm(task, arm_q);
-            chart.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2))).map_err(plot_error)?;
-            chart.draw_series(pts.iter().map(|&p| Circle::new(p, 2, colour.filled()))).map_err(plot_error)?;
+            chart.draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2))).map_err(AppError::failed)?;
+            chart.draw_series(pts.iter().map(|&p| Circle::new(p, 2, colour.filled()))).map_err(AppError::failed)?;
         }
-        chart.draw_series([gl, gr].iter().map(|g| Cross::new((g[0], g[1]), 5, BLACK.stroke_width(2)))).map_err(plot_error)?;
+        chart.draw_series([gl, gr].iter().map(|g| Cross::new((g[0], g[1]), 5, BLACK.stroke_width(2)))).map_err(AppError::failed)?;
     }
-    root.present().map_err(plot_error)?;
+    root.present().map_err(AppError::failed)?;
     Ok(())
 }
 
 /// Mean and standard deviation over runs of the mean policy's summed distance per iteration.
-pub(crate) fn draw(path: &Path, cfg: &SearchConfig, curves: &[Vec<f64>]) -> Result<(), SearchError> {
+pub(crate) fn draw(path: &Path, cfg: &SearchConfig, curves: &[Vec<f64>]) -> Result<(), AppError> {
     use plotters::prelude::*;
     let n = curves.iter().map(Vec::len).min().unwrap_or(0);
     let stats: Vec<(f64, f64)> = (0..n)
@@ -149,22 +149,22 @@ pub(crate) fn draw(path: &Path, cfg: &SearchConfig, curves: &[Vec<f64>]) -> Resu
         .collect();
     let top = stats.iter().map(|(m, s)| m + s).fold(0.0, f64::max) * 1.05;
     let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(plot_error)?;
+    root.fill(&WHITE).map_err(AppError::failed)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(format!("{} on the planar task, {} runs", cfg.method, curves.len()), ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60)
         .build_cartesian_2d(0f64..(n.max(2) - 1) as f64, 0f64..top.max(1.0))
-        .map_err(plot_error)?;
-    chart.configure_mesh().x_desc("iteration").y_desc("summed end-effector distance").draw().map_err(plot_error)?;
+        .map_err(AppError::failed)?;
+    chart.configure_mesh().x_desc("iteration").y_desc("summed end-effector distance").draw().map_err(AppError::failed)?;
     // The mean, and the mean plus and minus one standard deviation.
-    chart.draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, _))| (i as f64, *m)), &BLUE)).map_err(plot_error)?;
+    chart.draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, _))| (i as f64, *m)), &BLUE)).map_err(AppError::failed)?;
     for sign in [1.0, -1.0] {
         chart
             .draw_series(LineSeries::new(stats.iter().enumerate().map(|(i, (m, s))| (i as f64, m + sign * s)), BLUE.mix(0.35)))
-            .map_err(plot_error)?;
+            .map_err(AppError::failed)?;
     }
-    root.present().map_err(plot_error)?;
+    root.present().map_err(AppError::failed)?;
     Ok(())
 }

@@ -17,8 +17,8 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::config::SearchConfig;
-use super::error::{SearchError, Within};
 use crate::{EpisodicTask, Groups, GroupsConfig, LinearPolicy, Nac, Power, RolloutRunner, TimeFeatures};
+use coadapt_fleet::app::{AppError, Context};
 
 enum Learner {
     Groups(Box<Groups>),
@@ -47,13 +47,13 @@ impl Learner {
 
 /// `coadapt search`: `cfg.runs` searches into the run directory `out`; stops between
 /// iterations when `shutdown` is set. Gives back the JSON summary the command prints.
-pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serde_json::Value, SearchError> {
+pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serde_json::Value, AppError> {
     if out.join("iterations.csv").exists() {
-        return Err(SearchError::Config(format!("{} already holds a search (iterations.csv); choose another --out", out.display())));
+        return Err(AppError::Config(format!("{} already holds a search (iterations.csv); choose another --out", out.display())));
     }
-    std::fs::create_dir_all(out.join("plots")).map_err(SearchError::io(format!("creating {}", out.display())))?;
-    let text = toml::to_string(cfg).map_err(|e| SearchError::Config(e.to_string()))?;
-    std::fs::write(out.join("config.toml"), text).map_err(SearchError::io("writing config.toml"))?;
+    std::fs::create_dir_all(out.join("plots")).map_err(AppError::io(format!("creating {}", out.display())))?;
+    let text = toml::to_string(cfg).map_err(|e| AppError::Config(e.to_string()))?;
+    std::fs::write(out.join("config.toml"), text).map_err(AppError::io("writing config.toml"))?;
     let task = cfg.planar();
     let phi = TimeFeatures::thesis(task.steps());
     let d = task.action_dim();
@@ -62,10 +62,9 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
         Some(f) => &f.runner,
         None => &task,
     };
-    let create = |name: &str| {
-        std::fs::File::create(out.join(name)).map(std::io::BufWriter::new).map_err(SearchError::io(format!("creating {name}")))
-    };
-    let (iters_err, rolls_err) = (|| SearchError::io("writing iterations.csv"), || SearchError::io("writing rollouts.csv"));
+    let create =
+        |name: &str| std::fs::File::create(out.join(name)).map(std::io::BufWriter::new).map_err(AppError::io(format!("creating {name}")));
+    let (iters_err, rolls_err) = (|| AppError::io("writing iterations.csv"), || AppError::io("writing rollouts.csv"));
     let mut iters = create("iterations.csv")?;
     writeln!(iters, "run,iteration,rollouts,mean_policy_cost,best_return,mean_return,best_cost").map_err(iters_err())?;
     let mut rolls = create("rollouts.csv")?;
@@ -74,7 +73,7 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
         None
     } else {
         let k = cfg.groups_settings.latent;
-        Some(load_w(Path::new(cfg.w_hat.trim()), d, k).within(|| format!("w-hat = {}", cfg.w_hat))?)
+        Some(load_w(Path::new(cfg.w_hat.trim()), d, k).with_context(|| format!("w-hat = {}", cfg.w_hat))?)
     };
     let mut curves: Vec<Vec<f64>> = Vec::new();
     let mut actions = Vec::new();
@@ -83,7 +82,7 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
         let mut learner = match cfg.method.as_str() {
             "groups" => {
                 let mut g = Groups::new(cfg.groups_settings.clone(), cfg.groups.clone(), d, phi.len(), seed)
-                    .map_err(|e| SearchError::Config(format!("groups: {e}")))?;
+                    .map_err(|e| AppError::Config(format!("groups: {e}")))?;
                 if let Some(w) = &w_hat {
                     // Reuse: the earlier synergies are both the prior's centre and the start.
                     g.w_hat = w.clone();
@@ -101,11 +100,11 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
                     initial_variance: cfg.groups_settings.initial_variance,
                     ..GroupsConfig::pepper()
                 };
-                let g = Groups::new(settings, vec![all], d, phi.len(), seed).map_err(|e| SearchError::Config(format!("pepper: {e}")))?;
+                let g = Groups::new(settings, vec![all], d, phi.len(), seed).map_err(|e| AppError::Config(format!("pepper: {e}")))?;
                 Learner::Groups(Box::new(g))
             }
             "nac" => Learner::Nac(Box::new(
-                Nac::new(LinearPolicy::zeros(d, phi.len()), cfg.nac.clone(), seed).map_err(|e| SearchError::Config(e.to_string()))?,
+                Nac::new(LinearPolicy::zeros(d, phi.len()), cfg.nac.clone(), seed).map_err(|e| AppError::Config(e.to_string()))?,
             )),
             _ => Learner::Power(Box::new(Power::new(LinearPolicy::zeros(d, phi.len()), cfg.power.clone(), seed))),
         };
@@ -125,12 +124,12 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
             if shutdown.load(Ordering::Relaxed) {
                 iters.flush().map_err(iters_err())?;
                 rolls.flush().map_err(rolls_err())?;
-                return Err(SearchError::Interrupted(format!(
+                return Err(AppError::Interrupted(format!(
                     "interrupted before run {r} iteration {it}: {} keeps the iterations so far",
                     out.display()
                 )));
             }
-            let got = learner.iterate(runner, &phi).within(|| format!("run {r} iteration {it}"))?;
+            let got = learner.iterate(runner, &phi).with_context(|| format!("run {r} iteration {it}"))?;
             total_rollouts += got.len();
             for (k, (ret, cost)) in got.iter().enumerate() {
                 writeln!(rolls, "{r},{it},{k},{ret},{cost}").map_err(rolls_err())?;
@@ -148,7 +147,7 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
                 && let Learner::Groups(g) = &learner
             {
                 let dir = out.join(format!("run-{r}"));
-                std::fs::create_dir_all(&dir).map_err(SearchError::io(format!("creating {}", dir.display())))?;
+                std::fs::create_dir_all(&dir).map_err(AppError::io(format!("creating {}", dir.display())))?;
                 save_tensors(&dir.join(format!("w-iter{it}.safetensors")), &[("W".to_string(), vec![d, g.cfg.latent], g.w.clone())])?;
             }
             // Progress every iteration: on a robot an iteration takes minutes.
@@ -163,7 +162,7 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
         iters.flush().map_err(iters_err())?;
         rolls.flush().map_err(rolls_err())?;
         let dir = out.join(format!("run-{r}"));
-        std::fs::create_dir_all(&dir).map_err(SearchError::io(format!("creating {}", dir.display())))?;
+        std::fs::create_dir_all(&dir).map_err(AppError::io(format!("creating {}", dir.display())))?;
         let mut tensors = vec![("M".to_string(), vec![d, phi.len()], learner.mean().to_vec())];
         if let Learner::Groups(g) = &learner {
             tensors.push(("W".to_string(), vec![d, g.cfg.latent], g.w.clone()));
@@ -201,9 +200,9 @@ fn learner_w(l: &Learner) -> Vec<f64> {
 }
 
 /// The tensor `W` (`d x k`, F64) of a file written by `coadapt search`.
-fn load_w(path: &Path, d: usize, k: usize) -> Result<Vec<f64>, SearchError> {
-    let bad = |m: String| SearchError::Config(format!("{}: {m}", path.display()));
-    let bytes = std::fs::read(path).map_err(SearchError::io(format!("reading {}", path.display())))?;
+fn load_w(path: &Path, d: usize, k: usize) -> Result<Vec<f64>, AppError> {
+    let bad = |m: String| AppError::Config(format!("{}: {m}", path.display()));
+    let bytes = std::fs::read(path).map_err(AppError::io(format!("reading {}", path.display())))?;
     let st = safetensors::SafeTensors::deserialize(&bytes).map_err(|e| bad(e.to_string()))?;
     let t = st.tensor("W").map_err(|e| bad(format!("no tensor W ({e})")))?;
     if t.dtype() != safetensors::Dtype::F64 || t.shape() != [d, k] {
@@ -217,7 +216,7 @@ fn load_w(path: &Path, d: usize, k: usize) -> Result<Vec<f64>, SearchError> {
 }
 
 /// `(name, shape, values)` as F64 tensors in one safetensors file.
-fn save_tensors(path: &Path, tensors: &[(String, Vec<usize>, Vec<f64>)]) -> Result<(), SearchError> {
+fn save_tensors(path: &Path, tensors: &[(String, Vec<usize>, Vec<f64>)]) -> Result<(), AppError> {
     let bytes: Vec<Vec<u8>> = tensors.iter().map(|(_, _, v)| v.iter().flat_map(|x| x.to_le_bytes()).collect()).collect();
     let views = tensors
         .iter()
@@ -226,7 +225,7 @@ fn save_tensors(path: &Path, tensors: &[(String, Vec<usize>, Vec<f64>)]) -> Resu
             safetensors::tensor::TensorView::new(safetensors::Dtype::F64, shape.clone(), b).map(|v| (name.clone(), v))
         })
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| SearchError::Tensors(e.to_string()))?;
-    let buf = safetensors::serialize(views, None).map_err(|e| SearchError::Tensors(e.to_string()))?;
-    std::fs::write(path, buf).map_err(SearchError::io(format!("writing {}", path.display())))
+        .map_err(|e| AppError::failed(e))?;
+    let buf = safetensors::serialize(views, None).map_err(|e| AppError::failed(e))?;
+    std::fs::write(path, buf).map_err(AppError::io(format!("writing {}", path.display())))
 }
