@@ -53,7 +53,7 @@ fn model(sac: &Sac) -> Result<DesignModel, AppError> {
     let mut r = rng(11, 0);
     let starts: Vec<f32> = (0..STATES * (STATE + DESIGN)).map(|_| r.random_range(-1.0..1.0)).collect();
     let names = (0..DESIGN).map(|i| format!("d{i}")).collect();
-    Ok(DesignModel::new(
+    DesignModel::new(
         "half-cheetah".into(),
         names,
         BoxSpace::new(vec![0.5; DESIGN], vec![2.0; DESIGN])?,
@@ -64,7 +64,7 @@ fn model(sac: &Sac) -> Result<DesignModel, AppError> {
         STATE,
         QMode::First,
     )
-    .map_err(AppError::library)?)
+    .map_err(AppError::library)
 }
 
 fn designs(n: usize, seed: u64) -> Vec<f32> {

@@ -35,7 +35,7 @@ pub fn design_model(
     // Both critics always: Q1 alone scores under `q1`, and the pair gives each score's
     // disagreement.
     let thetas: Vec<&[f32]> = vec![q1, q2];
-    Ok(DesignModel::new(
+    DesignModel::new(
         spec.name.clone(),
         spec.design_names.clone(),
         spec.design.clone(),
@@ -46,7 +46,7 @@ pub fn design_model(
         spec.state_dim,
         mode,
     )
-    .map_err(crate::AppError::library)?)
+    .map_err(crate::AppError::library)
 }
 
 /// A designs.csv row as the service's history row.

@@ -225,7 +225,7 @@ fn save_tensors(path: &Path, tensors: &[(String, Vec<usize>, Vec<f64>)]) -> Resu
             safetensors::tensor::TensorView::new(safetensors::Dtype::F64, shape.clone(), b).map(|v| (name.clone(), v))
         })
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| AppError::failed(e))?;
-    let buf = safetensors::serialize(views, None).map_err(|e| AppError::failed(e))?;
+        .map_err(AppError::failed)?;
+    let buf = safetensors::serialize(views, None).map_err(AppError::failed)?;
     std::fs::write(path, buf).map_err(AppError::io(format!("writing {}", path.display())))
 }
