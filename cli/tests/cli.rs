@@ -328,26 +328,17 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
     let good = good.to_str().unwrap();
     let search = coadapt_test_support::workspace_file("configs/search/planar-groups1.toml");
     let search = search.to_str().unwrap();
+    let v = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
     let cases: Vec<(Vec<String>, &str)> = vec![
-        (vec!["train".into(), "--steps".into(), "0".into()], "steps"),
+        (v(&["train", "--steps", "0"]), "steps"),
+        (v(&["search-actor", "--config", search, "--id", "0", "--transport", "in-process"]), "fleet.transport"),
+        (v(&["run", "--config", bad, "--transport", "in-process"]), "optimizer.pessimism: -1 is not a finite number >= 0"),
+        // The supervisor stops the fleet naming the role; the role's log names the setting.
         (
-            vec![
-                "search-actor".into(),
-                "--config".into(),
-                search.into(),
-                "--id".into(),
-                "0".into(),
-                "--transport".into(),
-                "in-process".into(),
-            ],
-            "fleet.transport",
+            v(&["run", "--config", bad, "--transport", "shm", "--actors", "1"]),
+            "the optimizer ended with exit code 78 because its configuration is invalid",
         ),
-        (vec!["run".into(), "--config".into(), bad.into(), "--transport".into(), "in-process".into()], "optimizer.pessimism"),
-        (
-            vec!["run".into(), "--config".into(), bad.into(), "--transport".into(), "shm".into(), "--actors".into(), "1".into()],
-            "optimizer.pessimism",
-        ),
-        (vec!["run".into(), "--config".into(), good.into(), "--serve".into(), "not-an-address".into()], "design-service.listen"),
+        (v(&["run", "--config", good, "--serve", "not-an-address"]), "design-service.listen"),
     ];
     for (i, (args, needle)) in cases.iter().enumerate() {
         let out = dir.join(format!("run{i}"));
@@ -359,5 +350,9 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(78), "{args:?}: {err}");
         assert!(err.contains(needle), "{args:?}: stderr `{err}` does not mention `{needle}`");
+        if args.contains(&"shm") {
+            let log = std::fs::read_to_string(out.join("logs").join("optimizer.log")).unwrap();
+            assert!(log.contains("optimizer.pessimism: -1 is not a finite number >= 0"), "{log}");
+        }
     }
 }

@@ -46,23 +46,25 @@ pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bo
         let result = roles::learner(cfg, spec, dir, &mut learner_links, shutdown, resume);
         // Closing the learner's channels lets the other roles finish.
         drop(learner_links);
-        let mut errors = Vec::new();
+        // The first role failure keeps its kind: a bad setting read by the optimiser exits 78.
+        let mut first = None;
         for t in actors.into_iter().map(|t| t.join()).chain(std::iter::once(opt.join())) {
-            match t {
-                Ok(Ok(())) => {}
-                Ok(Err(e)) => errors.push(format!("{e:#}")),
-                Err(_) => errors.push("a role thread panicked".into()),
-            }
+            let e = match t {
+                Ok(Ok(())) => continue,
+                Ok(Err(e)) => e,
+                Err(_) => crate::error::failed!("a role thread panicked"),
+            };
+            first.get_or_insert(e);
         }
-        match (result, errors.first()) {
-            (Ok(o), Some(first)) if o.interrupted => Err(crate::error::failed!("{first}")),
+        match (result, first) {
+            (Ok(o), Some(first)) if o.interrupted => Err(first),
             (Ok(o), first) => {
                 if let Some(e) = first {
-                    coadapt_log::logln!("warning: {e}");
+                    coadapt_log::logln!("warning: {e:#}");
                 }
                 Ok(o)
             }
-            (Err(e), Some(first)) => Err(e.context(format!("first role failure: {first}"))),
+            (Err(e), Some(first)) => Err(e.context(format!("first role failure: {first:#}"))),
             (Err(e), None) => Err(e),
         }
     })
