@@ -76,6 +76,16 @@ pub struct RunArgs {
     /// only on a network you trust.
     #[arg(long)]
     pub insecure: bool,
+    /// Start the population networks (policy, critics, targets) from the run in RUN_DIR, its
+    /// newest checkpoint (sets init-population.from): transfer to another world (thesis 6.1).
+    /// Its state, action and design dimensions and network sizes must be this run's;
+    /// init-population.replay = true in the config also takes its population replay.
+    #[arg(long, value_name = "RUN_DIR")]
+    pub init_population: Option<PathBuf>,
+    /// Friction of the ground and of every part of the robot (sets world.friction; default
+    /// the robot's own: half-cheetah 0.4, walker 0.9, hopper 1.0, daisy 0.8).
+    #[arg(long, value_name = "F")]
+    pub friction: Option<f32>,
 }
 
 /// `coadapt run`.
@@ -90,6 +100,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         flow: args.flow,
         serve: args.serve,
         insecure: args.insecure,
+        init_population: args.init_population,
+        friction: args.friction,
     };
     let (cfg, name) = resolve(args.config.as_deref(), args.resume.as_deref(), &o)?;
     let shutdown = shutdown_on_ctrl_c();

@@ -181,7 +181,8 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let cfg = resolve(&args)?;
     let security = crate::security::from_args(&args.security);
-    let mut env = coadapt_fleet::make_env_with(&cfg.env, &coadapt_fleet::RemoteEnvConfig::default(), &security)?;
+    let mut env =
+        coadapt_fleet::make_env_with(&cfg.env, &coadapt_robots::World::default(), &coadapt_fleet::RemoteEnvConfig::default(), &security)?;
     // Refuse a bad design before anything is written.
     if let Some(d) = &cfg.design {
         env.spec().design.check("design", d).map_err(coadapt_core::EnvError::Design)?;

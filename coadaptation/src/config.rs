@@ -9,7 +9,10 @@ use coadapt_fleet::{FleetConfig, TransportKind};
 use coadapt_learner::coadapt::ScheduleConfig;
 use coadapt_learner::fear::FearLearnerConfig;
 use coadapt_learner::flow::{FlowConfig, FlowMode};
+use coadapt_robots::World;
 use serde::{Deserialize, Serialize};
+
+use crate::transfer::InitPopulation;
 
 use crate::error::Context;
 
@@ -23,6 +26,14 @@ pub struct RunConfig {
     /// The robot (pendulum, half-cheetah, walker, hopper, daisy), or a remote one served over
     /// dm_env_rpc: `dm-env-rpc://HOST:PORT` (dimensions and boxes come from its specs).
     pub env: String,
+    /// The world the robot steps in (`friction`, `actuator-scale`, `torso-mass-scale`), each the
+    /// robot's own unless set; a remote robot receives them as CreateWorld settings.
+    #[serde(skip_serializing_if = "World::is_default")]
+    pub world: World,
+    /// Start the population networks from another run's (transfer, thesis section 6.1):
+    /// `from` = its run directory, `replay` = also its population replay.
+    #[serde(skip_serializing_if = "InitPopulation::is_off")]
+    pub init_population: InitPopulation,
     /// Seed of every random stream: the same seed and config give the same run.
     pub seed: u64,
     /// Actors running episodes (processes, or threads in-process; lock-step uses one at a time).
@@ -57,10 +68,19 @@ pub struct RunConfig {
     pub security: coadapt_fleet::SecurityConfig,
 }
 
+impl RunConfig {
+    /// The run's robot in its world (a built-in one, or one served over dm_env_rpc).
+    pub fn make_env(&self) -> Result<Box<dyn coadapt_core::Env>, coadapt_fleet::SetupError> {
+        coadapt_fleet::make_env_with(&self.env, &self.world, &self.remote, &self.security)
+    }
+}
+
 impl Default for RunConfig {
     fn default() -> Self {
         Self {
             env: "half-cheetah".into(),
+            world: World::default(),
+            init_population: InitPopulation::default(),
             seed: 1,
             actors: 1,
             chunk_len: 250,
@@ -103,6 +123,10 @@ pub struct Overrides {
     pub serve: Option<String>,
     /// `security.insecure`.
     pub insecure: bool,
+    /// `init-population.from` (made absolute, so the record holds wherever it is read).
+    pub init_population: Option<PathBuf>,
+    /// `world.friction`.
+    pub friction: Option<f32>,
 }
 
 /// Reads the config: `resume`'s config.toml when resuming without `config`, else `config`, else
@@ -148,6 +172,14 @@ pub fn resolve(config: Option<&Path>, resume: Option<&Path>, o: &Overrides) -> c
     if o.insecure {
         cfg.security.insecure = true;
     }
+    if let Some(dir) = &o.init_population {
+        let full = std::fs::canonicalize(dir).map_err(|e| crate::AppError::Config(format!("--init-population {}: {e}", dir.display())))?;
+        cfg.init_population.from = full.display().to_string();
+    }
+    if let Some(f) = o.friction {
+        cfg.world.friction = Some(f);
+    }
+    cfg.world.check().map_err(|e| crate::AppError::Config(e.to_string()))?;
     Ok((cfg, name))
 }
 

@@ -18,6 +18,8 @@
 //!   gRPC health.
 //! - [`serve`]: a run's design critic for the design service (a running learner's, or a
 //!   finished run's for `coadapt serve`).
+//! - [`transfer`]: `[init-population]`, a run that starts with another run's population
+//!   networks (thesis section 6.1), the source checked against this run.
 //! - [`plot`]: the run directory's SVG plots (`coadapt plot`, and at the end of a run).
 //! - `error`: the short forms of the fleet's [`AppError`] this crate writes (`bail!`, `bail_config!`).
 
@@ -33,6 +35,7 @@ pub mod resume;
 pub mod roles;
 pub mod run;
 pub mod serve;
+pub mod transfer;
 
 pub use coadapt_fleet::app::{AppError, Result};
 pub use config::{DEFAULT_CONFIG, Overrides, RunConfig};

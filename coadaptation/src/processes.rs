@@ -15,7 +15,7 @@ use crate::roles;
 
 /// `cfg` with the initial designs the robot gives, checked: what every role runs with.
 pub fn prepare(mut cfg: RunConfig) -> crate::Result<RunConfig> {
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = cfg.make_env()?.spec().clone();
     resolve_initial_designs(&mut cfg, &spec);
     check(&cfg, &spec)?;
     Ok(cfg)
@@ -30,7 +30,7 @@ pub fn learner(cfg: &RunConfig, name: &str, out: Option<PathBuf>, resume: bool, 
         None if resume => bail!("--resume needs --out RUN_DIR"),
         None => default_out(name, cfg.seed),
     };
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = cfg.make_env()?.spec().clone();
     let dims = Dims { obs: spec.obs_dim(), act: spec.act_dim(), design: spec.design_dim() };
     let (mut links, guard) = cfg.fleet.learner_links(Some(dims), Some(spec.max_episode_steps), &cfg.security)?;
     coadapt_log::logln!("learner: {} over {}, into {}", cfg.env, cfg.fleet.transport.name(), dir.display());
@@ -63,7 +63,7 @@ pub fn learner(cfg: &RunConfig, name: &str, out: Option<PathBuf>, resume: bool, 
 
 /// Actor `id`: runs the episodes the learner hands out, with the newest weights.
 pub fn actor(cfg: &RunConfig, id: u64, shutdown: &AtomicBool) -> crate::Result<()> {
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = cfg.make_env()?.spec().clone();
     let mut links = cfg.fleet.actor_links(id, &cfg.security)?;
     coadapt_log::logln!("actor {id}: {} over {}", cfg.env, cfg.fleet.transport.name());
     roles::actor(cfg, &spec, id, &mut links, shutdown)
@@ -72,7 +72,7 @@ pub fn actor(cfg: &RunConfig, id: u64, shutdown: &AtomicBool) -> crate::Result<(
 /// The design optimiser: answers the learner's design requests, keeping its state in
 /// `state_dir` (and continuing from it) when given.
 pub fn optimizer(cfg: &RunConfig, state_dir: Option<&Path>, shutdown: &AtomicBool) -> crate::Result<()> {
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = cfg.make_env()?.spec().clone();
     let mut links = cfg.fleet.optimizer_links(&cfg.security)?;
     coadapt_log::logln!("optimizer: {} over {}, exploit {}", cfg.env, cfg.fleet.transport.name(), cfg.optimizer.exploit.name());
     roles::optimizer(cfg, &spec, &mut links, shutdown, state_dir)

@@ -13,7 +13,6 @@ use coadapt_actors::{Actor, PolicyKind};
 use coadapt_core::{Env, EnvSpec};
 use coadapt_design_optimizer::resume::StateFile;
 use coadapt_design_optimizer::role::{self as optimizer, Optimizer, OptimizerSpec, RolloutError, RolloutEvaluator};
-use coadapt_fleet::make_env_with;
 use coadapt_learner::coadapt::{self, RunEvent};
 use coadapt_learner::networks;
 use coadapt_learner::prototype::{self, Outcome, ResetMode};
@@ -228,9 +227,17 @@ pub fn learner(
     if holds_run && !resume {
         crate::error::bail!("{} already holds a run (designs.csv exists); choose another --out, or --resume it", dir.display());
     }
+    // A fresh start takes the population networks of another run, if asked (a resumed run has
+    // them in its snapshot already).
+    let transfer = || -> crate::Result<Option<coadapt_learner::coadapt::Transfer>> {
+        let Some(src) = crate::transfer::source(&cfg.init_population, spec, &cfg.learner.sac.hidden)? else { return Ok(None) };
+        coadapt_log::logln!("learner: population networks from {}", src.networks.display());
+        crate::transfer::transfer(&src, cfg.init_population.replay).map(Some)
+    };
     let mut writer = if holds_run {
         crate::resume::check_compatible(&crate::resume::stored_config(dir)?, cfg)?;
         if snapshot::list(&root)?.is_empty() {
+            snaps.transfer = transfer()?;
             coadapt_log::logln!("learner: {} has no snapshot yet: starting the run over (run id {run_id})", dir.display());
             RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
         } else {
@@ -251,6 +258,7 @@ pub fn learner(
             RunWriter::resume(dir, at).with_context(|| format!("reopening run directory {}", dir.display()))?
         }
     } else {
+        snaps.transfer = transfer()?;
         RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
     };
     std::fs::write(dir.join("config.toml"), toml::to_string(cfg).map_err(AppError::library)?).context("writing config.toml")?;
@@ -306,8 +314,7 @@ pub fn learner(
 /// One actor: runs the episodes it is handed until the learner is done.
 pub fn actor(cfg: &RunConfig, spec: &EnvSpec, id: u64, links: &mut ActorLinks, shutdown: &AtomicBool) -> crate::Result<()> {
     let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), &cfg.learner.sac.hidden)?;
-    let mut actor =
-        Actor::new(make_env_with(&cfg.env, &cfg.remote, &cfg.security)?, policy, PolicyKind::SquashedGaussian, cfg.seed.wrapping_add(id))?;
+    let mut actor = Actor::new(cfg.make_env()?, policy, PolicyKind::SquashedGaussian, cfg.seed.wrapping_add(id))?;
     let s = coadapt_actors::role::run(&mut actor, id, links, cfg.chunk_len, cfg.remote.env_retries, shutdown)
         .with_context(|| format!("actor {id}"))?;
     coadapt_log::logln!(
@@ -341,14 +348,7 @@ pub fn optimizer(
     };
     let mut sim = if cfg.optimizer.exploit.needs_rollouts() {
         let actors = (0..cfg.sim_threads.max(1))
-            .map(|i| {
-                Ok(Actor::new(
-                    make_env_with(&cfg.env, &cfg.remote, &cfg.security)?,
-                    policy.clone(),
-                    PolicyKind::SquashedGaussian,
-                    cfg.seed ^ (0x5349_4d00 + i as u64),
-                )?)
-            })
+            .map(|i| Ok(Actor::new(cfg.make_env()?, policy.clone(), PolicyKind::SquashedGaussian, cfg.seed ^ (0x5349_4d00 + i as u64))?))
             .collect::<crate::Result<Vec<_>>>()?;
         Some(SimEvaluator { actors, version: 0 })
     } else {

@@ -24,7 +24,7 @@ use crate::roles;
 /// Runs the co-adaptation described by `cfg` into `dir`, every role a thread of this process
 /// over the in-process transport.
 pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bool) -> crate::Result<coadapt::RunOutcome> {
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = cfg.make_env()?.spec().clone();
     check(cfg, &spec)?;
     let (mut learner_links, actor_links, mut optimizer_links) = in_process::fleet(cfg.actors);
     std::thread::scope(|s| -> crate::Result<coadapt::RunOutcome> {
@@ -78,7 +78,7 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
     if n == 0 || outcome.designs.is_empty() {
         return Ok(());
     }
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = cfg.make_env()?.spec().clone();
     let dim = spec.design_dim();
     let designs: Vec<f32> = outcome.designs.iter().flat_map(|d| d.design.clone()).collect();
     let pca = Pca2::fit(&designs, dim).map_err(AppError::library)?;
@@ -129,7 +129,7 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
     }
     let best = outcome.designs.iter().filter_map(|d| d.best_eval_return.map(|r| (r, d))).max_by(|a, b| a.0.total_cmp(&b.0));
     let t = outcome.time;
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "run_dir": dir.display().to_string(),
         "env": cfg.env,
         "exploit": cfg.optimizer.exploit.name(),
@@ -159,6 +159,13 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
         "replay_transitions": outcome.learner.population_transitions(),
         "start_states": outcome.learner.start_states(),
     });
+    // Only when set: a run in the robot's own world from scratch keeps the summary it had.
+    if !cfg.world.is_default() {
+        summary["world"] = serde_json::json!(cfg.world);
+    }
+    if !cfg.init_population.is_off() {
+        summary["init_population"] = serde_json::json!(cfg.init_population);
+    }
     print_stdout_line(&summary.to_string());
     Ok(())
 }
@@ -166,7 +173,7 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
 /// `coadapt run`: the co-adaptation of `cfg` (named `name`) into `out` (default:
 /// `runs/<name>-seed<seed>`), or continuing the run in `resume`; until done or `shutdown`.
 pub fn run(mut cfg: RunConfig, name: &str, out: Option<PathBuf>, resume: Option<PathBuf>, shutdown: &AtomicBool) -> crate::Result<()> {
-    let spec = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?.spec().clone();
+    let spec = cfg.make_env()?.spec().clone();
     resolve_initial_designs(&mut cfg, &spec);
     check(&cfg, &spec)?;
     let resuming = resume.is_some();

@@ -68,7 +68,7 @@ pub fn history_row(r: run_dir::DesignRow) -> HistoryRow {
 /// The model and history of the run in `dir`.
 pub fn load(dir: &Path) -> crate::Result<StaticSource> {
     let cfg = crate::resume::stored_config(dir)?;
-    let env = coadapt_fleet::make_env_with(&cfg.env, &cfg.remote, &cfg.security)?;
+    let env = cfg.make_env()?;
     let spec = env.spec();
     let root = crate::resume::snapshot_root(dir);
     let (from, manifest, mut state, skipped) =

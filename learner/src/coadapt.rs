@@ -28,7 +28,7 @@ mod driver;
 mod operator;
 mod resume;
 
-pub use resume::Snapshots;
+pub use resume::{Snapshots, Transfer};
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -402,7 +402,15 @@ pub fn run(
             p.resumes += 1;
             p
         }
-        None => resume::Progress::start(),
+        None => {
+            if let Some(t) = snaps.transfer.take() {
+                l.fear.init_population(&t.networks).map_err(|e| CoadaptError::Config(format!("init-population.from: {e}")))?;
+                if let Some(mut replay) = t.replay {
+                    l.fear.load_population_replay(&mut replay).map_err(|e| CoadaptError::Config(format!("init-population.replay: {e}")))?;
+                }
+            }
+            resume::Progress::start()
+        }
     };
     let start = Instant::now();
     let seconds_before = p.seconds;

@@ -362,6 +362,25 @@ impl FearLearner {
         Ok(())
     }
 
+    /// Transfer (thesis section 6.1): the population networks (policy, both critics and their
+    /// targets) from a checkpoint of another run with the same shapes ([`Sac::save`]); Adam's
+    /// moments, alpha and the buffers stay this learner's. The first design copies them into
+    /// the individual pair, as every design does.
+    pub fn init_population(&mut self, networks: &std::path::Path) -> Result<(), NnError> {
+        self.population.load(networks)
+    }
+
+    /// Transfer with experience: the population replay of another run's snapshot (its
+    /// capacity must be this run's); returns the transitions taken.
+    pub fn load_population_replay(&mut self, inp: &mut StateIn) -> Result<usize, SnapshotError> {
+        let name = "replay.population";
+        let mut take = |part: &str| inp.f32s_any(&format!("{name}.{part}"));
+        let arrays = [take("obs")?, take("act")?, take("rew")?, take("next_obs")?, take("done")?];
+        let next: usize = inp.get(&format!("{name}.next"))?;
+        self.pop_replay.restore_raw(arrays, next).map_err(|e| SnapshotError::Mismatch(format!("{name}: {e}")))?;
+        Ok(self.pop_replay.len())
+    }
+
     /// `n` population updates on batches from the population buffer, outside the per-episode
     /// schedule (while the run waits for a prototype or a reset); checked for non-finite
     /// losses and parameters as [`Self::end_episode`] checks them. Returns the updates made: 0

@@ -155,3 +155,57 @@ fn with_roll_back_a_non_finite_update_restores_the_networks_and_training_goes_on
     assert!(l.end_episode().unwrap().rolled_back.is_some());
     assert!(matches!(l.end_episode(), Err(coadapt_learner::fear::TrainError::NonFinite { .. })));
 }
+
+/// Transfer (thesis 6.1): `init_population` copies exactly the source's population networks
+/// (policy, both critics, both targets) and nothing else: this learner's individual pair, Adam
+/// moments, update count, alpha and buffers are as a fresh learner's; the first design then
+/// copies them into the individual pair. With `load_population_replay`, the source's
+/// population buffer comes too.
+#[test]
+fn init_population_copies_the_population_networks_and_nothing_else() {
+    use coadapt_learner::snapshot;
+    // A source that has trained, so its networks, targets and Adam moments are its own.
+    let mut src = FearLearner::new(2, 1, FearLearnerConfig { population_updates_from_design: 0, warmup_episodes: 0, ..cfg() }, 11).unwrap();
+    src.begin_design(0);
+    for _ in 0..3 {
+        episode(&mut src, 0.5);
+        src.end_episode().unwrap();
+    }
+    let dir = coadapt_test_support::scratch("learner", "init-population");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("population.safetensors");
+    let sp = src.agent(ActingPolicy::Population);
+    assert!(sp.updates() > 0, "the source trained its population pair");
+    sp.save(&path).unwrap();
+
+    let fresh = FearLearner::new(2, 1, cfg(), 1).unwrap();
+    let mut l = FearLearner::new(2, 1, cfg(), 1).unwrap();
+    l.init_population(&path).unwrap();
+    let (p, s, f) = (l.agent(ActingPolicy::Population), src.agent(ActingPolicy::Population), fresh.agent(ActingPolicy::Population));
+    assert_eq!(p.policy_params(), s.policy_params());
+    for i in 0..2 {
+        assert_eq!(p.critic_params(i), s.critic_params(i), "critic {i} and its target");
+    }
+    assert_ne!(p.policy_params(), f.policy_params(), "the copy is not the fresh start");
+    assert_eq!(p.updates(), 0, "the update count is this learner's");
+    assert_eq!(p.optimiser_steps(), [0; 4], "Adam starts fresh");
+    assert_eq!(p.alpha(), f.alpha(), "alpha is this learner's");
+    let ind = l.agent(ActingPolicy::Individual);
+    assert_eq!(ind.policy_params(), fresh.agent(ActingPolicy::Individual).policy_params(), "the individual pair waits for a design");
+    assert_eq!((l.population_transitions(), l.start_states()), (0, 0), "no experience came with the networks");
+    l.begin_design(0);
+    assert_eq!(l.agent(ActingPolicy::Individual).policy_params(), s.policy_params(), "the first design starts from the copy");
+
+    // The replay, when asked: from a snapshot of the source.
+    let snap = snapshot::write(&dir.join("snapshots"), 1, "src", "test", 2, |out| src.save_state(out)).unwrap();
+    let (_, mut inp) = snapshot::load(&snap).unwrap();
+    let n = l.load_population_replay(&mut inp).unwrap();
+    assert_eq!(n, src.population_transitions());
+    assert_eq!(l.population_transitions(), 30);
+    // A source of another shape is refused, naming the network.
+    let other = FearLearner::new(3, 1, cfg(), 1).unwrap();
+    let path3 = dir.join("other.safetensors");
+    other.agent(ActingPolicy::Population).save(&path3).unwrap();
+    let e = l.init_population(&path3).unwrap_err().to_string();
+    assert!(e.contains("policy") && e.contains("shape"), "{e}");
+}

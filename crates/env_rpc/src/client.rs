@@ -104,7 +104,8 @@ async fn receive(conn: &mut Conn, url: &str, request: &'static str, timeout: Dur
     }
 }
 
-/// Connects, creates a world (no settings), joins it, and reads the default design.
+/// Connects, creates a world (with `opts.world_settings`), joins it, and reads the default
+/// design.
 async fn open(url: String, endpoint: String, opts: RemoteOptions) -> Result<(Conn, Profile, Uids, Vec<f32>), RemoteError> {
     let connect_err = |what: String| RemoteError::Connect { url: url.clone(), what };
     let channel = opts
@@ -125,7 +126,8 @@ async fn open(url: String, endpoint: String, opts: RemoteOptions) -> Result<(Con
     // The first request goes in before the call: some servers (grpcio's) send their response
     // headers only with their first message, so waiting for the call to open first would wait
     // for ever.
-    tx.send(EnvironmentRequest { payload: Some(Req::CreateWorld(pb::CreateWorldRequest::default())) })
+    let settings = opts.world_settings.iter().map(|(name, v)| (name.clone(), tensor::scalar(*v))).collect();
+    tx.send(EnvironmentRequest { payload: Some(Req::CreateWorld(pb::CreateWorldRequest { settings })) })
         .await
         .map_err(|_| connect_err("the request stream closed at once".into()))?;
     let stream = tokio::time::timeout(opts.connect_timeout, client.process(tokio_stream::wrappers::ReceiverStream::new(requests)))

@@ -73,6 +73,9 @@ pub struct RemoteOptions {
     pub max_backoff: Duration,
     /// TLS (the CA that signed the server; a certificate for mutual TLS) and the actor's token.
     pub auth: coadapt_auth::ClientAuth,
+    /// Settings of the world beyond the design and seed (a scalar each, e.g. `friction`), sent
+    /// with CreateWorld on every (re)connection; a server that does not know one refuses it.
+    pub world_settings: Vec<(String, f32)>,
 }
 
 impl Default for RemoteOptions {
@@ -84,6 +87,7 @@ impl Default for RemoteOptions {
             reconnect_for: Duration::from_secs(60),
             max_backoff: Duration::from_secs(5),
             auth: coadapt_auth::ClientAuth::default(),
+            world_settings: Vec::new(),
         }
     }
 }

@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use coadapt_core::Env;
 use coadapt_env_rpc::{RemoteEnv, RemoteOptions};
+use coadapt_robots::{MakeError, World};
 use serde::{Deserialize, Serialize};
 
 use crate::{SecurityConfig, SetupError};
@@ -62,16 +63,24 @@ impl RemoteEnvConfig {
     }
 }
 
-/// The environment `name`: a built-in robot, or `dm-env-rpc://HOST:PORT` for a remote one.
-pub fn make_env_with(name: &str, remote: &RemoteEnvConfig, security: &SecurityConfig) -> Result<Box<dyn Env>, SetupError> {
+/// The environment `name` in `world`: a built-in robot, or `dm-env-rpc://HOST:PORT` for a
+/// remote one (which receives the world's values that differ from its own as CreateWorld
+/// settings, and refuses those it does not know).
+pub fn make_env_with(name: &str, world: &World, remote: &RemoteEnvConfig, security: &SecurityConfig) -> Result<Box<dyn Env>, SetupError> {
+    world.check().map_err(|e| SetupError::Config(e.to_string()))?;
     if coadapt_env_rpc::is_remote(name) {
-        let env = RemoteEnv::connect(name, remote.options(security)?).map_err(|e| SetupError::Env(e.to_string()))?;
+        let mut options = remote.options(security)?;
+        options.world_settings = world.settings().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+        let env = RemoteEnv::connect(name, options).map_err(|e| SetupError::Env(e.to_string()))?;
         return Ok(Box::new(env));
     }
-    coadapt_robots::make(name).map_err(|e| SetupError::Config(format!("{e}; or dm-env-rpc://HOST:PORT for a remote environment")))
+    coadapt_robots::make_in(name, world).map_err(|e| match e {
+        MakeError::Unknown(e) => SetupError::Config(format!("{e}; or dm-env-rpc://HOST:PORT for a remote environment")),
+        MakeError::World(e) => SetupError::Config(e.to_string()),
+    })
 }
 
-/// [`make_env_with`] with the default remote settings.
+/// [`make_env_with`] with the robot's own world and the default remote settings.
 pub fn make_env(name: &str) -> Result<Box<dyn Env>, SetupError> {
-    make_env_with(name, &RemoteEnvConfig::default(), &SecurityConfig::default())
+    make_env_with(name, &World::default(), &RemoteEnvConfig::default(), &SecurityConfig::default())
 }

@@ -17,7 +17,10 @@
 //!   goal paths; no design), its kinematics and [`bimanual::PlanarEnv`], the robot an actor steps
 //!   for policy search through a fleet.
 //! - [`bench`](mod@bench): env steps per second under random actions.
-//! - [`make`]: builds any robot by its registry name, wrapped in a time limit.
+//! - [`world`]: [`World`], the friction, actuator strength and torso mass a robot meets (each
+//!   the robot's own unless set).
+//! - [`make`], [`make_in`]: build any robot by its registry name (in a [`World`]), wrapped in a
+//!   time limit.
 
 pub mod bench;
 pub mod bimanual;
@@ -29,6 +32,7 @@ pub mod pendulum;
 pub mod planar;
 pub mod reach;
 pub mod walker;
+pub mod world;
 
 use coadapt_core::{Env, TimeLimit};
 
@@ -38,6 +42,7 @@ pub use hopper::Hopper;
 pub use pendulum::Pendulum;
 pub use reach::Reach;
 pub use walker::Walker;
+pub use world::{World, WorldError};
 
 /// Names accepted by [`make`].
 pub const ENV_NAMES: &[&str] = &["pendulum", "half-cheetah", "walker", "hopper", "daisy", "reach"];
@@ -89,13 +94,38 @@ pub fn reference_initial_designs(name: &str) -> Option<Vec<Vec<f32>>> {
 
 /// A fresh environment `name`, truncating episodes at its declared length.
 pub fn make(name: &str) -> Result<Box<dyn Env>, UnknownEnv> {
-    match name {
-        "pendulum" => Ok(Box::new(TimeLimit::new(Pendulum::new()))),
-        "half-cheetah" => Ok(Box::new(TimeLimit::new(HalfCheetah::new()))),
-        "walker" => Ok(Box::new(TimeLimit::new(Walker::new()))),
-        "hopper" => Ok(Box::new(TimeLimit::new(Hopper::new()))),
-        "daisy" => Ok(Box::new(TimeLimit::new(Daisy::new()))),
-        "reach" => Ok(Box::new(TimeLimit::new(Reach::new()))),
-        other => Err(UnknownEnv(other.to_string())),
-    }
+    make_in(name, &World::default()).map_err(|e| match e {
+        MakeError::Unknown(e) => e,
+        MakeError::World(e) => unreachable!("the default world fits every robot: {e}"),
+    })
+}
+
+/// Why [`make_in`] could not build a robot: both are settings to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum MakeError {
+    #[error(transparent)]
+    Unknown(#[from] UnknownEnv),
+    #[error(transparent)]
+    World(#[from] WorldError),
+}
+
+/// [`make`] in `world`: the legged robots take every [`World`] value; Pendulum and Reach, which
+/// have no ground, motors or torso of the kind, refuse any but the defaults.
+pub fn make_in(name: &str, world: &World) -> Result<Box<dyn Env>, MakeError> {
+    let w = world.clone();
+    Ok(match name {
+        "pendulum" => {
+            world.check_unchanged("pendulum")?;
+            Box::new(TimeLimit::new(Pendulum::new()))
+        }
+        "half-cheetah" => Box::new(TimeLimit::new(HalfCheetah::in_world(w)?)),
+        "walker" => Box::new(TimeLimit::new(Walker::in_world(w)?)),
+        "hopper" => Box::new(TimeLimit::new(Hopper::in_world(w)?)),
+        "daisy" => Box::new(TimeLimit::new(Daisy::in_world(w)?)),
+        "reach" => {
+            world.check_unchanged("reach")?;
+            Box::new(TimeLimit::new(Reach::new()))
+        }
+        other => return Err(UnknownEnv(other.to_string()).into()),
+    })
 }

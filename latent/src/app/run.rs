@@ -30,7 +30,8 @@ use coadapt_fleet::app::{AppError, Context};
 pub(crate) fn camera_env(cfg: &LatentConfig) -> Result<FrameSource, AppError> {
     let image = 3 * cfg.camera.side * cfg.camera.side;
     if coadapt_env_rpc::is_remote(&cfg.robot) {
-        let env = coadapt_fleet::make_env_with(&cfg.robot, &cfg.remote, &cfg.security).with_context(|| format!("robot = {}", cfg.robot))?;
+        let env = coadapt_fleet::make_env_with(&cfg.robot, &coadapt_robots::World::default(), &cfg.remote, &cfg.security)
+            .with_context(|| format!("robot = {}", cfg.robot))?;
         let got = env.spec().state_dim;
         if got != image {
             return Err(AppError::Config(format!(

@@ -19,6 +19,16 @@ use crate::flow::LearnerTime;
 use crate::run_dir::{DesignRow, RunWriter, WrittenSoFar};
 use crate::snapshot::{self, SnapshotConfig, StateIn};
 
+/// Where a fresh run's population networks come from, other than a random start: a checkpoint
+/// of another run (`policy`, `q1`, `q2`, `q1_target`, `q2_target`), and optionally that run's
+/// newest snapshot for its population replay. Adam's moments, alpha and every other buffer
+/// start fresh: the thesis copies the networks only.
+#[derive(Debug)]
+pub struct Transfer {
+    pub networks: PathBuf,
+    pub replay: Option<StateIn>,
+}
+
 /// The snapshots of one learner start.
 #[derive(Debug, Default)]
 pub struct Snapshots {
@@ -27,6 +37,9 @@ pub struct Snapshots {
     pub root: Option<PathBuf>,
     /// This learner start's id (new at every start).
     pub run_id: String,
+    /// A fresh run's population networks (and replay) from another run: transfer (thesis
+    /// section 6.1). Not used when the run continues from a snapshot, which holds them already.
+    pub transfer: Option<Transfer>,
     /// The checked contents of the snapshot to continue from.
     pub resume: Option<StateIn>,
     /// Sequence number of the next snapshot.

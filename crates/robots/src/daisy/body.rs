@@ -118,11 +118,26 @@ impl std::fmt::Debug for Body {
     }
 }
 
+/// What [`crate::World`] changes in Daisy's body: the friction of the floor and every part, and
+/// the torso's mass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ground {
+    pub friction: f32,
+    pub torso_mass: f32,
+}
+
 impl Body {
     /// A fresh world with the body of femur and tibia `lengths` per pair and base-range
     /// `offsets` per pair, at rest, torso level with its centre at `height` above the ground,
     /// joints at `angles` (within the limits).
-    pub fn build(lengths: &[[f32; 2]; 3], offsets: &[f32; 3], angles: &[f32; JOINTS], height: f32, cfg: &SimConfig) -> Self {
+    pub fn build(
+        lengths: &[[f32; 2]; 3],
+        offsets: &[f32; 3],
+        angles: &[f32; JOINTS],
+        height: f32,
+        values: Ground,
+        cfg: &SimConfig,
+    ) -> Self {
         let mut world = PhysicsWorld::new();
         world.gravity = Vector::new(0.0, 0.0, -9.81);
         let p = &mut world.integration_parameters;
@@ -133,14 +148,14 @@ impl Body {
 
         let ground = world.insert_body(RigidBodyBuilder::fixed());
         let floor_groups = InteractionGroups::new(GROUND, ROBOT, InteractionTestMode::And);
-        let floor = ColliderBuilder::new(SharedShape::halfspace(Vector::Z)).friction(FRICTION).collision_groups(floor_groups);
+        let floor = ColliderBuilder::new(SharedShape::halfspace(Vector::Z)).friction(values.friction).collision_groups(floor_groups);
         world.insert_collider(floor, Some(ground));
 
         let groups = InteractionGroups::new(ROBOT, GROUND, InteractionTestMode::And);
         let origin = Vector::new(0.0, 0.0, height);
         let torso = world.insert_body(RigidBodyBuilder::dynamic().translation(origin).can_sleep(false));
         let [hx, hy, hz] = TORSO_HALF_EXTENTS;
-        let torso_col = ColliderBuilder::cuboid(hx, hy, hz).mass(TORSO_MASS).friction(FRICTION).collision_groups(groups);
+        let torso_col = ColliderBuilder::cuboid(hx, hy, hz).mass(values.torso_mass).friction(values.friction).collision_groups(groups);
         world.insert_collider(torso_col, Some(torso));
 
         let limits = joint_limits(offsets);
@@ -167,7 +182,7 @@ impl Body {
                 joint_pos += anchor;
                 let child = world.insert_body(RigidBodyBuilder::dynamic().translation(joint_pos).can_sleep(false));
                 let col = ColliderBuilder::capsule_from_endpoints(Vector::ZERO, segment, radius).mass(mass);
-                world.insert_collider(col.friction(FRICTION).collision_groups(groups), Some(child));
+                world.insert_collider(col.friction(values.friction).collision_groups(groups), Some(child));
                 let joint = RevoluteJointBuilder::new(axis).local_anchor1(anchor).local_anchor2(Vector::ZERO).limits(limits[j]);
                 handles[j] = world.insert_multibody_joint(parent, child, joint);
                 (children[j], parents[j], axes[j]) = (child, parent, axis);

@@ -117,7 +117,8 @@ pub use body::{
     joint_limits, start_height,
 };
 
-use body::Body;
+use crate::world::{World, WorldError};
+use body::{Body, Ground};
 use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step, rng};
 use rand::Rng;
 use rapier3d::math::{Rotation, Vector};
@@ -205,6 +206,8 @@ pub struct Daisy {
     start_rot: Rotation,
     last_y: f32,
     obs: [f32; OBS_DIM],
+    /// Friction, actuator strength and torso mass ([`World`]).
+    world: World,
 }
 
 impl Default for Daisy {
@@ -255,7 +258,25 @@ impl Daisy {
             start_rot: Rotation::IDENTITY,
             last_y: 0.0,
             obs: [0.0; OBS_DIM],
+            world: World::default(),
         }
+    }
+
+    /// Daisy in `world` (its friction, actuator strength and torso mass), refusing values no
+    /// robot can have.
+    pub fn in_world(world: World) -> Result<Self, WorldError> {
+        world.check()?;
+        Ok(Self { world, ..Self::new() })
+    }
+
+    /// The world Daisy steps in.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Joint `j`'s torque at full action, in N m.
+    fn max_torque(&self, j: usize) -> f32 {
+        POWER_FACTOR * POWERS[j % 3] * self.world.actuator_scale
     }
 
     pub fn config(&self) -> &SimConfig {
@@ -306,13 +327,11 @@ impl Daisy {
     /// One control step holding the joints at `target` with a PD controller updated every
     /// physics step, its torque within the motors' limits.
     fn hold(&mut self, target: &[f32; JOINTS]) {
+        let max: [f32; JOINTS] = std::array::from_fn(|j| self.max_torque(j));
         let Some(body) = self.body.as_mut() else { return };
         for _ in 0..self.cfg.substeps {
             let (q, qd) = body.joints();
-            let torques: [f32; JOINTS] = std::array::from_fn(|j| {
-                let max = POWER_FACTOR * POWERS[j % 3];
-                (HOLD_KP * (target[j] - q[j]) - HOLD_KD * qd[j]).clamp(-max, max)
-            });
+            let torques: [f32; JOINTS] = std::array::from_fn(|j| (HOLD_KP * (target[j] - q[j]) - HOLD_KD * qd[j]).clamp(-max[j], max[j]));
             body.step(&torques);
         }
     }
@@ -357,7 +376,8 @@ impl Env for Daisy {
             (stand + r.random_range(-START_NOISE..START_NOISE)).clamp(lo, hi)
         });
         let height = start_height(&lengths, START_NOISE);
-        self.body = Some(Body::build(&lengths, &offsets, &angles, height, &self.cfg));
+        let ground = Ground { friction: self.world.friction_or(FRICTION), torso_mass: TORSO_MASS * self.world.torso_mass_scale };
+        self.body = Some(Body::build(&lengths, &offsets, &angles, height, ground, &self.cfg));
         for _ in 0..self.cfg.settle_steps {
             self.hold(&angles);
         }
@@ -379,7 +399,7 @@ impl Env for Daisy {
             return Err(EnvError::NotRunning);
         }
         self.spec.action.check_finite("action", action).map_err(EnvError::Action)?;
-        let torques: [f32; JOINTS] = std::array::from_fn(|j| POWER_FACTOR * POWERS[j % 3] * action[j].clamp(-1.0, 1.0));
+        let torques: [f32; JOINTS] = std::array::from_fn(|j| self.max_torque(j) * action[j].clamp(-1.0, 1.0));
         self.advance(&torques);
         if let Err(e) = self.observe() {
             self.body = None;

@@ -25,6 +25,7 @@ mod body;
 
 pub use body::{BodyPlan, Capsule, Limb, Torso, capsule_mass, wrap};
 
+use crate::world::{World, WorldError};
 use body::Body;
 use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step, rng};
 use rand::Rng;
@@ -154,6 +155,8 @@ pub struct PlanarEnv<R: Robot> {
     initial_height: f32,
     obs: Vec<f32>,
     torques: Vec<f32>,
+    /// Friction, actuator strength and torso mass ([`World`]).
+    world: World,
     robot: PhantomData<fn() -> R>,
 }
 
@@ -191,8 +194,21 @@ impl<R: Robot> PlanarEnv<R> {
             initial_height: 0.0,
             obs,
             torques: vec![0.0; n],
+            world: World::default(),
             robot: PhantomData,
         }
+    }
+
+    /// The robot in `world` (its friction, actuator strength and torso mass), refusing values
+    /// no robot can have.
+    pub fn in_world(world: World) -> Result<Self, WorldError> {
+        world.check()?;
+        Ok(Self { world, ..Self::new() })
+    }
+
+    /// The world this robot steps in.
+    pub fn world(&self) -> &World {
+        &self.world
     }
 
     pub fn config(&self) -> &SimConfig {
@@ -282,7 +298,11 @@ impl<R: Robot> Env for PlanarEnv<R> {
         self.design.copy_from_slice(design);
         let mut r = rng(seed, 0);
         let angles: Vec<f32> = R::JOINT_LIMITS.iter().map(|&[lo, hi]| r.random_range(-0.5f32..0.5).clamp(lo, hi)).collect();
-        let plan = R::plan(design);
+        let mut plan = R::plan(design);
+        plan.friction = self.world.friction_or(plan.friction);
+        for c in &mut plan.torso {
+            c.mass *= self.world.torso_mass_scale;
+        }
         let height = R::start_height(design, &plan, &angles);
         let mut body = Body::build(&plan, height, &angles, &self.cfg);
         let hold = self.cfg.hold_while_settling && self.cfg.settle_steps > 0;
@@ -315,7 +335,7 @@ impl<R: Robot> Env for PlanarEnv<R> {
         }
         self.spec.action.check_finite("action", action).map_err(EnvError::Action)?;
         for ((t, &a), &power) in self.torques.iter_mut().zip(action).zip(R::POWERS) {
-            *t = POWER_FACTOR * power * a.clamp(-1.0, 1.0);
+            *t = POWER_FACTOR * power * self.world.actuator_scale * a.clamp(-1.0, 1.0);
         }
         self.advance();
         let torso = match self.observe() {
