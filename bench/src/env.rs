@@ -94,7 +94,7 @@ pub fn run(a: &EnvOptions) -> Result<(), AppError> {
         emit(name, "in-process", &mut time_env(&mut *local, a.seconds)?);
         let n = name.clone();
         let server =
-            BackgroundServer::start("127.0.0.1:0", std::sync::Arc::new(move || coadapt_robots::make(&n).map_err(|e| e.to_string())))
+            BackgroundServer::start("127.0.0.1:0", coadapt_env_rpc::plain(move || coadapt_robots::make(&n).map_err(|e| e.to_string())))
                 .map_err(AppError::io(format!("serving {name} on loopback")))?;
         let mut remote = RemoteEnv::connect(&server.url(), RemoteOptions::default())?;
         emit(name, "dm_env_rpc loopback", &mut time_env(&mut remote, a.seconds)?);

@@ -60,17 +60,21 @@ pub fn run(args: EnvServeArgs) -> anyhow::Result<()> {
         coadapt_core::Pixels::new(coadapt_robots::make(&name)?, px).context("--pixels")?;
     }
     let (pixels, repeat) = (args.pixels, args.action_repeat);
-    let factory: coadapt_env_rpc::EnvFactory = if pixels > 0 {
-        std::sync::Arc::new(move || {
+    // Each world is the robot in the world its CreateWorld settings describe (`friction`, ...:
+    // a client's `[world]`); the planar benchmark has none.
+    let factory: coadapt_env_rpc::EnvFactory = if name == "planar" {
+        // The policy-search benchmark as a robot (`coadapt search` with `robot = URL`).
+        coadapt_env_rpc::plain(|| Ok(Box::new(coadapt_policy_search::PlanarEnv::default()) as Box<dyn coadapt_core::Env>))
+    } else {
+        std::sync::Arc::new(move |settings: &coadapt_env_rpc::WorldSettings| {
+            let world = coadapt_robots::World::from_settings(settings)?;
+            let robot = coadapt_robots::make_in(&name, &world).map_err(|e| e.to_string())?;
+            if pixels == 0 {
+                return Ok(robot);
+            }
             let px = coadapt_core::PixelsConfig { width: pixels, height: pixels, frames: 1, action_repeat: repeat };
-            let robot = coadapt_robots::make(&name).map_err(|e| e.to_string())?;
             Ok(Box::new(coadapt_core::Pixels::new(robot, px).map_err(|e| e.to_string())?) as Box<dyn coadapt_core::Env>)
         })
-    } else if name == "planar" {
-        // The policy-search benchmark as a robot (`coadapt search` with `robot = URL`).
-        std::sync::Arc::new(|| Ok(Box::new(coadapt_policy_search::PlanarEnv::default()) as Box<dyn coadapt_core::Env>))
-    } else {
-        std::sync::Arc::new(move || coadapt_robots::make(&name).map_err(|e| e.to_string()))
     };
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().context("starting the runtime")?;
     rt.block_on(async move {

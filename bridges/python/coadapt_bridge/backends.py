@@ -82,8 +82,12 @@ class Backend:
 
     profile: Profile
     is_robot = False
+    #: World settings beyond ``design`` and ``seed`` that CreateWorld may give (a scalar each,
+    #: e.g. ``friction``), as the client names them; each becomes a keyword argument of the
+    #: body's construction (``-`` read as ``_``).
+    world_settings: frozenset = frozenset()
 
-    def new_body(self, design: np.ndarray) -> Body:
+    def new_body(self, design: np.ndarray, world: Optional[dict] = None) -> Body:
         raise NotImplementedError
 
     def close(self) -> None:
@@ -159,11 +163,12 @@ def gym_profile(env: Any, design: DesignSpace, what: str) -> Profile:
 class GymBody(Body):
     """A gymnasium env, rebuilt by the factory when an episode starts with a different design."""
 
-    def __init__(self, backend: "GymBackend", design: np.ndarray):
+    def __init__(self, backend: "GymBackend", design: np.ndarray, world: Optional[dict] = None):
         self._backend = backend
         self.profile = backend.profile
+        self._world = dict(world or {})
         self._design = np.asarray(design, dtype=np.float32).copy()
-        self.env = backend.build(self._design)
+        self.env = backend.build(self._design, self._world)
 
     def start_episode(self, design: np.ndarray, seed: Optional[int]) -> np.ndarray:
         design = np.asarray(design, dtype=np.float32)
@@ -175,7 +180,7 @@ class GymBody(Body):
             old = self.env
             self.env = None
             _close_env(old)
-            self.env = self._backend.build(design)
+            self.env = self._backend.build(design, self._world)
             self._design = design.copy()
         obs, _info = self.env.reset(seed=seed) if seed is not None else self.env.reset()
         return self._flatten(obs)
@@ -217,6 +222,7 @@ class GymBackend(Backend):
         self._make = make
         self.what = what
         self.design = design
+        self.world_settings = _keyword_settings(make)
         # Build one env now: a broken environment fails at start, with its reason.
         probe = self._call_make(design.default)
         try:
@@ -246,17 +252,19 @@ class GymBackend(Backend):
             raise BackendError(str(e)) from None
         return GymBackend(fn, design, f"factory {spec}")
 
-    def _call_make(self, design: np.ndarray) -> Any:
+    def _call_make(self, design: np.ndarray, world: Optional[dict] = None) -> Any:
+        kwargs = {name.replace("-", "_"): value for name, value in (world or {}).items()}
         try:
-            env = self._make(np.asarray(design, dtype=np.float32).copy())
+            env = self._make(np.asarray(design, dtype=np.float32).copy(), **kwargs)
         except Exception as e:
-            raise BackendError(f"{self.what} failed to build the environment for design {design.tolist()}: {type(e).__name__}: {e}") from e
+            at = f"design {design.tolist()}" + (f" in world {world}" if world else "")
+            raise BackendError(f"{self.what} failed to build the environment for {at}: {type(e).__name__}: {e}") from e
         if not hasattr(env, "step") or not hasattr(env, "reset") or not hasattr(env, "action_space"):
             raise BackendError(f"{self.what} returned {type(env).__name__}, not a gymnasium.Env")
         return env
 
-    def build(self, design: np.ndarray) -> Any:
-        env = self._call_make(design)
+    def build(self, design: np.ndarray, world: Optional[dict] = None) -> Any:
+        env = self._call_make(design, world)
         profile = gym_profile(env, self.design, self.what)
         if not profile.same_spaces(self.profile):
             _close_env(env)
@@ -267,8 +275,21 @@ class GymBackend(Backend):
             )
         return env
 
-    def new_body(self, design: np.ndarray) -> Body:
-        return GymBody(self, design)
+    def new_body(self, design: np.ndarray, world: Optional[dict] = None) -> Body:
+        return GymBody(self, design, world)
+
+
+def _keyword_settings(make: Callable) -> frozenset:
+    """The world settings a factory takes: its keyword parameters after the design, named as a
+    client sends them (``actuator_scale`` -> ``actuator-scale``)."""
+    import inspect
+
+    try:
+        params = list(inspect.signature(make).parameters.values())[1:]
+    except (TypeError, ValueError):
+        return frozenset()
+    kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return frozenset(p.name.replace("_", "-") for p in params if p.kind in kinds and p.default is not inspect.Parameter.empty)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -375,7 +396,7 @@ class DriverBackend(Backend):
             raise BackendError(f"driver `{spec}`: creating it failed: {type(e).__name__}: {e}") from e
         return DriverBackend(driver, f"driver {spec}")
 
-    def new_body(self, design: np.ndarray) -> Body:
+    def new_body(self, design: np.ndarray, world: Optional[dict] = None) -> Body:
         with self._claim:
             if self._shutting_down:
                 raise ShuttingDown("the server is stopping")

@@ -57,8 +57,11 @@ The profile (uids):
   design       4  FLOAT [D], min/max = the design box: the body in use
   World settings (CreateWorld, ResetWorld), both optional: `design` (floats
   or doubles, shape [D], inside the box) and `seed` (integer scalar; the next
-  episode calls env.reset(seed=seed), later ones env.reset()). Other settings
-  are refused; JoinWorld and Reset take none. Worlds are named world-1,
+  episode calls env.reset(seed=seed), later ones env.reset()). CreateWorld
+  also takes a float scalar for each keyword argument the factory has after
+  the design (mujoco_half_cheetah:make takes `friction`; `actuator-scale`
+  names `actuator_scale`): the world's dynamics, fixed for its life. Other
+  settings are refused; JoinWorld and Reset take none. Worlds are named world-1,
   world-2, ...; one agent per world; a world is destroyed by DestroyWorld or
   when the connection that created it closes. The first Step after JoinWorld,
   Reset, ResetWorld or a TERMINATED step ignores its actions and starts an

@@ -269,6 +269,6 @@ class DmcBackend(Backend):
         """Renders ``env`` (320x240, the camera) and resizes: the observation."""
         return self.resize(env.physics.render(height=RENDER_HEIGHT, width=RENDER_WIDTH, camera_id=self.camera))
 
-    def new_body(self, design: np.ndarray) -> Body:
+    def new_body(self, design: np.ndarray, world: Optional[dict] = None) -> Body:
         return DmcBody(self)
 

@@ -201,9 +201,23 @@ def _scale_segment(body: ET.Element, name: str, factor: float) -> None:
         child.set("pos", _fmt(factor * _floats(child.get("pos", "0 0 0"))))
 
 
-def build_xml(design: Any) -> str:
-    """The MuJoCo XML of the cheetah with leg-segment scale factors ``design`` (see module doc)."""
+def validate_friction(friction: Any) -> float:
+    """The sliding friction as a finite float >= 0, or a ValueError naming ``friction``."""
+    try:
+        f = float(friction)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"friction must be a number, got {friction!r}") from err
+    if not (np.isfinite(f) and f >= 0.0):
+        raise ValueError(f"friction must be a finite number >= 0, got {f}")
+    return f
+
+
+def build_xml(design: Any, friction: Any = None) -> str:
+    """The MuJoCo XML of the cheetah with leg-segment scale factors ``design`` (see module doc),
+    with every geom's sliding friction ``friction`` (the floor's too; v5's 0.4 when ``None``;
+    MuJoCo takes the larger of two touching geoms' values, so the contact gets exactly this)."""
     xi = validate_design(design)
+    f = None if friction is None else validate_friction(friction)
     density, reference_low = _reference()
     tree = _load_tree()
     root = tree.getroot()
@@ -215,6 +229,11 @@ def build_xml(design: Any) -> str:
             default = ET.SubElement(root, "default")
         default_geom = ET.SubElement(default, "geom")
     default_geom.set("density", repr(density))
+    if f is not None:
+        for geom in [default_geom, *root.iter("geom")]:
+            if geom is default_geom or geom.get("friction") is not None:
+                rest = _floats(geom.get("friction", default_geom.get("friction", "0.4 0.1 0.1")))[1:]
+                geom.set("friction", _fmt([f, *rest]))
 
     bodies = {b.get("name"): b for b in root.iter("body")}
     for name, factor in zip(SEGMENTS, xi):
@@ -267,16 +286,19 @@ class CoadaptForwardReward(gymnasium.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def make_env(design: Any, max_episode_steps: int = MAX_EPISODE_STEPS, **kwargs: Any) -> gymnasium.Env:
-    """The cheetah for ``design``; ``kwargs`` go to v5's ``HalfCheetahEnv`` (v5 defaults otherwise)."""
-    path = _write_xml(build_xml(design))
+def make_env(design: Any, max_episode_steps: int = MAX_EPISODE_STEPS, friction: Any = None, **kwargs: Any) -> gymnasium.Env:
+    """The cheetah for ``design`` (and ``friction``, v5's when ``None``); ``kwargs`` go to v5's
+    ``HalfCheetahEnv`` (v5 defaults otherwise)."""
+    path = _write_xml(build_xml(design, friction))
     env = half_cheetah_v5.HalfCheetahEnv(xml_file=path, **kwargs)
     return TimeLimit(CoadaptForwardReward(env), max_episode_steps=max_episode_steps)
 
 
-def make(design: Any) -> gymnasium.Env:
-    """Factory for ``coadapt-gym-serve``: the cheetah for a design of 6 leg-segment scale factors."""
-    return make_env(design)
+def make(design: Any, friction: Any = None) -> gymnasium.Env:
+    """Factory for ``coadapt-gym-serve``: the cheetah for a design of 6 leg-segment scale factors;
+    ``friction`` (the world setting of a client's ``[world] friction``) is every geom's sliding
+    friction, v5's 0.4 by default."""
+    return make_env(design, friction=friction)
 
 
 # What ``coadapt_bridge.design_space(low=..., high=..., default=...)`` would set.

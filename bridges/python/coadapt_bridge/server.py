@@ -1,6 +1,7 @@
 """The dm_env_rpc v1 ``Environment`` service of the coadapt profile, over a ``Backend``.
 
-Worlds are created by CreateWorld (settings ``design`` and ``seed``, both optional) and named
+Worlds are created by CreateWorld (settings ``design`` and ``seed``, both optional, and the
+world settings the factory takes as keyword arguments, e.g. ``friction``) and named
 ``world-1``, ``world-2``...; one agent joins each. A world lives until DestroyWorld or until
 the connection that created it closes (a client that goes away without DestroyWorld leaks
 nothing; a world another agent is still joined to lives until that agent leaves). Every
@@ -237,9 +238,14 @@ class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
 
     # -- settings ---------------------------------------------------------------------------
 
-    def _world_settings(self, settings) -> tuple:
+    def _world_settings(self, settings, create: bool = False) -> tuple:
+        """(design, seed, world): ``world`` holds the settings the backend's bodies take
+        (``friction``, ...), accepted by CreateWorld only: a world's dynamics are fixed for its
+        life, while ResetWorld may change its design and seed."""
         design = None
         seed = None
+        world = {}
+        extra = self.backend.world_settings
         for name in sorted(settings.keys()):
             t = settings[name]
             try:
@@ -249,14 +255,22 @@ class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
                     T.check_in_box(name, design, d.low, d.high, "design box")
                 elif name == T.SETTING_SEED:
                     seed = T.read_seed(name, t)
-                else:
+                elif name in extra and create:
+                    world[name] = T.read_scalar_float(name, t)
+                elif name in extra:
                     raise RequestError(
                         grpc.StatusCode.INVALID_ARGUMENT,
-                        f"unknown world setting `{name}` (the coadapt profile has `design` and `seed`)",
+                        f"world setting `{name}` is fixed when the world is created (CreateWorld), not at a reset",
+                    )
+                else:
+                    known = ", ".join(f"`{n}`" for n in ["design", "seed", *sorted(extra)])
+                    raise RequestError(
+                        grpc.StatusCode.INVALID_ARGUMENT,
+                        f"unknown world setting `{name}` (this server's worlds take {known})",
                     )
             except T.TensorError as e:
                 raise RequestError(grpc.StatusCode.INVALID_ARGUMENT, f"setting `{name}`: {e}") from None
-        return design, seed
+        return design, seed, world
 
     @staticmethod
     def _no_settings(settings, request: str) -> None:
@@ -275,23 +289,25 @@ class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
         return world
 
     def create_world(self, session: Session, req: pb.CreateWorldRequest) -> pb.CreateWorldResponse:
-        design, seed = self._world_settings(req.settings)
+        design, seed, world = self._world_settings(req.settings, create=True)
         if design is None:
             design = self.profile.design.default.copy()
         if seed is None:
             seed = self.default_seed
         try:
-            body = self.backend.new_body(design)
+            body = self.backend.new_body(design, world)
         except RobotBusy as e:
             raise RequestError(grpc.StatusCode.FAILED_PRECONDITION, str(e)) from None
         except ShuttingDown as e:
             raise RequestError(grpc.StatusCode.UNAVAILABLE, str(e)) from None
         except BackendError as e:
-            raise RequestError(grpc.StatusCode.INTERNAL, f"building the environment: {e}") from None
+            # A value the factory refuses (a friction below 0) is the request's fault.
+            code = grpc.StatusCode.INVALID_ARGUMENT if world and isinstance(e.__cause__, ValueError) else grpc.StatusCode.INTERNAL
+            raise RequestError(code, f"building the environment: {e}") from None
         with self._lock:
             name = f"world-{next(self._world_numbers)}"
             self.worlds[name] = World(name, body, design, seed, session.id)
-        log.info("created %s (design %s) for connection %d", name, design.tolist(), session.id)
+        log.info("created %s (design %s%s) for connection %d", name, design.tolist(), f", world {world}" if world else "", session.id)
         return pb.CreateWorldResponse(world_name=name)
 
     def join_world(self, session: Session, req: pb.JoinWorldRequest) -> pb.JoinWorldResponse:
@@ -342,7 +358,7 @@ class EnvironmentService(dm_env_rpc_pb2_grpc.EnvironmentServicer):
 
     def reset_world(self, session: Session, req: pb.ResetWorldRequest) -> pb.ResetWorldResponse:
         world = self._find(req.world_name)
-        design, seed = self._world_settings(req.settings)
+        design, seed, _ = self._world_settings(req.settings)
         with world.lock:
             if design is not None:
                 world.design = design

@@ -55,6 +55,24 @@ def resolve_shape(name: str, shape: Sequence[int], n: int) -> list[int]:
     return dims
 
 
+def read_scalar_float(name: str, t: pb.Tensor) -> float:
+    """One finite number (a ``floats`` or ``doubles`` tensor of shape ``[]`` or ``[1]``)."""
+    which = t.WhichOneof("payload")
+    if which == "floats":
+        values = list(t.floats.array)
+    elif which == "doubles":
+        values = list(t.doubles.array)
+    else:
+        raise TensorError(f"tensor `{name}` has {which or 'no'} values, one float expected")
+    dims = resolve_shape(name, t.shape, len(values))
+    if len(values) != 1 or dims not in ([], [1]):
+        raise TensorError(f"tensor `{name}` has shape {dims}, one float expected")
+    v = float(values[0])
+    if not np.isfinite(v):
+        raise TensorError(f"tensor `{name}` is {v}, not finite")
+    return v
+
+
 def read_floats(name: str, t: pb.Tensor, dim: int, allow_doubles: bool) -> np.ndarray:
     """A finite float32 vector of shape ``[dim]`` from tensor ``t``.
 

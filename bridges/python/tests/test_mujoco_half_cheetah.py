@@ -218,3 +218,27 @@ def test_box_edges_accepted():
     for design in (np.full(6, 0.8, dtype=np.float32), np.full(6, 2.0, dtype=np.float32)):
         xi = mhc.validate_design(design)
         assert xi.dtype == np.float64 and np.all(xi >= 0.8) and np.all(xi <= 2.0)
+
+
+def test_friction_sets_every_geoms_sliding_friction_and_changes_the_run():
+    default = mujoco.MjModel.from_xml_string(mhc.build_xml([1.0] * 6))
+    slippery = mujoco.MjModel.from_xml_string(mhc.build_xml([1.0] * 6, friction=0.05))
+    np.testing.assert_allclose(default.geom_friction[:, 0], 0.4)
+    np.testing.assert_allclose(slippery.geom_friction[:, 0], 0.05)
+    # Torsional and rolling friction stay v5's.
+    np.testing.assert_allclose(slippery.geom_friction[:, 1:], default.geom_friction[:, 1:])
+    # Same start and actions, another ground: another run.
+    def run(friction):
+        env = mhc.make(MIXED, friction=friction)
+        env.reset(seed=3)
+        x = 0.0
+        for t in range(100):
+            _, _, _, _, info = env.step(np.sin(np.arange(6) + 0.3 * t).astype(np.float32))
+            x = info["x_position"]
+        env.close()
+        return x
+    assert abs(run(None) - run(0.05)) > 0.05
+    assert run(None) == run(0.4)
+    for bad in (-0.1, float("nan"), "grippy"):
+        with pytest.raises(ValueError, match="friction"):
+            mhc.build_xml([1.0] * 6, friction=bad)

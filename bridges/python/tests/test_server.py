@@ -341,3 +341,39 @@ def test_an_empty_design_is_accepted_without_a_design_box(pendulum):
         pendulum.reset_world(world, design=t, seed=tensor_utils.pack_tensor(np.uint64(9)))
     with pytest.raises(dm_error.DmEnvRpcError, match="design"):
         pendulum.reset_world(world, design=np.array([0.5], np.float32))
+
+
+def test_world_settings_reach_the_factory_at_create_and_only_there():
+    backend = GymBackend.from_factory("toys:make_toy_world")
+    assert backend.world_settings == frozenset({"friction"})
+    server = BridgeServer(backend, port=0)
+    server.start()
+    try:
+        with Client(server, own_channel=True) as c:
+            slow = c.create(friction=np.float32(4.0), seed=np.uint64(3))
+            assert toys.WORLD_BUILDS[-1] == ([1.0, 1.0], 4.0)
+            c.join(slow)
+            c.step()
+            _, a = c.step([1.0, 1.0])
+            _, b = c.step([1.0, 1.0])
+            # A quarter of the push of the default world (0.1 per unit action).
+            np.testing.assert_allclose(b[1][:2] - a[1][:2], [0.025, 0.025], rtol=1e-5)
+            # A new design keeps the world's friction.
+            c.reset_world(slow, design=np.array([2.0, 2.0], np.float32))
+            c.step()
+            assert toys.WORLD_BUILDS[-1] == ([2.0, 2.0], 4.0)
+            # The dynamics are fixed for the world's life; a value the factory refuses and an
+            # unknown name are the request's fault, each named.
+            for send, words in [
+                (lambda: c.reset_world(slow, friction=np.float32(1.0)), ["friction", "CreateWorld"]),
+                (lambda: c.create(friction=np.float32(-1.0)), ["friction must be > 0"]),
+                (lambda: c.create(friction=np.array([1.0, 2.0], np.float32)), ["friction", "one float"]),
+                (lambda: c.create(gravity=np.float32(1.0)), ["gravity", "`friction`"]),
+            ]:
+                with pytest.raises(dm_error.DmEnvRpcError) as e:
+                    send()
+                assert code_of(e.value) == grpc.StatusCode.INVALID_ARGUMENT, e.value.message
+                for w in words:
+                    assert w in e.value.message, e.value.message
+    finally:
+        server.stop()

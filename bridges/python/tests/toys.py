@@ -25,8 +25,9 @@ class ToyReacher(gymnasium.Env):
     observation_space = spaces.Box(-np.inf, np.inf, (3,), np.float32)
     action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
-    def __init__(self, design):
+    def __init__(self, design, gain: float = 1.0):
         self.design = np.asarray(design, dtype=np.float32)
+        self.gain = gain
         self.x = np.zeros(2)
 
     def _obs(self):
@@ -38,7 +39,7 @@ class ToyReacher(gymnasium.Env):
         return self._obs(), {}
 
     def step(self, action):
-        self.x = self.x + 0.1 * self.design * np.asarray(action, dtype=np.float64)
+        self.x = self.x + 0.1 * self.gain * self.design * np.asarray(action, dtype=np.float64)
         dist = float(np.linalg.norm(self.x))
         return self._obs(), -dist, dist > 3.0, False, {}
 
@@ -47,6 +48,19 @@ class ToyReacher(gymnasium.Env):
 def make_toy(design):
     BUILDS.append(np.asarray(design).tolist())
     return TimeLimit(ToyReacher(design), max_episode_steps=100)
+
+
+# The designs and frictions make_toy_world built.
+WORLD_BUILDS: list = []
+
+
+@design_space(low=[0.5, 0.5], high=[2.0, 2.0], default=[1.0, 1.0])
+def make_toy_world(design, friction=None):
+    """make_toy with a world setting: the point's push is divided by ``friction``."""
+    if friction is not None and not friction > 0:
+        raise ValueError(f"friction must be > 0, got {friction}")
+    WORLD_BUILDS.append((np.asarray(design).tolist(), friction))
+    return TimeLimit(ToyReacher(design, gain=1.0 / (friction or 1.0)), max_episode_steps=100)
 
 
 def make_discrete(design):

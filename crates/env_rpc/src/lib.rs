@@ -22,7 +22,7 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 pub use client::{RemoteEnv, RemoteError, RemoteStats};
-pub use server::{BackgroundServer, EnvFactory, EnvService, ServerHandle, ServerLimits, ServerRefusals};
+pub use server::{BackgroundServer, EnvFactory, EnvService, ServerHandle, ServerLimits, ServerRefusals, WorldSettings, plain};
 
 /// The scheme of remote environment names.
 pub const SCHEME: &str = "dm-env-rpc://";

@@ -1,6 +1,7 @@
 //! A dm_env_rpc server for any coadapt [`Env`]: `coadapt env-serve`.
 //!
-//! Worlds are created by CreateWorld (settings `design` and `seed`, both optional), one agent
+//! Worlds are created by CreateWorld (settings `design` and `seed`, both optional, and the
+//! world's own, e.g. `friction`, which the factory takes or refuses), one agent
 //! joins each, and a world lives as long as the connection that created it (a client that goes
 //! away without DestroyWorld leaks nothing). Every request gets one response in order; a bad
 //! request gets an `error` (google.rpc.Status) and the stream goes on.
@@ -24,8 +25,21 @@ use tonic::{Code, Request, Response, Streaming};
 
 use crate::profile::{self, Profile};
 
-/// Builds one environment per world.
-pub type EnvFactory = Arc<dyn Fn() -> Result<Box<dyn Env>, String> + Send + Sync>;
+/// The settings CreateWorld gave besides `design` and `seed`: the world's own (a number each,
+/// e.g. `friction`), fixed for its life. Empty: the environment's own world.
+pub type WorldSettings = [(String, f32)];
+
+/// Builds one environment per world, in the world its settings describe; it refuses (with a
+/// message naming it) a setting it does not take, and the client gets INVALID_ARGUMENT.
+pub type EnvFactory = Arc<dyn Fn(&WorldSettings) -> Result<Box<dyn Env>, String> + Send + Sync>;
+
+/// A factory of environments that take no world settings beyond `design` and `seed`.
+pub fn plain(make: impl Fn() -> Result<Box<dyn Env>, String> + Send + Sync + 'static) -> EnvFactory {
+    Arc::new(move |settings: &WorldSettings| match settings.first() {
+        Some((name, _)) => Err(format!("unknown world setting `{name}` (the coadapt profile has `design` and `seed`)")),
+        None => make(),
+    })
+}
 
 /// A google.rpc.Status for an error response.
 fn status(code: Code, message: impl Into<String>) -> Status {
@@ -143,8 +157,25 @@ impl EnvService {
         lock(&self.worlds).map.len()
     }
 
-    /// Applies world settings (`design`, `seed`) to `world`, refusing any other.
-    fn apply_settings(world: &mut World, settings: &HashMap<String, Tensor>) -> Result<(), Failure> {
+    /// The settings of `settings` that are not `design` or `seed`: the world's own, one
+    /// number each (sorted by name, so a factory sees them in one order).
+    fn world_settings(settings: &HashMap<String, Tensor>) -> Result<Vec<(String, f32)>, Failure> {
+        let mut out = Vec::new();
+        for (name, t) in settings {
+            if name != profile::SETTING_DESIGN && name != profile::SETTING_SEED {
+                let mut v = Vec::new();
+                tensor::read_f32(name, t, &[], Accept::AnyFloat, &mut v)
+                    .map_err(|e| status(Code::InvalidArgument, format!("world setting `{name}`: {e}")))?;
+                out.push((name.clone(), v[0]));
+            }
+        }
+        out.sort_by(|a, b| a.0.cmp(&b.0));
+        Ok(out)
+    }
+
+    /// Applies world settings (`design`, `seed`) to `world`; the world's own settings were
+    /// taken at CreateWorld (`create`), and at a reset they are refused.
+    fn apply_settings(world: &mut World, settings: &HashMap<String, Tensor>, create: bool) -> Result<(), Failure> {
         let mut design = None;
         let mut seed = None;
         for (name, t) in settings {
@@ -159,10 +190,13 @@ impl EnvService {
                 profile::SETTING_SEED => {
                     seed = Some(tensor::read_u64(name, t).map_err(|e| status(Code::InvalidArgument, e.to_string()))?);
                 }
+                _ if create => {}
                 other => {
                     return Err(status(
                         Code::InvalidArgument,
-                        format!("unknown world setting `{other}` (the coadapt profile has `design` and `seed`)"),
+                        format!(
+                            "world setting `{other}` at a reset: ResetWorld takes `design` and `seed` (a world's own settings are given to CreateWorld)"
+                        ),
                     ));
                 }
             }
@@ -190,10 +224,14 @@ impl EnvService {
         if alive >= self.max_worlds {
             return Err(full(alive));
         }
-        let env = (self.factory)().map_err(|e| status(Code::Internal, format!("building the environment: {e}")))?;
+        let own = Self::world_settings(&r.settings)?;
+        // With settings of its own, a refusal is the request's (a name or value the robot does
+        // not take); without, the server's.
+        let code = if own.is_empty() { Code::Internal } else { Code::InvalidArgument };
+        let env = (self.factory)(&own).map_err(|e| status(code, format!("building the environment: {e}")))?;
         let spec = env.spec().clone();
         let mut world = World { design: spec.default_design.clone(), env, spec, next_seed: 0, epoch: 0, joined: false, owner: session.id };
-        Self::apply_settings(&mut world, &r.settings)?;
+        Self::apply_settings(&mut world, &r.settings, true)?;
         let mut worlds = lock(&self.worlds);
         if worlds.map.len() >= self.max_worlds {
             return Err(full(worlds.map.len()));
@@ -252,7 +290,7 @@ impl EnvService {
         let world = self.find(&r.world_name)?;
         {
             let mut w = lock(&world);
-            Self::apply_settings(&mut w, &r.settings)?;
+            Self::apply_settings(&mut w, &r.settings, false)?;
             w.epoch += 1;
         }
         // The issuer, if joined to it, starts the next episode at once (no INTERRUPTED step).

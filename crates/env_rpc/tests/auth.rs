@@ -13,7 +13,7 @@ use coadapt_core::conformance::trace;
 use coadapt_env_rpc::{BackgroundServer, EnvFactory, RemoteEnv, RemoteOptions};
 
 fn robot() -> EnvFactory {
-    Arc::new(|| coadapt_robots::make("pendulum").map_err(|e| e.to_string()))
+    coadapt_env_rpc::plain(|| coadapt_robots::make("pendulum").map_err(|e| e.to_string()))
 }
 
 fn options(auth: ClientAuth) -> RemoteOptions {

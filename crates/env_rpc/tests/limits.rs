@@ -3,14 +3,13 @@
 
 use std::io::Read;
 use std::net::TcpStream;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use coadapt_core::Env;
 use coadapt_env_rpc::{BackgroundServer, EnvFactory, RemoteEnv, RemoteOptions, ServerLimits};
 
 fn pendulum() -> EnvFactory {
-    Arc::new(|| coadapt_robots::make("pendulum").map_err(|e| e.to_string()))
+    coadapt_env_rpc::plain(|| coadapt_robots::make("pendulum").map_err(|e| e.to_string()))
 }
 
 fn quick() -> RemoteOptions {

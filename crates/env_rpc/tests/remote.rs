@@ -10,7 +10,7 @@ use coadapt_core::{BoxSpace, Env, EnvError, EnvSpec, Step};
 use coadapt_env_rpc::{BackgroundServer, EnvFactory, RemoteEnv, RemoteOptions};
 
 fn robot(name: &'static str) -> EnvFactory {
-    Arc::new(move || coadapt_robots::make(name).map_err(|e| e.to_string()))
+    coadapt_env_rpc::plain(move || coadapt_robots::make(name).map_err(|e| e.to_string()))
 }
 
 fn quick() -> RemoteOptions {
@@ -53,6 +53,36 @@ fn a_served_robot_gives_the_same_episodes_as_in_process() {
     }
 }
 
+/// A client's `[world]` reaches a served robot as CreateWorld settings: the served half-cheetah
+/// on a slippery floor steps exactly as the local one on that floor, unlike the one on its own
+/// floor; a setting the robot does not take, or a value it cannot have, is refused at connect,
+/// named. The world is made again the same way on every reconnection.
+#[test]
+fn a_clients_world_settings_build_the_served_robots_world() {
+    let factory: EnvFactory = Arc::new(|settings: &coadapt_env_rpc::WorldSettings| {
+        let world = coadapt_robots::World::from_settings(settings)?;
+        coadapt_robots::make_in("half-cheetah", &world).map_err(|e| e.to_string())
+    });
+    let server = BackgroundServer::start("127.0.0.1:0", factory).unwrap();
+    let slippery = coadapt_robots::World { friction: Some(0.05), ..coadapt_robots::World::default() };
+    let with = |settings: Vec<(String, f32)>| RemoteOptions { world_settings: settings, ..quick() };
+    let mut remote = RemoteEnv::connect(&server.url(), with(vec![("friction".into(), 0.05)])).unwrap();
+    let mut local = coadapt_robots::make_in("half-cheetah", &slippery).unwrap();
+    let mut own = coadapt_robots::make("half-cheetah").unwrap();
+    let design = vec![1.0; 6];
+    let a = trace(&mut *local, 3, &design, 2, 300).unwrap();
+    let b = trace(&mut remote, 3, &design, 2, 300).unwrap();
+    assert_eq!(a, b, "the served robot is in the client's world");
+    assert_ne!(a, trace(&mut *own, 3, &design, 2, 300).unwrap(), "the friction changed the run");
+    for (settings, words) in [
+        (vec![("gravity".to_string(), 1.0)], "unknown world setting `gravity`"),
+        (vec![("friction".to_string(), -1.0)], "world.friction: -1 is not a finite number >= 0"),
+    ] {
+        let e = RemoteEnv::connect(&server.url(), with(settings)).err().unwrap().to_string();
+        assert!(e.contains(words) && e.contains("code 3"), "{e}");
+    }
+}
+
 /// A toy robot that misbehaves on cue: `bad_at` steps into an episode its observation (or
 /// reward) turns NaN, or its step stalls for `stall`.
 struct Faulty {
@@ -66,7 +96,7 @@ struct Faulty {
 
 impl Faulty {
     fn factory(bad_at: usize, nan_reward: bool, stall: Duration) -> EnvFactory {
-        Arc::new(move || {
+        coadapt_env_rpc::plain(move || {
             let spec = EnvSpec {
                 name: "faulty".into(),
                 state_dim: 2,
@@ -194,7 +224,7 @@ fn connecting_to_nothing_or_to_a_silent_socket_fails_within_the_deadline() {
 fn worlds_die_with_their_connection() {
     let calls = Arc::new(AtomicUsize::new(0));
     let c = calls.clone();
-    let factory: EnvFactory = Arc::new(move || {
+    let factory: EnvFactory = coadapt_env_rpc::plain(move || {
         c.fetch_add(1, Ordering::Relaxed);
         coadapt_robots::make("pendulum").map_err(|e| e.to_string())
     });

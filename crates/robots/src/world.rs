@@ -81,6 +81,26 @@ impl World {
         self.friction.unwrap_or(own)
     }
 
+    /// The world a served robot's CreateWorld settings describe ([`World::settings`] read
+    /// back), refusing a name it does not know and values no robot can have.
+    pub fn from_settings(settings: &[(String, f32)]) -> Result<Self, String> {
+        let mut w = Self::default();
+        for (name, v) in settings {
+            match name.as_str() {
+                "friction" => w.friction = Some(*v),
+                "actuator-scale" => w.actuator_scale = *v,
+                "torso-mass-scale" => w.torso_mass_scale = *v,
+                other => {
+                    return Err(format!(
+                        "unknown world setting `{other}` (this robot's worlds take `design`, `seed`, `friction`, `actuator-scale` and `torso-mass-scale`)"
+                    ));
+                }
+            }
+        }
+        w.check().map_err(|e| e.to_string())?;
+        Ok(w)
+    }
+
     /// The values that differ from the robot's own, named as in a config file: what a robot
     /// served over dm_env_rpc receives as CreateWorld settings.
     pub fn settings(&self) -> Vec<(&'static str, f32)> {
@@ -118,5 +138,10 @@ mod tests {
         let e = World { friction: Some(1.0), ..World::default() }.check_unchanged("pendulum").unwrap_err();
         assert_eq!(e.to_string(), "world.friction: pendulum has no ground to change (leave it unset)");
         assert!(toml::from_str::<World>("gravity = 3").is_err());
+        let w = World { friction: Some(0.7), torso_mass_scale: 2.0, ..World::default() };
+        let named: Vec<(String, f32)> = w.settings().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
+        assert_eq!(World::from_settings(&named).unwrap(), w);
+        assert!(World::from_settings(&[("gravity".into(), 1.0)]).unwrap_err().contains("`gravity`"));
+        assert!(World::from_settings(&[("friction".into(), -1.0)]).unwrap_err().starts_with("world.friction: -1"));
     }
 }
