@@ -64,6 +64,12 @@ pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bo
                 }
                 Ok(o)
             }
+            // The learner broke because a role went away (its links closed) and that role's
+            // failure is one a restart cannot mend (a setting, a full disk): that is the cause.
+            (Err(e), Some(first)) if e.exit_code().is_none() && first.exit_code().is_some() => {
+                coadapt_log::logln!("warning: the learner then stopped: {e:#}");
+                Err(first)
+            }
             (Err(e), Some(first)) => Err(e.context(format!("first role failure: {first:#}"))),
             (Err(e), None) => Err(e),
         }
