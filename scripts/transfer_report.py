@@ -74,6 +74,14 @@ def main():
     frictions = [float(x) for x in flag("--frictions", "0.1,0.2,0.8,1.6").split(",")]
     found = runs(root)
     data = {k: read(p, target) for k, p in found.items()}
+    sources = sorted(n for n in os.listdir(root) if re.match(r"^transfer-src-seed\d+$", n) and os.path.isfile(os.path.join(root, n, "summary.json")))
+    print(f"| source (friction 0.4) | designs | episodes to {target:g} | designs to {target:g} | best eval return | quality of chosen designs |")
+    print("|---|---|---|---|---|---|")
+    for n in sources:
+        r = read(os.path.join(root, n), target)
+        reached = r["reached"] or ("not reached", "-")
+        print(f"| {n} | {r['designs']} | {reached[0]} | {reached[1]} | {r['best']:.1f} | {r['quality']:.1f} |")
+    print()
     print(f"| target friction | arm | seeds | reached {target:g} | episodes to {target:g} | designs to {target:g} | best eval return | quality of chosen designs |")
     print("|---|---|---|---|---|---|---|---|")
     for y in frictions:
