@@ -1,6 +1,8 @@
 //! The coadapt learner: reinforcement learning on faer networks.
 //!
 //! # Layout
+//! - [`action_space`]: latent design-dependent action spaces (thesis 6.2, Eq. 6.1): the
+//!   Q-weighted action autoencoder and correlated exploration through its decoder.
 //! - [`config`]: [`SacConfig`] and [`DdpgConfig`], the reference hyper-parameters as defaults;
 //!   [`ConfigError`], a run's setting (schedule, flow, snapshots) that cannot work.
 //! - [`networks`]: network shapes (critic `[obs, action] -> 1`, Gaussian and deterministic
@@ -23,6 +25,7 @@
 //! - [`train`]: RL on one environment and one design (`coadapt train`), writing `episodes.csv`;
 //!   [`render`]: an episode of a robot with a trained policy as an animated GIF (`coadapt render`).
 
+pub mod action_space;
 pub mod agent;
 pub mod coadapt;
 pub mod config;
