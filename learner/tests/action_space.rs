@@ -7,7 +7,7 @@
 //! piecewise linear (a perturbation that flips a unit straddles a kink and is skipped; the test
 //! asserts few are).
 
-#![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::excessive_precision)] // tests: a panic is the failure report
 
 use coadapt_learner::action_space::{ActionAutoencoder, ActionSpaceConfig, weights};
 use rand::{Rng, SeedableRng};
@@ -15,6 +15,8 @@ use rand_distr::StandardNormal;
 use rand_pcg::Pcg64Mcg;
 
 const H: f32 = 3e-3;
+
+include!("reference/action_space_values.txt");
 
 fn randn(rng: &mut Pcg64Mcg, n: usize, scale: f32) -> Vec<f32> {
     (0..n).map(|_| scale * rng.sample::<f32, _>(StandardNormal)).collect()
@@ -151,4 +153,38 @@ fn exploration_is_the_policys_action_at_z_0_and_a_file_round_trips() {
     assert_eq!(back.decoder().1, ae.decoder().1);
     let mut wrong = ActionAutoencoder::new(4, 2, ActionSpaceConfig { hidden: vec![8], ..ActionSpaceConfig::default() }, 1).unwrap();
     assert!(wrong.load(&path).unwrap_err().to_string().contains("encoder"));
+}
+
+/// Eq. 6.1's loss, latent codes, decoded actions and both gradients against PyTorch (float64) on
+/// fixed weights: `reference/action_space.py`, output pasted verbatim in
+/// `reference/action_space_values.txt`. Our side is f32: each vector to 1e-5 of its largest
+/// magnitude (a few dozen multiply-adds per value, and a norm and a tanh).
+#[test]
+fn eq_6_1_matches_pytorch() {
+    let (obs_dim, act_dim, rows) = (4, 3, 6);
+    let cfg = ActionSpaceConfig { latent_dim: 2, hidden: vec![8, 6], ..ActionSpaceConfig::default() };
+    let mut ae = ActionAutoencoder::new(obs_dim, act_dim, cfg, 1).unwrap();
+    let p = |n: usize, scale: f64, offset: f64| -> Vec<f32> { (0..n).map(|i| (scale * (0.37 * i as f64 + offset).sin()) as f32).collect() };
+    let x = |r: usize, d: usize, scale: f64, offset: f64| -> Vec<f32> {
+        (0..r * d).map(|k| (scale * (0.11 * k as f64 + offset).cos()) as f32).collect()
+    };
+    let (ne, nd) = (ae.encoder().1.len(), ae.decoder().1.len());
+    ae.set_params(&p(ne, 0.5, 0.4), &p(nd, 0.5, 0.9));
+    let (obs, act) = (x(rows, obs_dim, 1.0, 0.3), x(rows, act_dim, 0.8, 1.1));
+    let q: Vec<f32> = (0..rows).map(|i| (2.0 * (0.7 * i as f64 + 0.2).cos()) as f32).collect();
+    let loss = ae.loss_and_gradients(&obs, &act, &weights(&q), rows);
+    let close = |name: &str, ours: &[f32], reference: &[f64]| {
+        assert_eq!(ours.len(), reference.len(), "{name}: length");
+        let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for (i, (o, r)) in ours.iter().zip(reference).enumerate() {
+            assert!((f64::from(*o) - r).abs() <= 1e-5 * scale, "{name}[{i}]: ours {o} vs PyTorch {r} (scale {scale})");
+        }
+    };
+    assert!((loss - AE_LOSS).abs() <= 1e-5 * AE_LOSS.abs(), "loss: ours {loss} vs PyTorch {AE_LOSS}");
+    let (ge, gd) = (ae.gradients().0.to_vec(), ae.gradients().1.to_vec());
+    close("encoder gradient", &ge, &AE_GRAD_ENCODER);
+    close("decoder gradient", &gd, &AE_GRAD_DECODER);
+    let z = ae.encode(&obs, &act, rows);
+    close("z", &z, &AE_Z);
+    close("decoded", &ae.decode(&obs, &z, rows), &AE_DECODED);
 }
