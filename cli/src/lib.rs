@@ -25,6 +25,7 @@
 //! - [`exit`]: exit codes from the libraries' errors; [`progress`]: the shutdown flag set by
 //!   Ctrl-C and SIGTERM.
 
+pub mod action_space;
 pub mod actor_procs;
 pub mod bench;
 pub mod confirm;
@@ -61,6 +62,7 @@ pub enum Command {
     Optimizer(role_cmd::OptimizerArgs),
     Confirm(confirm::ConfirmArgs),
     Plot(plot::PlotArgs),
+    ActionSpace(action_space::ActionSpaceArgs),
     Train(train::TrainArgs),
     Render(render::RenderArgs),
     EnvServe(env_serve::EnvServeArgs),
@@ -99,6 +101,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Optimizer(args) => role_cmd::optimizer(args),
         Command::Confirm(args) => confirm::run(args),
         Command::Plot(args) => plot::run(args),
+        Command::ActionSpace(args) => action_space::run(args),
         Command::Train(args) => train::run(args),
         Command::Render(args) => render::run(args),
         Command::EnvServe(args) => env_serve::run(args),

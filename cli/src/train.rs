@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
-use coadapt_learner::train::{self, TrainConfig, UpdateSchedule};
+use coadapt_learner::train::{self, LatentExploration, TrainConfig, UpdateSchedule};
 use coadapt_learner::{Algo, Exploration};
 
 use crate::progress::shutdown_on_ctrl_c;
@@ -90,6 +90,15 @@ pub struct TrainArgs {
     /// Start from the networks of this checkpoint (e.g. runs/.../checkpoint.safetensors).
     #[arg(long)]
     pub init_weights: Option<PathBuf>,
+    /// SAC: explore with correlated noise through this learned action space (an
+    /// action_space.safetensors of `coadapt action-space`, thesis 6.2): the policy's mean action
+    /// plus beta (d(z, s, xi) - d(0, s, xi)), z ~ N(0, I) at every step, instead of sampling the
+    /// policy's Gaussian (sets latent-exploration.action-space).
+    #[arg(long, value_name = "FILE")]
+    pub latent_exploration: Option<PathBuf>,
+    /// The latent perturbation's scale beta (sets latent-exploration.beta; default 0.5).
+    #[arg(long, requires = "latent_exploration")]
+    pub latent_beta: Option<f32>,
     /// Run directory (default: runs/<env>-<algo>-seed<seed>-<unix time>).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -167,6 +176,13 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if let Some(w) = &args.init_weights {
         cfg.init_weights = Some(w.clone());
+    }
+    if let Some(file) = &args.latent_exploration {
+        let beta = cfg.latent_exploration.as_ref().map_or(0.5, |l| l.beta);
+        cfg.latent_exploration = Some(LatentExploration { action_space: file.clone(), beta });
+    }
+    if let (Some(b), Some(l)) = (args.latent_beta, cfg.latent_exploration.as_mut()) {
+        l.beta = b;
     }
     if args.stop_at_target {
         if cfg.target_return.is_none() {

@@ -18,11 +18,14 @@
 //!   gRPC health.
 //! - [`serve`]: a run's design critic for the design service (a running learner's, or a
 //!   finished run's for `coadapt serve`).
+//! - [`action_space`]: `coadapt action-space`, the latent design-dependent action space (thesis
+//!   6.2) learned from a run's experience, with Fig. 6.1 and 6.2.
 //! - [`transfer`]: `[init-population]`, a run that starts with another run's population
 //!   networks (thesis section 6.1), the source checked against this run.
 //! - [`plot`]: the run directory's SVG plots (`coadapt plot`, and at the end of a run).
 //! - `error`: the short forms of the fleet's [`AppError`] this crate writes (`bail!`, `bail_config!`).
 
+pub mod action_space;
 pub mod config;
 pub mod design_live;
 pub mod error;

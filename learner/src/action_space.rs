@@ -262,6 +262,30 @@ impl ActionAutoencoder {
         out
     }
 
+    /// The autoencoder in `path` (written by [`Self::save`]), its latent and hidden sizes read
+    /// from the file; refused unless it reads observations of `obs_dim` and actions of `act_dim`.
+    pub fn from_file(path: &std::path::Path, obs_dim: usize, act_dim: usize) -> Result<Self, NnError> {
+        let nets = coadapt_nn::load_networks(path)?;
+        let enc = nets.iter().find(|n| n.name == "encoder").ok_or_else(|| NnError::MissingNetwork {
+            path: path.display().to_string(),
+            name: "encoder".into(),
+            available: nets.iter().map(|n| n.name.clone()).collect::<Vec<_>>().join(", "),
+        })?;
+        let sizes = enc.mlp.sizes();
+        let (latent_dim, hidden) = (sizes[sizes.len() - 1], sizes[1..sizes.len() - 1].to_vec());
+        if sizes[0] != act_dim + obs_dim {
+            return Err(NnError::ShapeMismatch {
+                path: path.display().to_string(),
+                name: "encoder".into(),
+                found: sizes.to_vec(),
+                expected: [vec![act_dim + obs_dim], hidden, vec![latent_dim]].concat(),
+            });
+        }
+        let mut ae = Self::new(obs_dim, act_dim, ActionSpaceConfig { latent_dim, hidden, ..ActionSpaceConfig::default() }, 0)?;
+        ae.load(path)?;
+        Ok(ae)
+    }
+
     /// Writes both networks to one safetensors file (`encoder`, `decoder`).
     pub fn save(&self, path: &std::path::Path) -> Result<(), NnError> {
         coadapt_nn::save_networks(path, &[("encoder", &self.enc, &self.theta_e), ("decoder", &self.dec, &self.theta_d)])

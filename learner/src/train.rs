@@ -53,8 +53,29 @@ pub struct TrainConfig {
     /// non-finite observation) before training stops; a failed episode's transitions are
     /// taken back out of the replay buffer and the episode is run again.
     pub env_retries: u32,
+    /// SAC only: explore with correlated noise through a learned action space (thesis 6.2)
+    /// instead of sampling the policy's Gaussian (absent: SAC's own exploration).
+    pub latent_exploration: Option<LatentExploration>,
     pub sac: SacConfig,
     pub ddpg: DdpgConfig,
+}
+
+/// `[latent-exploration]`: act with the policy's mean action plus
+/// `beta (d(z, o) - d(0, o))`, `z ~ N(0, I)` drawn at every step, `d` the decoder of an action
+/// autoencoder written by `coadapt action-space` (its observation and action widths must be
+/// this environment's).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct LatentExploration {
+    /// The autoencoder's file (`action_space.safetensors`).
+    pub action_space: PathBuf,
+    /// The perturbation's scale.
+    #[serde(default = "default_beta")]
+    pub beta: f32,
+}
+
+fn default_beta() -> f32 {
+    0.5
 }
 
 impl Default for TrainConfig {
@@ -74,6 +95,7 @@ impl Default for TrainConfig {
             stop_at_target: false,
             init_weights: None,
             env_retries: 5,
+            latent_exploration: None,
             sac: SacConfig::default(),
             ddpg: DdpgConfig::default(),
         }
@@ -128,6 +150,14 @@ impl TrainConfig {
         }
         if self.algo == Algo::Sac && !(self.sac.alpha.is_finite() && self.sac.alpha > 0.0) {
             return bad("alpha", format!("{} must be positive", self.sac.alpha));
+        }
+        if let Some(l) = &self.latent_exploration {
+            if self.algo != Algo::Sac {
+                return bad("latent-exploration", "is SAC's exploration (DDPG explores with its own noise)".into());
+            }
+            if !(l.beta.is_finite() && l.beta >= 0.0) {
+                return bad("latent-exploration.beta", format!("{} is not a finite number >= 0", l.beta));
+            }
         }
         Ok(())
     }
@@ -217,6 +247,15 @@ pub fn run(
     let mut replay = ReplayBuffer::new(obs_dim, act_dim, cfg.replay_capacity);
     let mut batch = Batch::new(agent.batch_size(), obs_dim, act_dim);
     let mut rng = rng(cfg.seed, 2);
+    let mut latent = match &cfg.latent_exploration {
+        Some(l) => {
+            let ae = crate::action_space::ActionAutoencoder::from_file(&l.action_space, obs_dim, act_dim)
+                .map_err(|e| TrainError::Config { field: "latent-exploration.action-space", why: e.to_string() })?;
+            let z = vec![0.0f32; ae.latent_dim()];
+            Some((ae, l.beta, z, vec![0.0f32; act_dim]))
+        }
+        None => None,
+    };
 
     let csv_path = run_dir.join("episodes.csv");
     let io = |path: &Path| {
@@ -247,6 +286,12 @@ pub fn run(
         while failed.is_none() {
             if step < cfg.learning_starts {
                 spec.action.sample(&mut rng, &mut action);
+            } else if let Some((ae, beta, z, mean)) = latent.as_mut() {
+                agent.act(&obs, false, mean);
+                for v in z.iter_mut() {
+                    *v = rand::Rng::sample(&mut rng, rand_distr::StandardNormal);
+                }
+                action.copy_from_slice(&ae.explore(&obs, mean, z, *beta));
             } else {
                 agent.act(&obs, true, &mut action);
             }

@@ -10,11 +10,11 @@ use plotters::prelude::*;
 
 use super::{DesignBest, EpisodeRow, LandscapeDesign, LandscapePoint, best_so_far};
 
-type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
+pub(super) type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 
 /// What drawing can fail with: plotters' own error (into a string: only a bug);
 /// [`write_svg`] says which figure.
-type Drawn<T = ()> = Result<T, DrawingAreaErrorKind<std::io::Error>>;
+pub(super) type Drawn<T = ()> = Result<T, DrawingAreaErrorKind<std::io::Error>>;
 
 /// Draws into an SVG string with `draw`, then writes it to `path`.
 pub(super) fn write_svg(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> Drawn) -> crate::Result<()> {
@@ -28,7 +28,7 @@ pub(super) fn write_svg(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) 
 }
 
 /// The perceptually uniform viridis colour map at `t` in [0, 1] (5 stops, linear in between).
-fn viridis(t: f64) -> RGBColor {
+pub(super) fn viridis(t: f64) -> RGBColor {
     const STOPS: [(f64, f64, f64); 5] =
         [(68.0, 1.0, 84.0), (59.0, 82.0, 139.0), (33.0, 145.0, 140.0), (94.0, 201.0, 98.0), (253.0, 231.0, 37.0)];
     let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 };
@@ -77,12 +77,12 @@ fn integer_label(v: &f64) -> String {
 }
 
 /// A short number for a label.
-fn fmt_num(v: f64) -> String {
+pub(super) fn fmt_num(v: f64) -> String {
     if v != 0.0 && (v.abs() >= 1e5 || v.abs() < 1e-2) { format!("{v:.3e}") } else { format!("{v:.3}") }
 }
 
 /// A vertical colour bar in `area` (pixel coordinates) from `lo` (bottom) to `hi` (top).
-fn colour_bar(area: &Area, title: &str, lo: &str, hi: &str) -> Drawn {
+pub(super) fn colour_bar(area: &Area, title: &str, lo: &str, hi: &str) -> Drawn {
     let h = area.dim_in_pixel().1;
     let (x0, x1) = (10i32, 34i32);
     let (top, bottom) = (60i32, h as i32 - 60);
@@ -315,7 +315,7 @@ pub(super) fn landscape_plot(root: &Area, points: &[LandscapePoint], tried: &[La
 }
 
 /// The range of finite coordinates, made non-empty.
-fn bounds(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
+pub(super) fn bounds(values: impl IntoIterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.into_iter().filter(|v| v.is_finite()) {
         lo = lo.min(v);

@@ -39,6 +39,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Context, bail};
 
+pub mod action_space;
 mod csv;
 mod figures;
 
