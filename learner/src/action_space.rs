@@ -111,7 +111,7 @@ impl ActionAutoencoder {
         Ok(Self {
             obs_dim,
             act_dim,
-            adam_e: Adam::new(enc.n_params(), adam.clone()),
+            adam_e: Adam::new(enc.n_params(), adam),
             adam_d: Adam::new(dec.n_params(), adam),
             grad_e: enc.zeros(),
             grad_d: dec.zeros(),
