@@ -208,7 +208,7 @@ fn broadcast(b: &Bench<'_>, kind: TransportKind, n: usize) -> Result<(), AppErro
     let mut version = 0u64;
     let publish = |l: &mut Learner, version: u64| -> Result<(), AppError> {
         let policy = (0..len).map(|i| (i as f32 * 1e-4) + version as f32).collect();
-        l.links.acting_weights.publish(Weights { version, policy, q1: vec![], q2: vec![] })?;
+        l.links.acting_weights.publish(Weights { version, policy, q1: vec![], q2: vec![], heads: vec![] })?;
         Ok(())
     };
     // Until every peer has answered once, they are still starting.

@@ -324,6 +324,9 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
     let bad = dir.join("pessimism.toml");
     std::fs::write(&bad, tiny.replace("[optimizer]\n", "[optimizer]\npessimism = -1.0\n")).unwrap();
     let bad = bad.to_str().unwrap();
+    let critics = dir.join("critics.toml");
+    std::fs::write(&critics, tiny.replace("[learner]\n", "[learner]\npopulation-critics = 1\n")).unwrap();
+    let critics = critics.to_str().unwrap();
     let good = coadapt_test_support::workspace_file("configs/half-cheetah-tiny.toml");
     let good = good.to_str().unwrap();
     let search = coadapt_test_support::workspace_file("configs/search/planar-groups1.toml");
@@ -333,6 +336,7 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
         (v(&["train", "--steps", "0"]), "steps"),
         (v(&["search-actor", "--config", search, "--id", "0", "--transport", "in-process"]), "fleet.transport"),
         (v(&["run", "--config", bad, "--transport", "in-process"]), "optimizer.pessimism: -1 is not a finite number >= 0"),
+        (v(&["run", "--config", critics, "--transport", "in-process"]), "learner.population-critics: 1 is fewer than 2"),
         // The supervisor stops the fleet naming the role; the role's log names the setting.
         (
             v(&["run", "--config", bad, "--transport", "shm", "--actors", "1"]),

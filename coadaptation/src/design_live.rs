@@ -103,8 +103,8 @@ impl Builder {
     fn request(&self, r: &DesignRequest) {
         let w = self.weights.lock().unwrap_or_else(|e| e.into_inner());
         let Some(w) = w.as_ref().filter(|w| w.version == r.weights_version) else { return };
-        match crate::serve::design_model(&self.cfg, &self.spec, w.version, self.run_id.clone(), (&w.policy, &w.q1, &w.q2), &r.start_states)
-        {
+        let critics: Vec<&[f32]> = [&w.q1, &w.q2].into_iter().chain(&w.heads).map(Vec::as_slice).collect();
+        match crate::serve::design_model(&self.cfg, &self.spec, w.version, self.run_id.clone(), (&w.policy, &critics), &r.start_states) {
             Ok(m) => self.source.set_model(m),
             // The optimiser gets the same networks and states: it will say what is wrong.
             Err(e) => coadapt_log::logln!("learner: design service: no model for weights version {}: {e:#}", w.version),

@@ -14,14 +14,14 @@ use coadapt_learner::{coadapt, networks, run_dir, snapshot};
 
 use crate::error::Context;
 
-/// Eq. 5.6 of `cfg`'s run with population networks `(policy, q1, q2)` of `version` over
-/// `start_states`, with the run's `optimizer.q`: what the optimiser maximises.
+/// Eq. 5.6 of `cfg`'s run with population networks `(policy, [q1, q2, heads...])` of `version`
+/// over `start_states`, with the run's `optimizer.q`: what the optimiser maximises.
 pub fn design_model(
     cfg: &crate::RunConfig,
     spec: &coadapt_core::EnvSpec,
     version: u64,
     run_id: String,
-    (phi, q1, q2): (&[f32], &[f32], &[f32]),
+    (phi, critics): (&[f32], &[&[f32]]),
     start_states: &[f32],
 ) -> crate::Result<DesignModel> {
     let hidden = &cfg.learner.sac.hidden;
@@ -32,21 +32,26 @@ pub fn design_model(
         QModeConfig::MinOfTwin => QMode::MinOfTwin,
         QModeConfig::Pessimistic => QMode::MeanMinusKStd(cfg.optimizer.pessimism),
     };
-    // Both critics always: Q1 alone scores under `q1`, and the pair gives each score's
-    // disagreement.
-    let thetas: Vec<&[f32]> = vec![q1, q2];
+    // Every critic always: Q1 alone scores under `q1`, min-of-twin takes the first two, and
+    // all of them give each score's disagreement (over the ensemble when the run has one).
+    let thetas = critics;
     DesignModel::new(
         spec.name.clone(),
         spec.design_names.clone(),
         spec.design.clone(),
         version,
         run_id,
-        (&policy, phi, &critic, &thetas),
+        (&policy, phi, &critic, thetas),
         start_states,
         spec.state_dim,
         mode,
     )
     .map_err(crate::AppError::library)
+}
+
+/// The population agent's critics: the twin, then any ensemble heads.
+fn population_critics(pop: &coadapt_learner::Sac) -> Vec<&[f32]> {
+    [pop.critic_params(0).0, pop.critic_params(1).0].into_iter().chain((0..pop.extra_heads()).map(|i| pop.head_params(i))).collect()
 }
 
 /// A designs.csv row as the service's history row.
@@ -84,14 +89,7 @@ pub fn load(dir: &Path) -> crate::Result<StaticSource> {
         .sample_start_states(n)
         .ok_or_else(|| crate::error::failed!("snapshot {}: no start states yet (no episode finished)", from.display()))?;
     let pop = fear.agent(ActingPolicy::Population);
-    let model = design_model(
-        &cfg,
-        spec,
-        version,
-        manifest.run_id.clone(),
-        (pop.policy_params(), pop.critic_params(0).0, pop.critic_params(1).0),
-        &starts,
-    )?;
+    let model = design_model(&cfg, spec, version, manifest.run_id.clone(), (pop.policy_params(), &population_critics(pop)), &starts)?;
     let path = dir.join("designs.csv");
     let len = std::fs::metadata(&path).with_context(|| format!("reading {}", path.display()))?.len();
     let history = run_dir::read_designs(&path, len)?.into_iter().map(history_row).collect();

@@ -17,17 +17,22 @@ pub enum QMode {
     First,
     /// min(Q1, Q2), as the SAC targets use.
     MinOfTwin,
-    /// Pessimism where the critics disagree: per row, the twin critics' mean minus `k` times
-    /// their standard deviation, `(Q1 + Q2)/2 - k |Q1 - Q2|/2` (`k = 1` is `MinOfTwin`). The
-    /// twins are trained on the same data from different initialisations, so they agree where
-    /// data constrain them and drift apart where the critic extrapolates: far from the
-    /// designs tried, where Q1 alone overestimates.
+    /// Pessimism where the critics disagree: per row, the critics' mean minus `k` times their
+    /// standard deviation (over the heads, population form), for the twin `(Q1 + Q2)/2 - k
+    /// |Q1 - Q2|/2` (`k = 1` is `MinOfTwin`), and over every head given when there are more
+    /// (an ensemble lower confidence bound). The heads are trained on the same data from
+    /// different initialisations, so they agree where data constrain them and drift apart
+    /// where the critic extrapolates: far from the designs tried, where Q1 alone overestimates.
     MeanMinusKStd(f32),
 }
 
 impl QMode {
     fn critics(self) -> usize {
-        if self == QMode::First { 1 } else { 2 }
+        match self {
+            QMode::First => 1,
+            QMode::MinOfTwin => 2,
+            QMode::MeanMinusKStd(_) => usize::MAX,
+        }
     }
 }
 
@@ -130,13 +135,15 @@ pub struct ObjectiveWorkspace {
     actions: Vec<f32>,
     design_part: Vec<f32>,
     q: Vec<f32>,
+    /// Welford's sum of squared deviations per row, over more than two heads.
+    q_m2: Vec<f32>,
     act_pi: Activations,
     act_q: Activations,
 }
 
 impl DesignObjective {
-    /// `policy` outputs `[mean, log_std]` (the SAC head); `thetas` holds one critic (Q1) or two
-    /// (Q1, Q2). `start_states` is `n_states x obs_dim`; the design occupies the observation
+    /// `policy` outputs `[mean, log_std]` (the SAC head); `thetas` holds one critic (Q1), two
+    /// (Q1, Q2) or the twin and ensemble heads. `start_states` is `n_states x obs_dim`; the design occupies the observation
     /// columns `design_at..design_at + design_dim`. Both networks need a hidden layer.
     pub fn new(
         policy: &Mlp,
@@ -159,8 +166,8 @@ impl DesignObjective {
         if policy.layers().len() < 2 || critic.layers().len() < 2 {
             return shape("networks", "policy and critic need at least one hidden layer".into());
         }
-        if thetas.is_empty() || thetas.len() > 2 || thetas.iter().any(|t| t.len() != critic.n_params()) {
-            return shape("critic parameters", "need one or two parameter vectors of the critic's size".into());
+        if thetas.is_empty() || thetas.iter().any(|t| t.len() != critic.n_params()) {
+            return shape("critic parameters", "need one or more parameter vectors of the critic's size".into());
         }
         if phi.len() != policy.n_params() {
             return shape("policy parameters", format!("{} values, expected {}", phi.len(), policy.n_params()));
@@ -280,9 +287,10 @@ impl DesignObjective {
         self.critics.len()
     }
 
-    /// How far the twin critics disagree about each design: per design the mean over the start
-    /// states of `|Q1 - Q2| / 2` (the two heads are that far either side of their mean), into
-    /// `out` (`particles`), on this thread. `false` (and `out` untouched) with one head.
+    /// How far the critics disagree about each design: per design the mean over the start
+    /// states of their standard deviation over the heads (population form: for the twin
+    /// `|Q1 - Q2| / 2`, the two heads are that far either side of their mean), into `out`
+    /// (`particles`), on this thread. `false` (and `out` untouched) with one head.
     pub fn disagreement(&self, designs: &[f32], chunk_rows: usize, out: &mut [f32], ws: &mut ObjectiveWorkspace) -> bool {
         if self.critics.len() < 2 {
             return false;
@@ -292,7 +300,7 @@ impl DesignObjective {
         let per_chunk = (chunk_rows / n).max(1);
         let mut mean_rows = Vec::new();
         for (o, d) in out.chunks_mut(per_chunk).zip(designs.chunks(per_chunk * self.design_dim)) {
-            // Per row: (Q1 + Q2)/2 with k = 0, and (Q1 + Q2)/2 - |Q1 - Q2|/2 with k = 1.
+            // Per row: the mean with k = 0, and the mean minus one sd with k = 1.
             self.rows(d, QMode::MeanMinusKStd(0.0), o.len(), ws);
             mean_rows.clear();
             mean_rows.extend_from_slice(&ws.q);
@@ -308,7 +316,7 @@ impl DesignObjective {
     fn rows(&self, designs: &[f32], mode: QMode, particles: usize, ws: &mut ObjectiveWorkspace) {
         let (n, act) = (self.n_states, self.act_dim);
         let rows = particles * n;
-        let ObjectiveWorkspace { h_actor, h_critic, actions, design_part, q, act_pi, act_q } = ws;
+        let ObjectiveWorkspace { h_actor, h_critic, actions, design_part, q, q_m2, act_pi, act_q } = ws;
         h_actor.resize(rows * self.actor.width, 0.0);
         self.first_layer(&self.actor, designs, h_actor, design_part, false);
         let mean = self.actor_tail.forward(&self.actor_tail_params, h_actor, rows, act_pi);
@@ -318,6 +326,14 @@ impl DesignObjective {
         }
         q.resize(rows, 0.0);
         let n_critics = mode.critics().min(self.critics.len());
+        // Over more than two heads, `q` holds the running mean and `q_m2` Welford's sum of
+        // squared deviations (a two-pass-free sd that keeps its digits when Q is large); the
+        // twin keeps its closed form, so its scores are the ones archived runs made.
+        let ensemble = matches!(mode, QMode::MeanMinusKStd(_)) && n_critics > 2;
+        if ensemble {
+            q_m2.clear();
+            q_m2.resize(rows, 0.0);
+        }
         for (i, split) in self.critics.iter().take(n_critics).enumerate() {
             h_critic.resize(rows * split.width, 0.0);
             // W_a a for every row, then the per-state and per-design parts on top.
@@ -333,6 +349,14 @@ impl DesignObjective {
             let qi = self.critic_tail.forward(&self.critic_tail_params[i], h_critic, rows, act_q);
             match (i, mode) {
                 (0, _) => q.copy_from_slice(qi),
+                (_, QMode::MeanMinusKStd(_)) if ensemble => {
+                    let c = (i + 1) as f32;
+                    for ((m, m2), x) in q.iter_mut().zip(q_m2.iter_mut()).zip(qi) {
+                        let delta = x - *m;
+                        *m += delta / c;
+                        *m2 += delta * (x - *m);
+                    }
+                }
                 (_, QMode::MeanMinusKStd(k)) => {
                     for (a, b) in q.iter_mut().zip(qi) {
                         *a = 0.5 * (*a + b) - k * 0.5 * (*a - b).abs();
@@ -343,6 +367,12 @@ impl DesignObjective {
                         *a = a.min(*b);
                     }
                 }
+            }
+        }
+        if let (true, QMode::MeanMinusKStd(k)) = (ensemble, mode) {
+            let c = n_critics as f32;
+            for (m, m2) in q.iter_mut().zip(q_m2.iter()) {
+                *m -= k * (m2.max(0.0) / c).sqrt();
             }
         }
     }

@@ -96,8 +96,10 @@ pub enum QModeConfig {
     Q1,
     /// min(Q1, Q2).
     MinOfTwin,
-    /// The twin critics' mean minus `pessimism` times their standard deviation: a design
-    /// objective that distrusts the critic where its two heads disagree (beyond the thesis).
+    /// The critics' mean minus `pessimism` times their standard deviation: a design objective
+    /// that distrusts the critic where its heads disagree (beyond the thesis). The heads are the
+    /// twin, and with `learner.population-critics` above 2 the ensemble heads too (a lower
+    /// confidence bound over an ensemble).
     Pessimistic,
 }
 
@@ -112,7 +114,7 @@ pub struct OptimizerConfig {
     pub explore: ExploreMethod,
     /// `q1` (the reference), `min-of-twin` or `pessimistic`.
     pub q: QModeConfig,
-    /// k of `q = "pessimistic"`: the objective is mean(Q1, Q2) - k std(Q1, Q2).
+    /// k of `q = "pessimistic"`: the objective is mean - k sd over the critics' heads.
     pub pessimism: f32,
     /// Cores for scoring the swarm over Q.
     pub cores: usize,
@@ -319,7 +321,10 @@ impl<'a> Optimizer<'a> {
     pub(crate) fn objective(&self, w: &Weights, start_states: &[f32]) -> Result<DesignObjective, ObjectiveError> {
         let thetas: Vec<&[f32]> = match self.cfg.q {
             QModeConfig::Q1 => vec![&w.q1],
-            QModeConfig::MinOfTwin | QModeConfig::Pessimistic => vec![&w.q1, &w.q2],
+            QModeConfig::MinOfTwin => vec![&w.q1, &w.q2],
+            // Every head the learner sends: the twin, and the ensemble heads of
+            // `learner.population-critics` when there are more.
+            QModeConfig::Pessimistic => [&w.q1, &w.q2].into_iter().chain(&w.heads).map(Vec::as_slice).collect(),
         };
         DesignObjective::new(
             &self.spec.policy,

@@ -91,3 +91,76 @@ fn mismatched_shapes_are_refused() {
     let wrong_critic = Mlp::new(&[6, 8, 1]).unwrap();
     assert!(DesignObjective::new(&policy, &phi, &wrong_critic, &[&wrong_critic.zeros()], &[0.0; 10], 3, 2).is_err());
 }
+
+/// With more heads than the twin, `MeanMinusKStd` is the mean minus k population sd over every
+/// head (an ensemble lower confidence bound), per row and then averaged over start states, and
+/// `disagreement` is the mean sd; the twin's own score only uses the first two heads. Heads
+/// offset by a large constant keep their spread's digits (Welford's update, not sum of squares).
+#[test]
+fn ensemble_heads_score_the_mean_minus_k_sd_over_every_head() {
+    let (obs, act, design_at, design_dim, n_states, particles) = (6, 2, 3, 3, 4, 9);
+    let mut rng = coadapt_core::rng(2, 0);
+    let policy = Mlp::new(&[obs, 12, 2 * act]).unwrap();
+    let critic = Mlp::new(&[obs + act, 12, 1]).unwrap();
+    let mut phi = policy.zeros();
+    policy.init(&mut phi, 0.5, &mut rng);
+    let heads: Vec<Vec<f32>> = (0..5)
+        .map(|_| {
+            let mut q = critic.zeros();
+            critic.init(&mut q, 0.5, &mut rng);
+            // Q around 3,000 with spreads of order 1: a sum of squares in f32 would lose them.
+            *q.last_mut().unwrap() = 3000.0;
+            q
+        })
+        .collect();
+    let thetas: Vec<&[f32]> = heads.iter().map(Vec::as_slice).collect();
+    let start: Vec<f32> = (0..n_states * obs).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let designs: Vec<f32> = (0..particles * design_dim).map(|_| rng.random_range(0.5..1.5)).collect();
+    let f = DesignObjective::new(&policy, &phi, &critic, &thetas, &start, design_at, design_dim).unwrap();
+    let twin = DesignObjective::new(&policy, &phi, &critic, &thetas[..2], &start, design_at, design_dim).unwrap();
+
+    // Per design: (mean over states of mean - k sd, mean over states of sd), in f64.
+    let naive = |xi: &[f32], k: f64| -> (f64, f64) {
+        let (mut lcb, mut sd_total) = (0.0, 0.0);
+        for s in start.chunks_exact(obs) {
+            let mut o = s.to_vec();
+            o[design_at..design_at + design_dim].copy_from_slice(xi);
+            let mut a_pi = policy.activations(1);
+            let mut a = vec![0.0; act];
+            squashed::mean_action(policy.forward(&phi, &o, 1, &mut a_pi), act, &mut a);
+            let x: Vec<f32> = o.iter().chain(&a).copied().collect();
+            let mut aq = critic.activations(1);
+            let v: Vec<f64> = heads.iter().map(|q| f64::from(critic.forward(q, &x, 1, &mut aq)[0])).collect();
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+            lcb += mean - k * sd;
+            sd_total += sd;
+        }
+        (lcb / n_states as f64, sd_total / n_states as f64)
+    };
+    let mut spread_seen = 0.0f64;
+    for (k, chunk_rows, cores) in [(2.0, 12, 2), (0.0, 64, 1), (1.0, 4, 3)] {
+        let mut out = vec![0.0; particles];
+        f.evaluate(&designs, QMode::MeanMinusKStd(k), chunk_rows, &mut out, &mut vec![ObjectiveWorkspace::default(); cores]);
+        for (p, xi) in designs.chunks_exact(design_dim).enumerate() {
+            let (expect, sd) = naive(xi, f64::from(k));
+            spread_seen = spread_seen.max(sd);
+            // f32 rows near 3,000 carry about 3e-4 of rounding each.
+            assert!((f64::from(out[p]) - expect).abs() < 2e-3, "k {k} particle {p}: {} vs {expect} (sd {sd})", out[p]);
+        }
+    }
+    assert!(spread_seen > 0.05, "the heads disagree enough for the test to mean something ({spread_seen})");
+    let mut gap = vec![0.0; particles];
+    assert!(f.disagreement(&designs, 12, &mut gap, &mut ObjectiveWorkspace::default()));
+    for (p, xi) in designs.chunks_exact(design_dim).enumerate() {
+        let (_, sd) = naive(xi, 0.0);
+        assert!((f64::from(gap[p]) - sd).abs() < 2e-3, "particle {p}: disagreement {} vs sd {sd}", gap[p]);
+    }
+    // The twin's modes read the first two heads only, whatever else is given.
+    for mode in [QMode::First, QMode::MinOfTwin] {
+        let (mut a, mut b) = (vec![0.0; particles], vec![0.0; particles]);
+        f.evaluate(&designs, mode, 64, &mut a, &mut [ObjectiveWorkspace::default()]);
+        twin.evaluate(&designs, mode, 64, &mut b, &mut [ObjectiveWorkspace::default()]);
+        assert_eq!(a, b, "{mode:?}");
+    }
+}

@@ -41,7 +41,13 @@ fn spec() -> OptimizerSpec {
 /// Weights of a small fixed pattern, so the objective over Q has some shape.
 fn weights(s: &OptimizerSpec) -> Weights {
     let wave = |n: usize, k: f32| (0..n).map(|i| 0.3 * (k * i as f32).sin()).collect::<Vec<f32>>();
-    Weights { version: 1, policy: wave(s.policy.n_params(), 0.7), q1: wave(s.critic.n_params(), 1.3), q2: wave(s.critic.n_params(), 2.1) }
+    Weights {
+        version: 1,
+        policy: wave(s.policy.n_params(), 0.7),
+        q1: wave(s.critic.n_params(), 1.3),
+        q2: wave(s.critic.n_params(), 2.1),
+        heads: vec![],
+    }
 }
 
 fn request(index: u32, kind: DesignKind, rejected: &[f32]) -> DesignRequest {

@@ -49,6 +49,7 @@ fn weights(s: &OptimizerSpec) -> Weights {
         policy: vec![0.01; s.policy.n_params()],
         q1: vec![0.01; s.critic.n_params()],
         q2: vec![0.01; s.critic.n_params()],
+        heads: vec![],
     }
 }
 
@@ -135,7 +136,13 @@ fn a_bad_pessimism_is_refused_naming_the_field() {
 /// Weights that make the objective depend on the design (not all equal).
 fn varied_weights(s: &OptimizerSpec) -> Weights {
     let v = |n: usize, k: f32| (0..n).map(|i| (i as f32 * k).sin() * 0.5).collect::<Vec<f32>>();
-    Weights { version: 1, policy: v(s.policy.n_params(), 0.7), q1: v(s.critic.n_params(), 1.3), q2: v(s.critic.n_params(), 2.1) }
+    Weights {
+        version: 1,
+        policy: v(s.policy.n_params(), 0.7),
+        q1: v(s.critic.n_params(), 1.3),
+        q2: v(s.critic.n_params(), 2.1),
+        heads: vec![],
+    }
 }
 
 #[test]

@@ -33,7 +33,7 @@ fn weights(s: &OptimizerSpec) -> Weights {
     q[l[0].w + 2] = 1.0; // hidden unit 0 <- xi_0
     q[l[0].w + 3] = 2.0; // hidden unit 0 <- xi_1
     q[l[1].w] = 1.0; // output <- hidden unit 0
-    Weights { version: 1, policy: s.policy.zeros(), q1: q.clone(), q2: q }
+    Weights { version: 1, policy: s.policy.zeros(), q1: q.clone(), q2: q, heads: vec![] }
 }
 
 fn request(chosen: Vec<f32>) -> DesignRequest {

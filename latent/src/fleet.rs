@@ -259,7 +259,7 @@ impl EpisodeRunner {
     pub fn episode(&mut self, agent: &mut LatentAgent, train: bool, seed: u64, index: u32) -> Result<FleetEpisode, FleetError> {
         agent.acting_weights(&mut self.weights);
         self.version += 1;
-        let w = Weights { version: self.version, policy: std::mem::take(&mut self.weights), q1: vec![], q2: vec![] };
+        let w = Weights { version: self.version, policy: std::mem::take(&mut self.weights), q1: vec![], q2: vec![], heads: vec![] };
         self.links.acting_weights.publish(w)?;
         let mode = if train { EpisodeMode::Train } else { EpisodeMode::Eval };
         let job = Job { design_index: index, design: vec![], mode, seed, min_weights_version: self.version };

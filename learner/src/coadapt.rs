@@ -360,6 +360,7 @@ pub fn run(
         }
     }
     snaps.cfg.validate()?;
+    fear_cfg.check()?;
     let fear = FearLearner::new(dims.obs, dims.act, fear_cfg.clone(), seed).map_err(|e| CoadaptError::Config(e.to_string()))?;
     let lease = flow.lease()?;
     let in_flight = flow.in_flight(actors);

@@ -15,6 +15,9 @@ pub enum ConfigError {
     /// `snapshot.keep` below 2.
     #[error("snapshot.keep: {0} is fewer than 2 (a damaged newest snapshot needs one to fall back to)")]
     TooFewSnapshots(usize),
+    /// `learner.population-critics` below 2.
+    #[error("learner.population-critics: {0} is fewer than 2 (the twin critics are SAC's; more are ensemble heads)")]
+    TooFewCritics(usize),
 }
 
 /// A setting fails the same way every time.

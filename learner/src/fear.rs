@@ -51,6 +51,12 @@ pub struct FearLearnerConfig {
     pub start_state_capacity: usize,
     /// Train only the population networks and act with them (the thesis's Fig. 5.7 ablation).
     pub population_only: bool,
+    /// Critics of the population pair: the twin (2, FEAR's) plus ensemble heads that regress on
+    /// the twin's Bellman target from their own initialisations and change nothing the twin, the
+    /// policy or an action does. The design optimiser's `q = "pessimistic"` scores a design by
+    /// the mean minus `pessimism` sd over all of them, and the design service reports their
+    /// disagreement (beyond the thesis: issue 28's ensemble lower confidence bound).
+    pub population_critics: usize,
     /// What a NaN or infinite loss or parameter does: `stop` the run (naming the update), or
     /// `roll-back` both network pairs (and their optimisers and generator) to where they were
     /// before the episode's updates, report it and go on; `max-rollbacks-in-a-row` roll-backs
@@ -82,9 +88,20 @@ impl Default for FearLearnerConfig {
             species_capacity: 1_000_000,
             start_state_capacity: 100_000,
             population_only: false,
+            population_critics: 2,
             on_non_finite: OnNonFinite::Stop,
             max_rollbacks_in_a_row: 5,
         }
+    }
+}
+
+impl FearLearnerConfig {
+    /// The settings that cannot work, named as a config file spells them.
+    pub fn check(&self) -> Result<(), crate::ConfigError> {
+        if self.population_critics < 2 {
+            return Err(crate::ConfigError::TooFewCritics(self.population_critics));
+        }
+        Ok(())
     }
 }
 
@@ -104,10 +121,17 @@ pub enum TrainError {
 
 /// The first non-finite loss of `l`, named.
 fn non_finite_loss(l: &SacLosses) -> Option<String> {
-    [("critic 1 loss", l.q1), ("critic 2 loss", l.q2), ("policy loss", l.policy), ("alpha loss", l.alpha), ("log pi", l.log_pi)]
-        .into_iter()
-        .find(|(_, v)| !v.is_finite())
-        .map(|(name, v)| format!("{name} ({v})"))
+    [
+        ("critic 1 loss", l.q1),
+        ("critic 2 loss", l.q2),
+        ("policy loss", l.policy),
+        ("alpha loss", l.alpha),
+        ("log pi", l.log_pi),
+        ("ensemble heads' loss", l.heads),
+    ]
+    .into_iter()
+    .find(|(_, v)| !v.is_finite())
+    .map(|(name, v)| format!("{name} ({v})"))
 }
 
 /// The first non-finite parameter of `sac`, named.
@@ -117,6 +141,12 @@ fn non_finite_param(sac: &Sac) -> Option<String> {
     [("policy", sac.policy_params()), ("critic 1", t1), ("critic 2", t2), ("target critic 1", b1), ("target critic 2", b2)]
         .into_iter()
         .find_map(|(name, p)| p.iter().position(|v| !v.is_finite()).map(|i| format!("{name} parameter {i} ({})", p[i])))
+        .or_else(|| {
+            (0..sac.extra_heads()).find_map(|h| {
+                let p = sac.head_params(h);
+                p.iter().position(|v| !v.is_finite()).map(|i| format!("ensemble head {} parameter {i} ({})", h + 1, p[i]))
+            })
+        })
         .or_else(|| (!sac.alpha().is_finite()).then(|| format!("alpha ({})", sac.alpha())))
 }
 
@@ -166,7 +196,8 @@ pub struct FearLearner {
 
 impl FearLearner {
     pub fn new(obs_dim: usize, act_dim: usize, cfg: FearLearnerConfig, seed: u64) -> Result<Self, NnError> {
-        let population = Sac::new(obs_dim, act_dim, cfg.sac.clone(), seed)?;
+        let heads = cfg.population_critics.saturating_sub(2);
+        let population = Sac::with_heads(obs_dim, act_dim, cfg.sac.clone(), seed, heads)?;
         let individual = Sac::new(obs_dim, act_dim, cfg.sac.clone(), seed.wrapping_add(1))?;
         Ok(Self {
             pop_replay: ReplayBuffer::new(obs_dim, act_dim, cfg.population_capacity),

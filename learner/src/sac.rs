@@ -29,6 +29,8 @@ pub struct SacLosses {
     pub alpha: f32,
     /// Mean log pi(a~|s) of the batch (minus the policy's entropy).
     pub log_pi: f32,
+    /// Mean loss of the ensemble heads (0 without heads).
+    pub heads: f32,
 }
 
 /// The scalars of [`Sac::save_state`].
@@ -39,6 +41,9 @@ struct SacScalars {
     updates: u64,
     #[serde(with = "crate::snapshot::bits::rng")]
     rng: Rng64,
+    /// Adam steps of each ensemble head (absent without heads, and in older snapshots).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    head_steps: Vec<u32>,
 }
 
 /// One critic with its target, optimiser and scratch: what one core owns during an update.
@@ -90,6 +95,8 @@ pub struct Sac {
     phi: Vec<f32>,
     phi_adam: Adam,
     critics: [Critic; 2],
+    /// Ensemble heads beyond the twin (see [`Sac::with_heads`]); empty in plain SAC.
+    heads: Vec<Head>,
     log_alpha: f32,
     alpha_adam: Adam,
     target_entropy: f32,
@@ -99,6 +106,56 @@ pub struct Sac {
     act_eps: Vec<f32>,
     rng: Rng64,
     updates: u64,
+}
+
+/// An ensemble head: a critic of the twin's shape that regresses on the twin's Bellman target
+/// and is never used by the policy or the target, so that the heads' spread at a state-action
+/// (or, for FEAR's population critic, a design) far from the data measures how little the data
+/// pins Q down there (a deep ensemble of independently initialised regressors).
+#[derive(Clone, Debug)]
+struct Head {
+    theta: Vec<f32>,
+    adam: Adam,
+    grad: Vec<f32>,
+    act: Activations,
+    x: Vec<f32>,
+    dy: Vec<f32>,
+}
+
+impl Head {
+    fn new(critic: &Mlp, cfg: &SacConfig, rng: &mut Rng64) -> Self {
+        let mut theta = critic.zeros();
+        critic.init_with(cfg.hidden_init, &mut theta, cfg.critic_final_init, rng);
+        Self {
+            adam: Adam::new(critic.n_params(), AdamConfig { lr: cfg.critic_lr, ..AdamConfig::default() }),
+            grad: critic.zeros(),
+            theta,
+            act: Activations::default(),
+            x: vec![],
+            dy: vec![],
+        }
+    }
+
+    /// J_Q(theta_h) = mean_b (Q_h(s_b, a_b) - y_b)^2: gradient, clamp, Adam (no target network:
+    /// the twin's target `y` is the head's).
+    fn fit(&mut self, critic: &Mlp, b: &Batch, y: &[f32], obs_dim: usize, act_dim: usize, cfg: &SacConfig) -> f32 {
+        let n = b.rows;
+        resize(&mut self.x, n * (obs_dim + act_dim));
+        resize(&mut self.dy, n);
+        concat_rows(&b.obs, obs_dim, &b.act, act_dim, &mut self.x);
+        let q = critic.forward(&self.theta, &self.x, n, &mut self.act);
+        let mut loss = 0.0;
+        for ((d, q), y) in self.dy.iter_mut().zip(q).zip(y) {
+            loss += (q - y) * (q - y);
+            *d = 2.0 * (q - y) / n as f32;
+        }
+        critic.backward(&self.theta, &self.x, &mut self.act, 0..n, &self.dy, Some(&mut self.grad), None);
+        if cfg.grad_clamp > 0.0 {
+            clamp_elementwise(&mut self.grad, cfg.grad_clamp);
+        }
+        self.adam.step(&mut self.theta, &self.grad);
+        loss / n as f32
+    }
 }
 
 impl Critic {
@@ -191,6 +248,7 @@ impl Sac {
             critic,
             phi,
             critics: [c1, c2],
+            heads: Vec::new(),
             work: PolicyWork::default(),
             act_ws: Activations::default(),
             act_eps: Vec::new(),
@@ -198,6 +256,28 @@ impl Sac {
             updates: 0,
             cfg,
         })
+    }
+
+    /// The agent with `extra` ensemble heads beside the twin critics, initialised from their own
+    /// generator stream (`seed`, stream 9), so the twin, the policy and every action are those of
+    /// [`Sac::new`] with the same seed: the heads only watch. Each update fits every head to the
+    /// twin's Bellman target on the same batch (one more forward and backward pass on the
+    /// batch per head, against three per twin critic).
+    pub fn with_heads(obs_dim: usize, act_dim: usize, cfg: SacConfig, seed: u64, extra: usize) -> Result<Self, NnError> {
+        let mut sac = Self::new(obs_dim, act_dim, cfg, seed)?;
+        let mut rng = coadapt_core::rng(seed, 9);
+        sac.heads = (0..extra).map(|_| Head::new(&sac.critic, &sac.cfg, &mut rng)).collect();
+        Ok(sac)
+    }
+
+    /// Ensemble heads beyond the twin.
+    pub fn extra_heads(&self) -> usize {
+        self.heads.len()
+    }
+
+    /// Ensemble head `i`'s parameters (`i < extra_heads()`).
+    pub fn head_params(&self, i: usize) -> &[f32] {
+        &self.heads[i].theta
     }
 
     pub fn alpha(&self) -> f32 {
@@ -251,6 +331,11 @@ impl Sac {
             c.theta_bar.copy_from_slice(&o.theta_bar);
             c.adam.reset();
         }
+        // Heads both agents have (FEAR's individual pair has none).
+        for (h, o) in self.heads.iter_mut().zip(&other.heads) {
+            h.theta.copy_from_slice(&o.theta);
+            h.adam.reset();
+        }
         self.phi_adam.reset();
         self.log_alpha = other.log_alpha;
         self.alpha_adam.reset();
@@ -288,7 +373,7 @@ impl Sac {
     /// test can reproduce it exactly against a reference.
     fn update_with_noise(&mut self, b: &Batch) -> SacLosses {
         let (n, act, obs) = (b.rows, self.act_dim, self.obs_dim);
-        let Self { cfg, policy, critic, phi, phi_adam, critics, log_alpha, alpha_adam, target_entropy, work: w, .. } = self;
+        let Self { cfg, policy, critic, phi, phi_adam, critics, heads, log_alpha, alpha_adam, target_entropy, work: w, .. } = self;
         for v in [&mut w.a_new, &mut w.a_next, &mut w.d_a] {
             resize(v, n * act);
         }
@@ -325,6 +410,15 @@ impl Sac {
             w.y[i] = cfg.reward_scale * b.rew[i] + cfg.gamma * (1.0 - b.done[i]) * v_next;
         }
 
+        // The ensemble heads regress on the same target; nothing else reads them.
+        let mut head_loss = 0.0;
+        for h in heads.iter_mut() {
+            head_loss += h.fit(critic, b, &w.y, obs, act, cfg);
+        }
+        if !heads.is_empty() {
+            head_loss /= heads.len() as f32;
+        }
+
         // J_pi(phi) = mean_b [alpha log pi(a~_b|s_b) - min_i Q_theta_i(s_b, a~_b)]; the gradient
         // reaches a~ through whichever critic is the smaller for that sample.
         let mut policy_loss = 0.0;
@@ -352,23 +446,23 @@ impl Sac {
             },
         );
         self.updates += 1;
-        SacLosses { q1: q1_loss, q2: q2_loss, policy: policy_loss / n as f32, alpha: alpha_loss, log_pi: mean_log_pi }
+        SacLosses { q1: q1_loss, q2: q2_loss, policy: policy_loss / n as f32, alpha: alpha_loss, log_pi: mean_log_pi, heads: head_loss }
     }
 
     /// Saves the policy, critics and targets as one safetensors file (`policy`, `q1`, `q2`,
-    /// `q1_target`, `q2_target`).
+    /// `q1_target`, `q2_target`, and `head1`... for ensemble heads).
     pub fn save(&self, path: &Path) -> Result<(), NnError> {
         let [c1, c2] = &self.critics;
-        coadapt_nn::save_networks(
-            path,
-            &[
-                ("policy", &self.policy, &self.phi),
-                ("q1", &self.critic, &c1.theta),
-                ("q2", &self.critic, &c2.theta),
-                ("q1_target", &self.critic, &c1.theta_bar),
-                ("q2_target", &self.critic, &c2.theta_bar),
-            ],
-        )
+        let names: Vec<String> = (1..=self.heads.len()).map(|i| format!("head{i}")).collect();
+        let mut nets = vec![
+            ("policy", &self.policy, self.phi.as_slice()),
+            ("q1", &self.critic, c1.theta.as_slice()),
+            ("q2", &self.critic, c2.theta.as_slice()),
+            ("q1_target", &self.critic, c1.theta_bar.as_slice()),
+            ("q2_target", &self.critic, c2.theta_bar.as_slice()),
+        ];
+        nets.extend(names.iter().zip(&self.heads).map(|(name, h)| (name.as_str(), &self.critic, h.theta.as_slice())));
+        coadapt_nn::save_networks(path, &nets)
     }
 
     /// Loads networks saved by [`Sac::save`]; the shapes must match this agent's.
@@ -379,6 +473,14 @@ impl Sac {
         let q = [get("q1", &self.critic)?, get("q2", &self.critic)?];
         let q_bar = [get("q1_target", &self.critic)?, get("q2_target", &self.critic)?];
         self.set_params(&phi, [&q[0], &q[1]], [&q_bar[0], &q_bar[1]]);
+        // Heads the file has; a file without them (a run without heads) leaves ours as they are.
+        for (i, h) in self.heads.iter_mut().enumerate() {
+            let name = format!("head{}", i + 1);
+            if nets.iter().any(|n| n.name == name) {
+                let theta = get(&name, &self.critic)?;
+                h.theta.copy_from_slice(&theta);
+            }
+        }
         Ok(())
     }
 
@@ -396,12 +498,24 @@ impl Sac {
             out.f32s(&format!("{prefix}.q{}.adam.m", i + 1), m)?;
             out.f32s(&format!("{prefix}.q{}.adam.v", i + 1), v)?;
         }
+        for (i, h) in self.heads.iter().enumerate() {
+            let (m, v) = h.adam.moments();
+            out.f32s(&format!("{prefix}.head{}", i + 1), &h.theta)?;
+            out.f32s(&format!("{prefix}.head{}.adam.m", i + 1), m)?;
+            out.f32s(&format!("{prefix}.head{}.adam.v", i + 1), v)?;
+        }
         let (m, v) = self.alpha_adam.moments();
         out.f32s(&format!("{prefix}.log_alpha.adam.m"), m)?;
         out.f32s(&format!("{prefix}.log_alpha.adam.v"), v)?;
         out.put(
             prefix,
-            &SacScalars { log_alpha: self.log_alpha, adam_steps: self.optimiser_steps(), updates: self.updates, rng: self.rng.clone() },
+            &SacScalars {
+                log_alpha: self.log_alpha,
+                adam_steps: self.optimiser_steps(),
+                updates: self.updates,
+                rng: self.rng.clone(),
+                head_steps: self.heads.iter().map(|h| h.adam.steps()).collect(),
+            },
         )
     }
 
@@ -422,6 +536,20 @@ impl Sac {
             c.adam.restore(&m, &v, s.adam_steps[1 + i]).map_err(|e| mismatch(e.to_string()))?;
             (c.theta, c.theta_bar) = (theta, theta_bar);
         }
+        if s.head_steps.len() != self.heads.len() {
+            return Err(mismatch(format!(
+                "the snapshot has {} ensemble heads beside the twin critics, this run's settings {} (learner.population-critics)",
+                s.head_steps.len(),
+                self.heads.len()
+            )));
+        }
+        for (i, h) in self.heads.iter_mut().enumerate() {
+            let theta = inp.f32s(&format!("{prefix}.head{}", i + 1), nc)?;
+            let m = inp.f32s(&format!("{prefix}.head{}.adam.m", i + 1), nc)?;
+            let v = inp.f32s(&format!("{prefix}.head{}.adam.v", i + 1), nc)?;
+            h.adam.restore(&m, &v, s.head_steps[i]).map_err(|e| mismatch(e.to_string()))?;
+            h.theta = theta;
+        }
         let (m, v) = (inp.f32s(&format!("{prefix}.log_alpha.adam.m"), 1)?, inp.f32s(&format!("{prefix}.log_alpha.adam.v"), 1)?);
         self.alpha_adam.restore(&m, &v, s.adam_steps[3]).map_err(|e| mismatch(e.to_string()))?;
         if !s.log_alpha.is_finite() {
@@ -441,6 +569,12 @@ impl Sac {
         self.work.eps_next.clear();
         self.work.eps_next.extend_from_slice(eps_next);
         self.update_with_noise(b)
+    }
+
+    #[doc(hidden)]
+    /// Test hook: overwrites ensemble head `i`'s parameters.
+    pub fn set_head_params(&mut self, i: usize, theta: &[f32]) {
+        self.heads[i].theta.copy_from_slice(theta);
     }
 
     #[doc(hidden)]

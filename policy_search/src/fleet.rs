@@ -197,7 +197,7 @@ impl RolloutRunner for FleetRunner {
         let version = *version;
         links
             .acting_weights
-            .publish(Weights { version, policy: rollouts.concat(), q1: vec![], q2: vec![] })
+            .publish(Weights { version, policy: rollouts.concat(), q1: vec![], q2: vec![], heads: vec![] })
             .map_err(|e| RolloutError(e.to_string()))?;
         for r in 0..n {
             let job = Job {

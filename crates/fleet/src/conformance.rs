@@ -111,7 +111,7 @@ fn job(seed: u64, version: u64) -> Job {
 }
 
 fn publish(links: &mut LearnerLinks, version: u64) {
-    links.acting_weights.publish(Weights { version, policy: vec![1.0; 4], q1: vec![], q2: vec![] }).expect("publish");
+    links.acting_weights.publish(Weights { version, policy: vec![1.0; 4], q1: vec![], q2: vec![], heads: vec![] }).expect("publish");
 }
 
 /// The episode's transitions as they came back, checked against its seed.

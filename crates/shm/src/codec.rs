@@ -42,6 +42,7 @@ const VERSION_TAG: u8 = 1 << 3; // field 1, varint
 const POLICY_TAG: u8 = (2 << 3) | 2; // field 2, length-delimited
 const Q1_TAG: u8 = (3 << 3) | 2;
 const Q2_TAG: u8 = (4 << 3) | 2;
+const HEAD_TAG: u8 = (5 << 3) | 2; // repeated: one field per head
 
 fn varint_len(v: u64) -> usize {
     (64 - (v | 1).leading_zeros() as usize).div_ceil(7)
@@ -62,10 +63,20 @@ fn field_len(values: &[f32]) -> usize {
     if n == 0 { 0 } else { 1 + varint_len(n as u64) + n }
 }
 
+/// A repeated field's element is written even when empty (prost keeps empty elements).
+fn element_len(values: &[f32]) -> usize {
+    let n = values.len() * 4;
+    1 + varint_len(n as u64) + n
+}
+
 fn put_f32s(out: &mut [u8], at: usize, tag: u8, values: &[f32]) -> usize {
     if values.is_empty() {
         return at;
     }
+    put_element(out, at, tag, values)
+}
+
+fn put_element(out: &mut [u8], at: usize, tag: u8, values: &[f32]) -> usize {
     out[at] = tag;
     let at = put_varint(out, at + 1, values.len() as u64 * 4);
     let end = at + values.len() * 4;
@@ -78,7 +89,8 @@ fn put_f32s(out: &mut [u8], at: usize, tag: u8, values: &[f32]) -> usize {
 impl Codec for Weights {
     fn write_with<'a>(&self, loan: impl FnOnce(usize) -> Result<&'a mut [u8], TransportError>) -> Result<(), TransportError> {
         let version_len = if self.version == 0 { 0 } else { 1 + varint_len(self.version) };
-        let len = version_len + field_len(&self.policy) + field_len(&self.q1) + field_len(&self.q2);
+        let heads_len: usize = self.heads.iter().map(|h| element_len(h)).sum();
+        let len = version_len + field_len(&self.policy) + field_len(&self.q1) + field_len(&self.q2) + heads_len;
         let out = loan(len)?;
         let mut at = 0;
         if self.version != 0 {
@@ -87,7 +99,10 @@ impl Codec for Weights {
         }
         at = put_f32s(out, at, POLICY_TAG, &self.policy);
         at = put_f32s(out, at, Q1_TAG, &self.q1);
-        put_f32s(out, at, Q2_TAG, &self.q2);
+        at = put_f32s(out, at, Q2_TAG, &self.q2);
+        for h in &self.heads {
+            at = put_element(out, at, HEAD_TAG, h);
+        }
         Ok(())
     }
 
@@ -133,9 +148,12 @@ mod tests {
     #[test]
     fn weights_are_written_exactly_as_prost_writes_them() {
         for w in [
-            Weights { version: 0, policy: vec![1.0], q1: vec![], q2: vec![] },
-            Weights { version: 1, policy: vec![0.5; 3], q1: vec![2.0; 40], q2: vec![-1.0; 40] },
-            Weights { version: u64::MAX, policy: (0..70_000).map(|i| i as f32 * 1e-3).collect(), q1: vec![], q2: vec![] },
+            Weights { version: 0, policy: vec![1.0], q1: vec![], q2: vec![], heads: vec![] },
+            Weights { version: 1, policy: vec![0.5; 3], q1: vec![2.0; 40], q2: vec![-1.0; 40], heads: vec![] },
+            Weights { version: u64::MAX, policy: (0..70_000).map(|i| i as f32 * 1e-3).collect(), q1: vec![], q2: vec![], heads: vec![] },
+            Weights { version: 7, policy: vec![0.5; 3], q1: vec![2.0; 40], q2: vec![-1.0; 40], heads: vec![vec![3.0; 40], vec![-4.5; 40]] },
+            // An empty head is still an element of the repeated field.
+            Weights { version: 8, policy: vec![0.5; 3], q1: vec![], q2: vec![], heads: vec![vec![]] },
         ] {
             let ours = encode(&w);
             assert_eq!(ours, w.encode(), "version {}", w.version);

@@ -31,7 +31,7 @@ pub fn chunk(i: u64) -> ExperienceChunk {
 /// Weights of `version`, `n` values.
 pub fn weights(version: u64, n: usize) -> Weights {
     let v = version as f32;
-    Weights { version, policy: (0..n).map(|i| v + i as f32 * 1e-3).collect(), q1: vec![v; 4], q2: vec![-v; 4] }
+    Weights { version, policy: (0..n).map(|i| v + i as f32 * 1e-3).collect(), q1: vec![v; 4], q2: vec![-v; 4], heads: vec![] }
 }
 
 /// Every accepted chunk arrives, once, in order, intact.

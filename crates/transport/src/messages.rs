@@ -42,13 +42,15 @@ pub trait Validate {
 }
 
 /// Versioned network weights: the policy, and for the design optimiser the twin critics
-/// (empty for actors, which only act).
-#[derive(Clone, Debug, PartialEq)]
+/// and any ensemble heads (empty for actors, which only act).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Weights {
     pub version: u64,
     pub policy: Vec<f32>,
     pub q1: Vec<f32>,
     pub q2: Vec<f32>,
+    /// Critics beyond the twin, each shaped as `q1` (`learner.population-critics`).
+    pub heads: Vec<Vec<f32>>,
 }
 
 impl Versioned for Weights {
@@ -65,9 +67,13 @@ impl Validate for Weights {
         if self.q1.len() != self.q2.len() {
             return Err(field("q2", format!("{} values but q1 has {}", self.q2.len(), self.q1.len())));
         }
+        if let Some(i) = self.heads.iter().position(|h| h.len() != self.q1.len()) {
+            return Err(field("heads", format!("head {} has {} values but q1 has {}", i + 1, self.heads[i].len(), self.q1.len())));
+        }
         finite("policy", &self.policy)?;
         finite("q1", &self.q1)?;
-        finite("q2", &self.q2)
+        finite("q2", &self.q2)?;
+        self.heads.iter().try_for_each(|h| finite("heads", h))
     }
 }
 

@@ -153,16 +153,31 @@ impl Wire for Weights {
     type Pb = pb::Weights;
 
     fn to_pb(&self) -> pb::Weights {
-        pb::Weights { version: self.version, policy: f32_bytes(&self.policy), q1: f32_bytes(&self.q1), q2: f32_bytes(&self.q2) }
+        pb::Weights {
+            version: self.version,
+            policy: f32_bytes(&self.policy),
+            q1: f32_bytes(&self.q1),
+            q2: f32_bytes(&self.q2),
+            heads: self.heads.iter().map(|h| f32_bytes(h)).collect(),
+        }
     }
 
     fn from_pb(pb: pb::Weights) -> Result<Self, WireError> {
-        let w = Weights { version: pb.version, policy: f32s("policy", &pb.policy)?, q1: f32s("q1", &pb.q1)?, q2: f32s("q2", &pb.q2)? };
+        let w = Weights {
+            version: pb.version,
+            policy: f32s("policy", &pb.policy)?,
+            q1: f32s("q1", &pb.q1)?,
+            q2: f32s("q2", &pb.q2)?,
+            heads: pb.heads.iter().map(|h| f32s("heads", h)).collect::<Result<_, _>>()?,
+        };
         if w.policy.is_empty() {
             return Err(err("policy", "no values"));
         }
         if w.q1.len() != w.q2.len() {
             return Err(err("q2", format!("{} values but q1 has {}", w.q2.len(), w.q1.len())));
+        }
+        if let Some(i) = w.heads.iter().position(|h| h.len() != w.q1.len()) {
+            return Err(err("heads", format!("head {} has {} values but q1 has {}", i + 1, w.heads[i].len(), w.q1.len())));
         }
         Ok(w)
     }

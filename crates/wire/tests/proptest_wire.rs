@@ -24,9 +24,9 @@ fn floats(len: impl Into<prop::collection::SizeRange>) -> impl Strategy<Value = 
 }
 
 fn weights() -> impl Strategy<Value = Weights> {
-    (any::<u64>(), floats(1..64), 0..32usize)
-        .prop_flat_map(|(version, policy, k)| (Just(version), Just(policy), floats(k), floats(k)))
-        .prop_map(|(version, policy, q1, q2)| Weights { version, policy, q1, q2 })
+    (any::<u64>(), floats(1..64), 0..32usize, 0..3usize)
+        .prop_flat_map(|(version, policy, k, h)| (Just(version), Just(policy), floats(k), floats(k), vec(floats(k), h)))
+        .prop_map(|(version, policy, q1, q2, heads)| Weights { version, policy, q1, q2, heads })
 }
 
 fn assignment(design: usize) -> impl Strategy<Value = Assignment> {
@@ -266,7 +266,7 @@ fn decode_everything(bytes: &[u8], d: &Dims, limits: &Limits) {
 /// length prefix, the shared-memory sample's size), so a cut message never reaches a decoder.
 #[test]
 fn a_cut_between_fields_is_a_different_message_not_the_original() {
-    let w = Weights { version: 3, policy: vec![1.0, 2.0], q1: vec![0.5], q2: vec![0.25] };
+    let w = Weights { version: 3, policy: vec![1.0, 2.0], q1: vec![0.5], q2: vec![0.25], heads: vec![] };
     let bytes = w.encode();
     let policy_end = field_boundaries(&bytes)[2];
     let cut = Weights::decode(&bytes[..policy_end], &Limits::default()).unwrap();

@@ -151,7 +151,7 @@ impl Learner<'_> {
         }
         self.republish = false;
         let policy = self.fear.agent(which).policy_params().to_vec();
-        self.links.acting_weights.publish(Weights { version: self.acting_version, policy, q1: vec![], q2: vec![] })?;
+        self.links.acting_weights.publish(Weights { version: self.acting_version, policy, q1: vec![], q2: vec![], heads: vec![] })?;
         self.acting_dirty = false;
         self.acting_which = Some(which);
         self.time.sending += t.elapsed().as_secs_f64();
@@ -166,6 +166,7 @@ impl Learner<'_> {
             policy: pop.policy_params().to_vec(),
             q1: pop.critic_params(0).0.to_vec(),
             q2: pop.critic_params(1).0.to_vec(),
+            heads: (0..pop.extra_heads()).map(|i| pop.head_params(i).to_vec()).collect(),
         };
         self.links.population_weights.publish(w)?;
         Ok(self.population_version)
