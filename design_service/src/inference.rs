@@ -1,8 +1,8 @@
 //! The Open Inference Protocol (KServe v2): the design critic as the model `design-critic`,
 //! input `design` FP32 `[N, D]`, outputs FP32 `[N, 1]`: `value` (Eq. 5.6, as Score's
 //! `objective`), `spread` (its standard deviation over the start states) and, when the served
-//! networks have the twin critics, `disagreement` (the mean over the start states of
-//! `|Q1 - Q2| / 2`). A request that names no output gets them all, as the protocol says.
+//! networks have two critics or more, `disagreement` (the mean over the start states of the
+//! critics' sd over their heads: `|Q1 - Q2| / 2` for the twin). A request that names no output gets them all, as the protocol says.
 
 use std::sync::Arc;
 

@@ -62,13 +62,13 @@ impl DesignModel {
         self.objective.evaluate_with_spread(designs, self.mode, 256, mean, spread, ws);
     }
 
-    /// Whether the model has the twin critics, so that [`Self::disagreement`] says something.
+    /// Whether the model has two critics or more, so that [`Self::disagreement`] says something.
     pub fn has_disagreement(&self) -> bool {
         self.objective.heads() >= 2
     }
 
-    /// The twin critics' disagreement about each design (the mean over the start states of
-    /// `|Q1 - Q2| / 2`) into `out`; `false` when the model has one critic.
+    /// The critics' disagreement about each design (the mean over the start states of their sd
+    /// over the heads: `|Q1 - Q2| / 2` for the twin) into `out`; `false` with one critic.
     pub fn disagreement(&self, designs: &[f32], out: &mut [f32], ws: &mut ObjectiveWorkspace) -> bool {
         self.objective.disagreement(designs, 256, out, ws)
     }

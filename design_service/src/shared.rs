@@ -131,7 +131,7 @@ impl Shared {
 pub(crate) struct Scores {
     pub mean: Vec<f32>,
     pub spread: Vec<f32>,
-    /// The twin critics' disagreement (`None`: not asked for, or one critic).
+    /// The critics' disagreement (`None`: not asked for, or one critic).
     pub disagreement: Option<Vec<f32>>,
 }
 
