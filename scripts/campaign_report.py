@@ -65,6 +65,26 @@ BOUNDS = {
 }
 
 
+def served_mujoco_box():
+    """The design box of the MuJoCo cheetah the bridge serves, read from the bridge's own
+    module (DESIGN_LOW, DESIGN_HIGH), so the report follows it."""
+    src = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "bridges", "python", "coadapt_bridge", "mujoco_half_cheetah.py")
+    text = open(src).read()
+    vals = {}
+    for name in ("DESIGN_LOW", "DESIGN_HIGH"):
+        m = re.search(rf"^{name}\s*=\s*\[([-0-9.eE]+)\]\s*\*\s*(\d+)\s*$", text, re.M)
+        if not m:
+            raise SystemExit(f"campaign_report: {src} has no `{name} = [x] * n` line")
+        vals[name] = [float(m.group(1))] * int(m.group(2))
+    return vals["DESIGN_LOW"], vals["DESIGN_HIGH"]
+
+
+# A served robot's address says nothing of its box: the runs of the MuJoCo cheetah through the
+# bridge (named mujoco-*, scripts/mujoco_lane.sh) are told by their directory's name.
+MUJOCO = "mujoco-half-cheetah (served)"
+BOUNDS[MUJOCO] = served_mujoco_box()
+
+
 def read_run(path):
     with open(os.path.join(path, "designs.csv")) as f:
         # A proposal rejected at the prototype step (schedule.confirm-designs) was never trained
@@ -76,6 +96,8 @@ def read_run(path):
         m = re.search(r'^env\s*=\s*"([^"]+)"', open(cfg).read(), re.M)
         if m:
             env = m.group(1)
+    if env.startswith("dm-env-rpc") and os.path.basename(os.path.normpath(path)).startswith("mujoco"):
+        env = MUJOCO
     out = []
     for r in rows:
         out.append({
