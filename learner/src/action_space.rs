@@ -240,13 +240,27 @@ impl ActionAutoencoder {
     /// Correlated exploration around the policy's action `pi` at observation `obs`:
     /// `pi + beta (d(z, o) - d(0, o))`, clipped to `[-1, 1]`, for one latent draw `z`.
     pub fn explore(&mut self, obs: &[f32], pi: &[f32], z: &[f32], beta: f32) -> Vec<f32> {
-        let zero = vec![0.0; self.cfg.latent_dim];
-        let mut both = z.to_vec();
-        both.extend_from_slice(&zero);
-        let obs2: Vec<f32> = obs.iter().chain(obs).copied().collect();
-        let d = self.decode(&obs2, &both, 2);
-        let n = self.act_dim;
-        (0..n).map(|k| (pi[k] + beta * (d[k] - d[n + k])).clamp(-1.0, 1.0)).collect()
+        let mut out = vec![0.0; self.act_dim];
+        self.explore_into(obs, pi, z, beta, &mut out);
+        out
+    }
+
+    /// [`Self::explore`] into `out` (`act_dim`), allocating nothing once the decoder's workspace
+    /// holds two rows: what an acting loop calls every step.
+    pub fn explore_into(&mut self, obs: &[f32], pi: &[f32], z: &[f32], beta: f32, out: &mut [f32]) {
+        let (n, nz) = (self.act_dim, self.cfg.latent_dim);
+        assert_eq!((obs.len(), pi.len(), z.len(), out.len()), (self.obs_dim, n, nz, n), "explore shapes");
+        self.grow(2);
+        // Rows [z, o] and [0, o] of the decoder's input, in its workspace.
+        self.dec_in.clear();
+        self.dec_in.extend_from_slice(z);
+        self.dec_in.extend_from_slice(obs);
+        self.dec_in.resize(self.dec_in.len() + nz, 0.0);
+        self.dec_in.extend_from_slice(obs);
+        let pre = self.dec.forward(&self.theta_d, &self.dec_in, 2, &mut self.act_d);
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = (pi[k] + beta * (pre[k].tanh() - pre[n + k].tanh())).clamp(-1.0, 1.0);
+        }
     }
 
     #[doc(hidden)]

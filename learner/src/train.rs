@@ -291,7 +291,7 @@ pub fn run(
                 for v in z.iter_mut() {
                     *v = rand::Rng::sample(&mut rng, rand_distr::StandardNormal);
                 }
-                action.copy_from_slice(&ae.explore(&obs, mean, z, *beta));
+                ae.explore_into(&obs, mean, z, *beta, &mut action);
             } else {
                 agent.act(&obs, true, &mut action);
             }
