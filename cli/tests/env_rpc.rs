@@ -10,7 +10,6 @@
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 fn workspace_file(rel: &str) -> PathBuf {
@@ -23,17 +22,7 @@ fn tmpdir(name: &str) -> PathBuf {
 
 /// The bridge's virtualenv (created on first use, then reused: the script checks a stamp).
 fn venv() -> &'static Path {
-    static VENV: OnceLock<PathBuf> = OnceLock::new();
-    VENV.get_or_init(|| {
-        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("py-bridge-venv");
-        let t = Instant::now();
-        let status = Command::new("bash").arg(workspace_file("bridges/python/setup_venv.sh")).arg(&dir).status().unwrap();
-        assert!(status.success(), "bridges/python/setup_venv.sh failed");
-        if t.elapsed() > Duration::from_secs(2) {
-            eprintln!("python bridge venv ready in {:?}", t.elapsed());
-        }
-        dir
-    })
+    coadapt_test_support::bridge_venv(env!("CARGO_TARGET_TMPDIR"))
 }
 
 /// A server process, killed when dropped.

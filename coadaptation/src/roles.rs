@@ -261,7 +261,13 @@ pub fn learner(
         snaps.transfer = transfer()?;
         RunWriter::create(dir).with_context(|| format!("creating run directory {}", dir.display()))?
     };
-    std::fs::write(dir.join("config.toml"), toml::to_string(cfg).map_err(AppError::library)?).context("writing config.toml")?;
+    let config_text = toml::to_string(cfg).map_err(AppError::library)?;
+    std::fs::write(dir.join("config.toml"), &config_text).context("writing config.toml")?;
+    writer.events().set_design_names(spec.design_names.clone());
+    if writer.episodes_bytes() <= coadapt_learner::run_dir::EPISODES_HEADER.len() as u64 + 1 {
+        // A fresh start (a resume has its config in the file already, at step 0).
+        writer.events().text("run/config", 0, &format!("```toml\n{config_text}```")).context("writing the event file")?;
+    }
     // Dropped when the run returns: Watch streams end, the server stops.
     let design_service = crate::design_live::start(cfg, spec, &run_id, links, &mut writer)?;
     // The operator may answer from another directory: name the run directory in full.

@@ -105,12 +105,72 @@ pub fn write_landscape(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOu
     f.flush()?;
     let mut f = std::io::BufWriter::new(std::fs::File::create(dir.join("landscape_designs.csv"))?);
     writeln!(f, "index,kind,pc1,pc2")?;
+    let mut tried = Vec::with_capacity(outcome.designs.len());
     for d in &outcome.designs {
         let p = pca.project(&d.design);
         writeln!(f, "{},{},{},{}", d.index, d.kind, p[0], p[1])?;
+        tried.push(p);
     }
     f.flush()?;
+    // The same landscape for TensorBoard's image dashboard (`run/landscape`), in a file of its
+    // own beside the run's event file (TensorBoard reads every event file of the directory).
+    let (w, h, rgb) = landscape_raster(n, &grid.pc, &scores, &tried);
+    let mut events = coadapt_tensorboard::EventWriter::create(dir, "landscape")?;
+    events.image("run/landscape", outcome.designs.len() as i64, coadapt_tensorboard::png_rgb(w, h, &rgb), w, h)?;
+    events.sync()?;
     Ok(())
+}
+
+/// Thesis Fig. 5.9 as an RGB raster: the grid's objective coloured from dark blue (low) through
+/// green to yellow (high), pc1 to the right and pc2 up, `CELL` pixels a grid point, and the
+/// designs tried as white dots with a black rim.
+fn landscape_raster(n: usize, pc: &[[f32; 2]], scores: &[f32], tried: &[[f32; 2]]) -> (u32, u32, Vec<u8>) {
+    const CELL: usize = 16;
+    let side = n * CELL;
+    let (lo, hi) = scores.iter().filter(|v| v.is_finite()).fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    // Viridis at five stops.
+    const STOPS: [[f32; 3]; 5] = [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
+    let colour = |v: f32| -> [u8; 3] {
+        let t = if v.is_finite() { ((v - lo) / span).clamp(0.0, 1.0) * 4.0 } else { 0.0 };
+        let i = (t.floor() as usize).min(3);
+        let f = t - i as f32;
+        let mut c = [0u8; 3];
+        for (k, c) in c.iter_mut().enumerate() {
+            *c = (STOPS[i][k] + f * (STOPS[i + 1][k] - STOPS[i][k])).round() as u8;
+        }
+        c
+    };
+    let mut rgb = vec![0u8; side * side * 3];
+    for (k, s) in scores.iter().enumerate().take(n * n) {
+        let (i1, i2) = (k % n, k / n);
+        let c = colour(*s);
+        for y in 0..CELL {
+            let row = (n - 1 - i2) * CELL + y;
+            for x in 0..CELL {
+                let at = (row * side + i1 * CELL + x) * 3;
+                rgb[at..at + 3].copy_from_slice(&c);
+            }
+        }
+    }
+    if n >= 2 && pc.len() >= n * n {
+        let (x0, x1, y0, y1) = (pc[0][0], pc[n - 1][0], pc[0][1], pc[n * (n - 1)][1]);
+        for p in tried {
+            let fx = if x1 > x0 { (p[0] - x0) / (x1 - x0) } else { 0.5 };
+            let fy = if y1 > y0 { (p[1] - y0) / (y1 - y0) } else { 0.5 };
+            let (cx, cy) = ((fx * (n - 1) as f32 + 0.5) * CELL as f32, ((1.0 - fy) * (n - 1) as f32 + 0.5) * CELL as f32);
+            for y in 0..side {
+                for x in 0..side {
+                    let d = ((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)).sqrt();
+                    if d <= 5.0 {
+                        let c = if d <= 3.5 { 255 } else { 0 };
+                        rgb[(y * side + x) * 3..(y * side + x) * 3 + 3].fill(c);
+                    }
+                }
+            }
+        }
+    }
+    (side as u32, side as u32, rgb)
 }
 
 /// What a finished learner leaves besides its rows: the design landscape, the plots, and the

@@ -393,6 +393,7 @@ pub fn run(
         time: LearnerTime::default(),
         dir: &dir,
         rejected: Vec::new(),
+        last_training: None,
     };
     let mut p = match snaps.resume.take() {
         Some(mut inp) => {
@@ -492,6 +493,7 @@ pub fn run(
                 seconds: seconds_before + start.elapsed().as_secs_f64(),
             };
             out.episode(&ep)?;
+            out.events().scalars(ep.global_episode as i64, &l.episode_scalars())?;
             on_event(&RunEvent::Episode { row: &ep, episodes_in_design: n });
             on_event(&RunEvent::Stats(&l.stats(index, p.global + 1, p.steps, c.policy_lag, snaps, p.resumes)));
             written += 1;
@@ -517,6 +519,7 @@ pub fn run(
         // An interrupted design drops what is still out; the actors' late chunks are ignored.
         l.fleet.forget_all();
         out.design(&row)?;
+        out.events().design_ended(&row)?;
         out.checkpoint(index, &l.fear)?;
         on_event(&RunEvent::DesignEnd { row: &row });
         p.rows.push(row);

@@ -37,6 +37,7 @@ pub mod networks;
 pub mod prototype;
 pub mod render;
 pub mod run_dir;
+pub mod run_events;
 pub mod sac;
 pub mod snapshot;
 pub mod train;

@@ -105,6 +105,8 @@ pub struct RunWriter {
     episodes_bytes: u64,
     /// Told each design row written (a running learner's design service).
     on_designs: Option<DesignsObserver>,
+    /// The TensorBoard event file (`crate::run_events`).
+    events: crate::run_events::RunEvents,
 }
 
 /// A callback given each row written to `designs.csv` (after it is written).
@@ -125,6 +127,9 @@ pub struct WrittenSoFar {
     pub designs_open: Vec<DesignRow>,
     /// Bytes of `episodes.csv`.
     pub episodes_bytes: u64,
+    /// The TensorBoard event file (absent in snapshots from before event files).
+    #[serde(default)]
+    pub events: Option<crate::run_events::EventsAt>,
 }
 
 /// Writes `text` to `path` through `path.tmp` (fsynced) and a rename, so a reader sees the old
@@ -243,6 +248,7 @@ impl RunWriter {
             episodes,
             episodes_bytes: header.len() as u64,
             on_designs: None,
+            events: crate::run_events::RunEvents::create(dir)?,
         })
     }
 
@@ -255,6 +261,7 @@ impl RunWriter {
         cut(&path, at.episodes_bytes)?;
         let episodes = BufWriter::new(File::options().append(true).open(&path)?);
         cut(&dir.join("designs.csv"), at.designs_closed)?;
+        let events = crate::run_events::RunEvents::resume(dir, at.events.as_ref())?;
         let w = Self {
             dir: dir.to_path_buf(),
             designs_closed: at.designs_closed,
@@ -262,6 +269,7 @@ impl RunWriter {
             episodes,
             episodes_bytes: at.episodes_bytes,
             on_designs: None,
+            events,
         };
         w.write_open_designs().map_err(|e| named(e, "writing", &dir.join("designs.csv")))?;
         Ok(w)
@@ -274,7 +282,12 @@ impl RunWriter {
 
     /// Where the files stand (for a snapshot; call [`RunWriter::sync`] first).
     pub fn written_so_far(&self) -> WrittenSoFar {
-        WrittenSoFar { designs_closed: self.designs_closed, designs_open: self.designs_open.clone(), episodes_bytes: self.episodes_bytes }
+        WrittenSoFar {
+            designs_closed: self.designs_closed,
+            designs_open: self.designs_open.clone(),
+            episodes_bytes: self.episodes_bytes,
+            events: Some(self.events.at()),
+        }
     }
 
     /// Every row of `designs.csv`, read back from the file (a resume does this once).
@@ -293,7 +306,13 @@ impl RunWriter {
     pub fn sync(&mut self) -> io::Result<()> {
         let path = self.dir.join("episodes.csv");
         self.episodes.flush().map_err(|e| named(e, "writing", &path))?;
-        self.episodes.get_ref().sync_all().map_err(|e| named(e, "syncing", &path))
+        self.episodes.get_ref().sync_all().map_err(|e| named(e, "syncing", &path))?;
+        self.events.sync()
+    }
+
+    /// The run's TensorBoard event file.
+    pub fn events(&mut self) -> &mut crate::run_events::RunEvents {
+        &mut self.events
     }
 
     pub fn dir(&self) -> &Path {
@@ -400,7 +419,17 @@ impl RunWriter {
         let named = |e| named(e, "appending a row to", &self.dir.join("episodes.csv"));
         self.episodes.write_all(line.as_bytes()).map_err(named)?;
         self.episodes_bytes += line.len() as u64;
-        self.episodes.flush().map_err(named)
+        self.episodes.flush().map_err(named)?;
+        let mut values = vec![
+            ("episode/return", f64::from(r.train_return)),
+            ("episode/policy_lag", r.policy_lag as f64),
+            ("episode/design", r.design as f64),
+            ("episode/env_steps", r.steps as f64),
+        ];
+        if let Some(e) = r.eval_return {
+            values.push(("episode/eval_return", f64::from(e)));
+        }
+        self.events.scalars(r.global_episode as i64, &values)
     }
 }
 

@@ -4,6 +4,8 @@
 //! - [`scratch`], [`scratch_dir`]: a per-process temporary directory, emptied first.
 //! - [`workspace_file`], [`read_config`]: files of the workspace (configs, reference scripts)
 //!   from any crate's tests.
+//! - [`bridge_venv`]: the Python bridge's virtualenv (dm-env-rpc, gymnasium, MuJoCo,
+//!   TensorBoard's reader), made once per target directory.
 //! - [`reference`]: the statistics our PyTorch reference scripts print of a tensor, and the
 //!   comparison against them.
 
@@ -60,6 +62,27 @@ pub fn scratch_dir(prefix: &str, name: &str) -> PathBuf {
 }
 
 /// `rel` under the workspace root (`configs/half-cheetah-tiny.toml`).
+/// The Python bridge's virtualenv under `target_tmpdir` (a test passes
+/// `env!("CARGO_TARGET_TMPDIR")`), created on first use by `bridges/python/setup_venv.sh` and
+/// reused after (the script checks a stamp, under a lock: test binaries may call it at once).
+pub fn bridge_venv(target_tmpdir: &str) -> &'static Path {
+    static VENV: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    VENV.get_or_init(|| {
+        let dir = PathBuf::from(target_tmpdir).join("py-bridge-venv");
+        let t = std::time::Instant::now();
+        let status = std::process::Command::new("bash")
+            .arg(workspace_file("bridges/python/setup_venv.sh"))
+            .arg(&dir)
+            .status()
+            .unwrap_or_else(|e| panic!("running bridges/python/setup_venv.sh: {e}"));
+        assert!(status.success(), "bridges/python/setup_venv.sh failed");
+        if t.elapsed() > std::time::Duration::from_secs(2) {
+            eprintln!("python bridge venv ready in {:?}", t.elapsed());
+        }
+        dir
+    })
+}
+
 pub fn workspace_file(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
 }

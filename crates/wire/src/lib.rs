@@ -43,6 +43,12 @@ pub mod google {
     }
 }
 
+/// TensorBoard's event-file schema, as much as coadapt writes (`proto/tensorboard/`).
+#[allow(clippy::all, missing_debug_implementations)]
+pub mod tensorboard {
+    tonic::include_proto!("tensorboard");
+}
+
 /// The Open Inference Protocol (KServe v2), package `inference` (`proto/inference`).
 #[allow(clippy::all, missing_debug_implementations)]
 pub mod inference {

@@ -125,6 +125,8 @@ pub(super) struct Learner<'a> {
     pub(super) dir: &'a Path,
     /// Designs the operator would not build, in order (`designs.csv` rows).
     pub(super) rejected: Vec<DesignRow>,
+    /// What the last episode's training did and how long it took (for the event file).
+    pub(super) last_training: Option<(crate::fear::EpisodeTraining, f64)>,
 }
 
 impl Learner<'_> {
@@ -231,7 +233,9 @@ impl Learner<'_> {
         }
         let t = Instant::now();
         let trained = self.fear.end_episode()?;
-        self.time.training += t.elapsed().as_secs_f64();
+        let took = t.elapsed().as_secs_f64();
+        self.time.training += took;
+        self.last_training = Some((trained.clone(), took));
         if let Some(why) = trained.rolled_back {
             self.time.rollbacks += 1;
             coadapt_log::logln!(
@@ -240,6 +244,37 @@ impl Learner<'_> {
         }
         self.acting_dirty = true;
         Ok(())
+    }
+
+    /// The learner's scalars after an episode (TensorBoard's `loss/*`, `train/*`, `time/*`):
+    /// the last update's losses and the episode's updates per second when it trained, the
+    /// entropy weights, and the time spent so far waiting, training and sending.
+    pub(super) fn episode_scalars(&self) -> Vec<(&'static str, f64)> {
+        let time = self.time();
+        let mut v = vec![
+            ("train/alpha_individual", f64::from(self.fear.agent(ActingPolicy::Individual).alpha())),
+            ("train/alpha_population", f64::from(self.fear.agent(ActingPolicy::Population).alpha())),
+            ("time/waiting_seconds", time.waiting),
+            ("time/training_seconds", time.training),
+            ("time/sending_seconds", time.sending),
+            ("train/replay_population", self.fear.population_transitions() as f64),
+        ];
+        if let Some((t, took)) = &self.last_training {
+            let updates = (t.individual_updates + t.population_updates) as f64;
+            if updates > 0.0 && *took > 0.0 {
+                v.push(("train/updates_per_second", updates / took));
+            }
+            if let Some(l) = &t.last {
+                v.extend([
+                    ("loss/critic1", f64::from(l.q1)),
+                    ("loss/critic2", f64::from(l.q2)),
+                    ("loss/policy", f64::from(l.policy)),
+                    ("loss/alpha", f64::from(l.alpha)),
+                    ("train/log_pi", f64::from(l.log_pi)),
+                ]);
+            }
+        }
+        v
     }
 
     /// Asks the optimiser for design `index`, telling it every design chosen and every one
