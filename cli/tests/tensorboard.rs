@@ -1,4 +1,4 @@
-//! TensorBoard event files of `coadapt run` (issue 32), read by TensorBoard's own reader (its
+//! TensorBoard event files of `coadapt run` and `coadapt train` (issue 32), read by TensorBoard's own reader (its
 //! EventAccumulator, in the bridge's virtualenv: `cli/tests/python/tb_check.py`): every tag of
 //! the README's list, steps strictly increasing, values equal to episodes.csv and designs.csv;
 //! a run killed with SIGKILL mid-run leaves a file the reader reads, a record torn in half
@@ -101,4 +101,17 @@ fn a_run_killed_mid_write_is_readable_and_resumes_without_a_step_twice() {
     assert_eq!(files.len(), 2, "the resumed run went on in its own file: {files:?}");
     let said = check(&out, &["--xi", XI]);
     assert!(said.contains("tb_check: ok, 14 episodes"), "{said}");
+}
+
+#[test]
+fn coadapt_train_writes_its_episodes_for_tensorboard_too() {
+    let dir = coadapt_test_support::scratch("cli", "tensorboard-train");
+    let out = dir.join("train");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["train", "--env", "pendulum", "--algo", "sac", "--steps", "1400", "--quiet", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = check(&out, &["--train"]);
+    assert!(said.contains("tb_check: ok, train, 7 episodes"), "{said}");
 }

@@ -5,7 +5,9 @@
 //! With `update-schedule = "per-episode"` the same gradient steps are taken in one burst when
 //! the episode ends, with the policy fixed during the episode: FEAR's schedule on one body
 //! (its learner trains after each episode), to tell the burst apart from the rest of FEAR.
-//! Every finished episode is appended (and flushed) to `episodes.csv` in the run directory, and
+//! Every finished episode is appended (and flushed) to `episodes.csv` in the run directory and
+//! to a TensorBoard event file beside it (`episode/*`, `loss/*`, `train/updates`, `time/seconds`
+//! at step = the episode's number), and
 //! the agent is checkpointed at the end and every `checkpoint-every` episodes, so a crash loses
 //! at most the episodes since the last checkpoint.
 
@@ -265,6 +267,10 @@ pub fn run(
     let mut csv = BufWriter::new(File::create(&csv_path).map_err(io(&csv_path))?);
     writeln!(csv, "episode,step,return,length,mean_return_last_10,wall_s").map_err(io(&csv_path))?;
     let ckpt = run_dir.join("checkpoint.safetensors");
+    // TensorBoard's view of the same rows (README, "TensorBoard"), flushed every episode.
+    let mut events = coadapt_tensorboard::EventWriter::create(run_dir, "coadapt")
+        .map_err(|source| TrainError::Io { path: run_dir.to_path_buf(), source })?;
+    let mut last_loss: Option<(f32, f32)> = None;
 
     let start = Instant::now();
     let mut obs = vec![0.0; obs_dim];
@@ -313,7 +319,7 @@ pub fn run(
                     UpdateSchedule::PerStep => {
                         for _ in 0..cfg.updates_per_step {
                             replay.sample(&mut rng, &mut batch)?;
-                            agent.update(&batch);
+                            last_loss = Some(agent.update(&batch));
                             updates += 1;
                         }
                     }
@@ -327,7 +333,7 @@ pub fn run(
         if failed.is_none() {
             for _ in 0..owed {
                 replay.sample(&mut rng, &mut batch)?;
-                agent.update(&batch);
+                last_loss = Some(agent.update(&batch));
                 updates += 1;
             }
         }
@@ -359,6 +365,21 @@ pub fn run(
         writeln!(csv, "{},{},{},{},{},{:.3}", rec.episode, rec.step, rec.episode_return, rec.length, rec.mean_return_last_10, rec.wall_s)
             .and_then(|_| csv.flush())
             .map_err(io(&csv_path))?;
+        let mut values = vec![
+            ("episode/return", f64::from(rec.episode_return)),
+            ("episode/length", rec.length as f64),
+            ("episode/mean_return_last_10", f64::from(rec.mean_return_last_10)),
+            ("episode/env_steps", rec.step as f64),
+            ("train/updates", updates as f64),
+            ("time/seconds", rec.wall_s),
+        ];
+        if let Some((critic, policy)) = last_loss {
+            values.extend([("loss/critic", f64::from(critic)), ("loss/policy", f64::from(policy))]);
+        }
+        events
+            .scalars(rec.episode as i64, &values)
+            .and_then(|()| events.flush())
+            .map_err(|source| TrainError::Io { path: events.path().to_path_buf(), source })?;
         on_episode(&rec);
         if reached.is_none() && returns.len() >= 10 && cfg.target_return.is_some_and(|t| mean10 > t) {
             reached = Some(step);

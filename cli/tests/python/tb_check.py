@@ -2,6 +2,7 @@
 EventAccumulator, as `tensorboard --logdir` does) and checks them against the run's CSV files.
 
 usage: tb_check.py RUN_DIR [--partial] [--xi NAME,NAME,...]
+       tb_check.py TRAIN_DIR --train      (a `coadapt train` directory: episode/* against its CSV)
 
 - every tag of the README's TensorBoard section is there (--partial: the episode tags only, for a
   run killed before its first design ended);
@@ -23,6 +24,22 @@ import sys
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 run = sys.argv[1]
+if "--train" in sys.argv[2:]:
+    # `coadapt train`: episode/* at step = the episode's number (1-based), equal to episodes.csv.
+    ea = EventAccumulator(run, size_guidance={"scalars": 0})
+    ea.Reload()
+    have = set(ea.Tags()["scalars"])
+    want = {"episode/return", "episode/length", "episode/mean_return_last_10", "episode/env_steps", "train/updates",
+            "time/seconds", "loss/critic", "loss/policy"}
+    assert want <= have, sorted(want - have)
+    rows = list(csv.DictReader(open(os.path.join(run, "episodes.csv"))))
+    for tag, col in [("episode/return", "return"), ("episode/length", "length"), ("episode/env_steps", "step"),
+                     ("episode/mean_return_last_10", "mean_return_last_10")]:
+        got = [(e.step, e.value) for e in ea.Scalars(tag)]
+        assert [s for s, _ in got] == [int(r["episode"]) for r in rows], (tag, got)
+        assert all(math.isclose(v, float(r[col]), rel_tol=1e-6, abs_tol=1e-6) for (_, v), r in zip(got, rows)), (tag, got)
+    print(f"tb_check: ok, train, {len(rows)} episodes")
+    sys.exit(0)
 partial = "--partial" in sys.argv[2:]
 xi_names = sys.argv[sys.argv.index("--xi") + 1].split(",") if "--xi" in sys.argv else []
 ea = EventAccumulator(run, size_guidance={"scalars": 0, "images": 0, "tensors": 0})
