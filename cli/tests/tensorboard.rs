@@ -1,4 +1,4 @@
-//! TensorBoard event files of `coadapt run` and `coadapt train` (issue 32), read by TensorBoard's own reader (its
+//! TensorBoard event files of `coadapt run`, `train`, `latent` and `search` (issue 32), read by TensorBoard's own reader (its
 //! EventAccumulator, in the bridge's virtualenv: `cli/tests/python/tb_check.py`): every tag of
 //! the README's list, steps strictly increasing, values equal to episodes.csv and designs.csv;
 //! a run killed with SIGKILL mid-run leaves a file the reader reads, a record torn in half
@@ -114,4 +114,30 @@ fn coadapt_train_writes_its_episodes_for_tensorboard_too() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let said = check(&out, &["--train"]);
     assert!(said.contains("tb_check: ok, train, 7 episodes"), "{said}");
+}
+
+#[test]
+fn latent_and_search_write_one_event_file_per_run_equal_to_their_csvs() {
+    let dir = coadapt_test_support::scratch("cli", "tensorboard-latent-search");
+    std::fs::create_dir_all(&dir).unwrap();
+    let latent = dir.join("latent");
+    let config = coadapt_test_support::workspace_file("configs/latent/pendulum-tiny.toml");
+    let emb = dir.join("emb.safetensors");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["latent", "--config", config.to_str().unwrap(), "--embedding", emb.to_str().unwrap(), "--out", latent.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = check(&latent, &["--latent"]);
+    assert!(said.contains("tb_check: ok, latent, 2 runs, 6 rows"), "{said}");
+
+    let search = dir.join("search");
+    let config = coadapt_test_support::workspace_file("configs/search/planar-groups1.toml");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["search", "--config", config.to_str().unwrap(), "--iterations", "3", "--runs", "2", "--out", search.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = check(&search, &["--search"]);
+    assert!(said.contains("tb_check: ok, search, 2 runs, 6 rows"), "{said}");
 }

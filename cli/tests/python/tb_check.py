@@ -3,6 +3,7 @@ EventAccumulator, as `tensorboard --logdir` does) and checks them against the ru
 
 usage: tb_check.py RUN_DIR [--partial] [--xi NAME,NAME,...]
        tb_check.py TRAIN_DIR --train      (a `coadapt train` directory: episode/* against its CSV)
+       tb_check.py OUT --latent | --search (run-R/ event files against episodes.csv / iterations.csv)
 
 - every tag of the README's TensorBoard section is there (--partial: the episode tags only, for a
   run killed before its first design ended);
@@ -24,6 +25,34 @@ import sys
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 run = sys.argv[1]
+PER_RUN = {
+    # coadapt latent: run-R/ per run, step = episode.
+    "--latent": ("episodes.csv", "episode", {"episode/return": "train_return", "episode/eval_return": "eval_return",
+                                             "episode/env_steps": "train_steps", "loss/model": "model_loss"}),
+    # coadapt search: run-R/ per run, step = iteration (0: the start's cost).
+    "--search": ("iterations.csv", "iteration", {"iteration/mean_policy_cost": "mean_policy_cost",
+                                                 "iteration/best_return": "best_return", "iteration/mean_return": "mean_return",
+                                                 "iteration/best_cost": "best_cost", "iteration/rollouts": "rollouts"}),
+}
+for flag, (name, step_col, tags) in PER_RUN.items():
+    if flag not in sys.argv[2:]:
+        continue
+    rows = list(csv.DictReader(open(os.path.join(run, name))))
+    runs = sorted({int(r["run"]) for r in rows})
+    for k in runs:
+        ea = EventAccumulator(os.path.join(run, f"run-{k}"), size_guidance={"scalars": 0})
+        ea.Reload()
+        mine = [r for r in rows if int(r["run"]) == k]
+        for tag, col in tags.items():
+            got = {e.step: e.value for e in ea.Scalars(tag)}
+            want = {int(r[step_col]): float(r[col]) for r in mine}
+            assert set(want) <= set(got), (k, tag, sorted(got), sorted(want))
+            steps = [e.step for e in ea.Scalars(tag)]
+            assert all(a < b for a, b in zip(steps, steps[1:])), (k, tag, steps)
+            for st, v in want.items():
+                assert math.isclose(got[st], v, rel_tol=1e-5, abs_tol=1e-5), (k, tag, st, got[st], v)
+    print(f"tb_check: ok, {flag[2:]}, {len(runs)} runs, {len(rows)} rows")
+    sys.exit(0)
 if "--train" in sys.argv[2:]:
     # `coadapt train`: episode/* at step = the episode's number (1-based), equal to episodes.csv.
     ea = EventAccumulator(run, size_guidance={"scalars": 0})

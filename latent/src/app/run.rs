@@ -191,6 +191,15 @@ pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) 
         let mut agent = LatentAgent::new(cfg.agent.clone(), emb.clone(), enc.clone(), cfg.camera.frames, act, seed, &mut rng)?;
         let dir = out.join(format!("run-{r}"));
         std::fs::create_dir_all(&dir).map_err(AppError::io(format!("creating {}", dir.display())))?;
+        // TensorBoard: one event file per run (`run-R/`). A resume starts run R over, so an
+        // event file it left is removed first: no step appears twice.
+        for e in std::fs::read_dir(&dir).map_err(AppError::io(format!("reading {}", dir.display())))?.flatten() {
+            if e.file_name().to_string_lossy().starts_with("events.out.tfevents.") {
+                std::fs::remove_file(e.path()).map_err(AppError::io(format!("removing {}", e.path().display())))?;
+            }
+        }
+        let mut events =
+            coadapt_tensorboard::EventWriter::create(&dir, "coadapt").map_err(AppError::io(format!("writing to {}", dir.display())))?;
         if cfg.demonstrations > 0 {
             let ok = demonstrate(&mut agent, &mut env, cfg.demonstrations, seed, cfg.episode_steps)?;
             agent.train(&mut rng);
@@ -229,6 +238,15 @@ pub fn run(cfg: &LatentConfig, out: &Path, resume: bool, shutdown: &AtomicBool) 
             writeln!(csv, "{r},{ep},{},{},{},{},{loss},{mean},{p90},{:.1}", tr.ret, ev.ret, tr.steps, ev.steps, t0.elapsed().as_secs_f64())
                 .and_then(|()| csv.flush())
                 .map_err(AppError::io("writing episodes.csv"))?;
+            let values = [
+                ("episode/return", f64::from(tr.ret)),
+                ("episode/eval_return", f64::from(ev.ret)),
+                ("episode/env_steps", tr.steps as f64),
+                ("loss/model", f64::from(loss)),
+                ("time/plan_ms_mean", mean),
+                ("time/plan_ms_p90", p90),
+            ];
+            events.scalars(ep as i64, &values).and_then(|()| events.flush()).map_err(AppError::io("writing the event file"))?;
             agent.save(&dir.join("agent.safetensors")).with_context(|| "writing the checkpoint")?;
             let plan = if fleet.is_some() { "on the actors".to_string() } else { format!("{mean:.1} ms/step") };
             coadapt_log::logln!(

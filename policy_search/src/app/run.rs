@@ -119,6 +119,15 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
         if r == 0 {
             history.record(&learner_w(&learner), learner.mean());
         }
+        // TensorBoard: one event file per run (`run-R/`), so the runs compare as TensorBoard runs.
+        let run_dir = out.join(format!("run-{r}"));
+        std::fs::create_dir_all(&run_dir).map_err(AppError::io(format!("creating {}", run_dir.display())))?;
+        let mut events = coadapt_tensorboard::EventWriter::create(&run_dir, "coadapt")
+            .map_err(AppError::io(format!("writing to {}", run_dir.display())))?;
+        events
+            .scalars(0, &[("iteration/mean_policy_cost", curve[0])])
+            .and_then(|()| events.flush())
+            .map_err(AppError::io("writing the event file"))?;
         let mut total_rollouts = 0;
         for it in 1..=cfg.iterations {
             if shutdown.load(Ordering::Relaxed) {
@@ -143,6 +152,14 @@ pub fn run(cfg: &SearchConfig, out: &Path, shutdown: &AtomicBool) -> Result<serd
             let best_cost = got.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
             let mean = got.iter().map(|x| x.0).sum::<f64>() / got.len().max(1) as f64;
             writeln!(iters, "{r},{it},{total_rollouts},{cost},{best},{mean},{best_cost}").map_err(iters_err())?;
+            let values = [
+                ("iteration/mean_policy_cost", cost),
+                ("iteration/best_return", best),
+                ("iteration/mean_return", mean),
+                ("iteration/best_cost", best_cost),
+                ("iteration/rollouts", total_rollouts as f64),
+            ];
+            events.scalars(it as i64, &values).and_then(|()| events.flush()).map_err(AppError::io("writing the event file"))?;
             if it == cfg.save_w_at
                 && let Learner::Groups(g) = &learner
             {
