@@ -2,7 +2,8 @@
 //! EventAccumulator, in the bridge's virtualenv: `cli/tests/python/tb_check.py`): every tag of
 //! the README's list, steps strictly increasing, values equal to episodes.csv and designs.csv;
 //! a run killed with SIGKILL mid-run leaves a file the reader reads, a record torn in half
-//! included; the run resumed continues its curves without a step written twice.
+//! included, and its plots as of its last design; the run resumed continues its curves without
+//! a step written twice.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
@@ -93,6 +94,12 @@ fn a_run_killed_mid_write_is_readable_and_resumes_without_a_step_twice() {
     run.kill().unwrap(); // SIGKILL
     run.wait().unwrap();
     check(&out, &["--partial"]);
+    // Killed before its end, the run has its plots all the same: they are redrawn whole at each
+    // design's end (issue 32 section 3), never left half-written.
+    for plot in ["learning_curves.svg", "best_return.svg"] {
+        let svg = std::fs::read_to_string(out.join("plots").join(plot)).unwrap();
+        assert!(svg.trim_end().ends_with("</svg>"), "{plot} is not whole");
+    }
 
     let o = Command::new(env!("CARGO_BIN_EXE_coadapt")).args(["run", "--resume", out.to_str().unwrap()]).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));

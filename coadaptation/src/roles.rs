@@ -292,6 +292,12 @@ pub fn learner(
             }
             e => print(e),
         }
+        // The plots as the run goes, not only at its end (each replaced whole).
+        if let RunEvent::DesignEnd { .. } = e
+            && let Err(err) = crate::plot::redraw_live(&full_dir)
+        {
+            coadapt_log::logln!("warning: plots not redrawn: {err:#}");
+        }
     };
     let outcome = coadapt::run(
         &cfg.schedule,

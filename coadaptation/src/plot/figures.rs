@@ -1,7 +1,7 @@
 //! Drawing the figures with plotters' SVG backend.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use coadapt_fleet::app::{AppError, Context};
 use plotters::coord::Shift;
@@ -24,7 +24,13 @@ pub(super) fn write_svg(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) 
         let drawn = root.fill(&WHITE).and_then(|()| draw(&root)).and_then(|()| root.present());
         drawn.map_err(|e| AppError::failed(e).context(format!("drawing {}", path.display())))?;
     }
-    std::fs::write(path, svg).with_context(|| format!("writing {}", path.display()))
+    // Aside, then renamed over the old file: a reader (a browser, the operator page) sees the
+    // old plot or the new one, never a part, also while the run redraws them.
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, svg).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
 }
 
 /// The perceptually uniform viridis colour map at `t` in [0, 1] (5 stops, linear in between).

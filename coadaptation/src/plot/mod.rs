@@ -86,6 +86,22 @@ fn dir_label(dir: &Path) -> String {
 /// whose input is missing or empty is skipped with a note on stderr; errors for an unreadable or
 /// malformed file, or when no plot could be drawn at all.
 pub fn draw_run(dir: &Path) -> crate::Result<Vec<PathBuf>> {
+    draw(dir, true)
+}
+
+/// [`draw_run`] while the run goes on (each design's end): the same files, each replaced
+/// whole (written aside and renamed, so a reader never sees half of one), without a line for
+/// each plot that has no data yet.
+pub fn redraw_live(dir: &Path) -> crate::Result<Vec<PathBuf>> {
+    draw(dir, false)
+}
+
+fn draw(dir: &Path, say_skips: bool) -> crate::Result<Vec<PathBuf>> {
+    let skip = |what: std::fmt::Arguments<'_>| {
+        if say_skips {
+            coadapt_log::logln!("{what}");
+        }
+    };
     let designs = read_designs(&dir.join("designs.csv"))?;
     let episodes = read_episodes(&dir.join("episodes.csv"))?;
     let landscape = read_landscape(&dir.join("landscape.csv"))?;
@@ -99,8 +115,8 @@ pub fn draw_run(dir: &Path) -> crate::Result<Vec<PathBuf>> {
 
     let out = plots.join("learning_curves.svg");
     match &episodes {
-        None => coadapt_log::logln!("skipping {}: no episodes.csv", out.display()),
-        Some(eps) if !eps.iter().any(|e| e.ret.is_some()) => coadapt_log::logln!("skipping {}: no episode returns yet", out.display()),
+        None => skip(format_args!("skipping {}: no episodes.csv", out.display())),
+        Some(eps) if !eps.iter().any(|e| e.ret.is_some()) => skip(format_args!("skipping {}: no episode returns yet", out.display())),
         Some(eps) => {
             write_svg(&out, (900, 560), |root| learning_curves(root, eps))?;
             written.push(out);
@@ -113,14 +129,14 @@ pub fn draw_run(dir: &Path) -> crate::Result<Vec<PathBuf>> {
         write_svg(&out, (900, 560), |root| best_return(root, &best))?;
         written.push(out);
     } else {
-        coadapt_log::logln!("skipping {}: no evaluation returns yet", out.display());
+        skip(format_args!("skipping {}: no evaluation returns yet", out.display()));
     }
 
     let out = plots.join("landscape.svg");
     match &landscape {
-        None => coadapt_log::logln!("skipping {}: no landscape.csv", out.display()),
+        None => skip(format_args!("skipping {}: no landscape.csv", out.display())),
         Some(points) if !points.iter().any(|p| p.objective.is_some()) => {
-            coadapt_log::logln!("skipping {}: landscape.csv has no objective values", out.display())
+            skip(format_args!("skipping {}: landscape.csv has no objective values", out.display()))
         }
         Some(points) => {
             let tried = landscape_designs.as_deref().unwrap_or(&[]);
