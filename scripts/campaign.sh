@@ -33,6 +33,11 @@ jobs=2
 if [ "${1:-}" = "-j" ]; then jobs=$2; shift 2; fi
 queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE}
 [ -f "$queue" ] || { echo "campaign: no queue file $queue" >&2; exit 2; }
+# runs/ lives beside the work tree (../runs, linked as runs): a session's checkout is laid anew
+# each time, and a machine that is kept then keeps the runs and their snapshots too.
+if [ ! -e runs ] && [ ! -L runs ]; then
+  mkdir -p ../runs && ln -s "$(cd ../runs && pwd)" runs
+fi
 root=runs/campaign
 mkdir -p "$root/configs"
 # A private copy: rebuilding the workspace during the campaign does not touch running runs.
