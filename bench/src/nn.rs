@@ -1,5 +1,7 @@
-//! `coadapt bench nn`: SAC updates per second (three network sizes, batch 256) and the design
-//! objective's forward throughput (700 particles over 32, optionally 256, start states).
+//! `coadapt bench nn`: SAC updates per second (three network sizes, batch 256), the design
+//! objective's forward throughput (700 particles over 32, optionally 256, start states), and
+//! what the population critics' ensemble (`learner.population-critics`) costs: FEAR's
+//! population update and the pessimistic design objective with 2 critics against 5.
 
 use coadapt_core::{Batch, rng};
 use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
@@ -34,6 +36,60 @@ pub fn run(a: &NnOptions) -> Result<(), AppError> {
     if wanted("forward_actor_critic") {
         forward(a)?;
     }
+    if wanted("ensemble_cost") {
+        ensemble_cost(a)?;
+    }
+    Ok(())
+}
+
+/// The ensemble's cost, both sides in one run on the same thread, interleaved (2 critics, then
+/// 5, then 2 again, ... 5 rounds of `seconds / 5` each), so drift in the machine's speed hits
+/// both alike: FEAR's population update (3 x 200 networks, HalfCheetah's 17 + 6 inputs, batch
+/// 256) and one pass of the pessimistic design objective (700 particles x 32 start states) over
+/// the twin against the twin and 3 heads. One line per side and figure: mean and sample sd of
+/// the rounds' rates, n = 5.
+fn ensemble_cost(a: &NnOptions) -> Result<(), AppError> {
+    let (obs, act, design) = (23, 6, 6);
+    let cfg = SacConfig { hidden: vec![200; 3], auto_alpha: true, ..SacConfig::default() };
+    let mut agents = [Sac::with_heads(obs, act, cfg.clone(), 1, 0)?, Sac::with_heads(obs, act, cfg, 1, 3)?];
+    let batch = random_batch(256, obs, act, 2);
+    let mut r = rng(4, 0);
+    let start: Vec<f32> = (0..32 * obs).map(|_| r.random_range(-1.0..1.0)).collect();
+    let heads = &agents[1];
+    let thetas: Vec<&[f32]> =
+        [heads.critic_params(0).0, heads.critic_params(1).0].into_iter().chain((0..3).map(|i| heads.head_params(i))).collect();
+    let objective = |n: usize| {
+        DesignObjective::new(heads.policy(), heads.policy_params(), heads.critic(), &thetas[..n], &start, obs - design, design)
+            .map_err(AppError::library)
+    };
+    let (twin, five) = (objective(2)?, objective(5)?);
+    let designs: Vec<f32> = (0..700 * design).map(|_| r.random_range(0.8..2.0)).collect();
+    let mut out = vec![0.0; 700];
+    let mut ws = vec![ObjectiveWorkspace::default()];
+    let rounds = 5;
+    let each = a.seconds / rounds as f64;
+    let (mut updates, mut passes) = ([Vec::new(), Vec::new()], [Vec::new(), Vec::new()]);
+    for _ in 0..rounds {
+        for (k, agent) in agents.iter_mut().enumerate() {
+            updates[k].push(rate(each, || {
+                agent.update(&batch);
+            }));
+        }
+        for (k, f) in [&twin, &five].into_iter().enumerate() {
+            passes[k].push(rate(each, || f.evaluate(&designs, QMode::MeanMinusKStd(2.0), a.chunk_rows, &mut out, &mut ws)));
+        }
+    }
+    let line = |config: &str, v: &[f64], unit: &str| {
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+        let l = serde_json::json!({"bench": "ensemble_cost", "config": config, "value": (mean * 1000.0).round() / 1000.0,
+            "sd": (sd * 1000.0).round() / 1000.0, "n": v.len(), "unit": unit, "impl": "coadapt"});
+        coadapt_log::print_stdout_line(&l.to_string());
+    };
+    line("population-update-2-critics", &updates[0], "updates/s");
+    line("population-update-5-critics", &updates[1], "updates/s");
+    line("pessimistic-objective-2-critics-22400rows", &passes[0], "passes/s");
+    line("pessimistic-objective-5-critics-22400rows", &passes[1], "passes/s");
     Ok(())
 }
 
