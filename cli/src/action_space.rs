@@ -13,9 +13,9 @@ use crate::progress::shutdown_on_ctrl_c;
 /// Trains an encoder e(a, s, xi) = z and a decoder d(z, s, xi) = a~ on the population replay of
 /// RUN_DIR's newest snapshot (every design's experience), with Eq. 6.1's loss: the distance
 /// between an action and its reconstruction, weighted by max(Q(s, a, xi), 0) under the run's
-/// population critic. Writes OUT/action_space.safetensors (for `coadapt train --explore
-/// latent`), OUT/loss.csv, OUT/latent_plane.svg (Fig. 6.1: the latent plane at a start state,
-/// coloured by Q of each decoded action), OUT/decoded_grid.svg (Fig. 6.2: a latent grid decoded
+/// population critic. Writes OUT/action_space.safetensors (for `coadapt train
+/// --latent-exploration`), OUT/loss.csv, OUT/latent_plane.svg (Fig. 6.1: the latent plane at a
+/// start state, coloured by Q of each decoded action), OUT/decoded_grid.svg (Fig. 6.2: a latent grid decoded
 /// for the run's shortest- and longest-legged designs, in action dimensions 2 and 4) and
 /// OUT/summary.json, which it also prints.
 #[derive(Debug, Args)]

@@ -4,7 +4,7 @@
 //! whose values weight Eq. 6.1 (`max(Q, 0)`); the autoencoder is trained on it and written with
 //! its learning curve and the thesis's two figures:
 //!
-//! - `action_space.safetensors` (`encoder`, `decoder`), what `coadapt train --explore latent`
+//! - `action_space.safetensors` (`encoder`, `decoder`), what `coadapt train --latent-exploration`
 //!   reads;
 //! - `loss.csv` (update, mean loss over the last 100 updates);
 //! - `latent_plane.svg` (Fig. 6.1): the latent plane at one start state of the run, each code
