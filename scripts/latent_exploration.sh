@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# Issue 31 section 2: does exploring through a learned design-dependent action space (thesis
+# 6.2) make SAC more sample-efficient on bodies the action space never saw?
+#
+#   usage: [BIN=coadapt] scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA]
+#                                                      [-u UPDATES] SRC_RUN NAME
+#
+# SRC_RUN: a finished co-adaptation (the action space learns from its population replay, e.g.
+# runs/campaign/as-hc-50-seed1). Steps, each skipped when its output is already there, so the
+# script resumes where it stopped:
+# 1. `coadapt action-space SRC_RUN --out SRC_RUN/action-space` (UPDATES Adam updates, 20000);
+# 2. DESIGNS new designs (3), uniform in the robot's box from a fixed seed (none is one of the
+#    run's: the run chose from a continuum);
+# 3. per design and seed (1..SEEDS, 3): `coadapt train --algo sac` on that body for STEPS steps
+#    (30000) twice, exploring through the action space (`--latent-exploration`, beta BETA, 0.5)
+#    and with SAC's own Gaussian, into runs/latent-exploration/NAME/{latent,sac}-d<k>-seed<s>;
+# 4. each finished pair's small files (summary.json, config.toml, episodes.csv) copied to
+#    docs/campaign/results/latent-exploration/NAME/ to be committed, with designs.json.
+# Then `python3 scripts/latent_exploration_report.py docs/campaign/results/latent-exploration/NAME`
+# prints episodes to a return, paired by design and seed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+designs=3 seeds=3 steps=30000 beta=0.5 updates=20000
+while getopts "n:s:t:b:u:" o; do
+  case $o in
+    n) designs=$OPTARG ;; s) seeds=$OPTARG ;; t) steps=$OPTARG ;; b) beta=$OPTARG ;; u) updates=$OPTARG ;;
+    *) echo "usage: scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA] [-u UPDATES] SRC_RUN NAME" >&2; exit 2 ;;
+  esac
+done
+shift $((OPTIND - 1))
+src=${1:?usage: scripts/latent_exploration.sh [options] SRC_RUN NAME}
+name=${2:?usage: scripts/latent_exploration.sh [options] SRC_RUN NAME}
+bin=${BIN:-target/release/coadapt}
+[ -x "$bin" ] || { echo "latent_exploration: no coadapt binary at $bin (cargo build --release, or BIN=...)" >&2; exit 2; }
+[ -s "$src/config.toml" ] || { echo "latent_exploration: $src has no config.toml: not a run directory" >&2; exit 2; }
+out=runs/latent-exploration/$name
+archive=docs/campaign/results/latent-exploration/$name
+mkdir -p "$out" "$archive"
+
+space=$src/action-space/action_space.safetensors
+if [ ! -s "$space" ]; then
+  echo "latent_exploration: learning the action space of $src ($updates updates)" >&2
+  RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1} "$bin" action-space "$src" --out "$src/action-space" --updates "$updates" > /dev/null
+fi
+mkdir -p "$archive/action-space"
+cp "$src/action-space/summary.json" "$src/action-space/loss.csv" "$archive/action-space/"
+
+env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb"))["env"])' "$src/config.toml")
+if [ ! -s "$archive/designs.json" ]; then
+  python3 - "$env" "$designs" > "$archive/designs.json" <<'PY'
+import json, random, sys
+sys.path.insert(0, "scripts")
+from campaign_report import BOUNDS
+env, n = sys.argv[1], int(sys.argv[2])
+if env not in BOUNDS:
+    raise SystemExit(f"latent_exploration: no design box known for {env} (scripts/campaign_report.py BOUNDS)")
+low, high = BOUNDS[env]
+rng = random.Random(31)  # issue 31: the same new bodies every time
+print(json.dumps({"env": env, "designs": [[round(rng.uniform(l, h), 4) for l, h in zip(low, high)] for _ in range(n)]}))
+PY
+fi
+
+for k in $(seq 1 "$designs"); do
+  design=$(python3 -c 'import json, sys; print(",".join(map(str, json.load(open(sys.argv[1]))["designs"][int(sys.argv[2]) - 1])))' "$archive/designs.json" "$k")
+  for s in $(seq 1 "$seeds"); do
+    for arm in latent sac; do
+      dir=$out/$arm-d$k-seed$s
+      if [ -s "$archive/$arm-d$k-seed$s/summary.json" ]; then continue; fi
+      flags=()
+      if [ "$arm" = latent ]; then flags=(--latent-exploration "$space" --latent-beta "$beta"); fi
+      rm -rf "$dir"
+      echo "latent_exploration: $arm, design $k ($design), seed $s ($(date -u +%H:%M:%S))" >&2
+      RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1} "$bin" train --env "$env" --algo sac --design "$design" --steps "$steps" \
+        --seed "$s" --quiet --out "$dir" "${flags[@]}" > "$dir.summary" 2>> "$out/log.txt"
+      mkdir -p "$archive/$arm-d$k-seed$s"
+      mv "$dir.summary" "$dir/summary.json"
+      cp "$dir"/{summary.json,config.toml,episodes.csv} "$archive/$arm-d$k-seed$s/"
+    done
+  done
+done
+echo "latent_exploration: $name done; python3 scripts/latent_exploration_report.py $archive" >&2
