@@ -10,34 +10,24 @@ its last. Then, paired by (design, seed), latent minus SAC: mean and sample sd (
 the exact two-sided sign-flip p. A run that never reaches R counts its episodes plus one
 (censored; said in the table).
 
-Pure Python, no packages.
+Pure Python, no packages; the statistics are campaign_report's and design_bench_report's.
 """
 import csv
-import itertools
 import json
 import os
-import statistics
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import campaign_report as cr  # noqa: E402
+from design_bench_report import sign_flip_p  # noqa: E402
 
 
 def curve(path):
     return [float(r["mean_return_last_10"]) for r in csv.DictReader(open(path))]
 
 
-def sign_flip_p(d):
-    if not d:
-        return float("nan")
-    obs = abs(sum(d))
-    hits = sum(1 for signs in itertools.product((1, -1), repeat=len(d)) if abs(sum(s * x for s, x in zip(signs, d))) >= obs - 1e-12)
-    return hits / 2 ** len(d)
-
-
 def mean_sd(v):
-    if not v:
-        return "-"
-    if len(v) == 1:
-        return f"{v[0]:+.1f} (n = 1)"
-    return f"{statistics.mean(v):+.1f} ± {statistics.stdev(v):.1f} (n = {len(v)})"
+    return f"{cr.signed_sd(v)} (n = {len(v)})" if v else "-"
 
 
 def main():
@@ -73,7 +63,7 @@ def main():
     d_best = [max(runs[("latent", k, s)]) - max(runs[("sac", k, s)]) for k, s in pairs]
     print("\n| latent minus SAC, paired by design and seed | pairs | episodes to target | p | best 10-episode mean | p |")
     print("|---|---|---|---|---|---|")
-    print(f"| all | {len(pairs)} | {mean_sd(d_reach)} | {sign_flip_p(d_reach):.3g} | {mean_sd(d_best)} | {sign_flip_p(d_best):.3g} |")
+    print(f"| all | {len(pairs)} | {mean_sd(d_reach)} | {sign_flip_p(d_reach)} | {mean_sd(d_best)} | {sign_flip_p(d_best)} |")
 
 
 if __name__ == "__main__":
