@@ -13,7 +13,10 @@ use coadapt_design_service::ServeConfig;
 
 /// Serve a run's design critic: DesignService (Info, Score, History) and the Open Inference
 /// Protocol model `design-critic` (input `design` FP32 [N, D]; outputs `value`, `spread` and
-/// `disagreement`, FP32 [N, 1] each).
+/// `disagreement`, FP32 [N, 1] each), and the run's operator page in a browser on the same
+/// address (`http://ADDR/`, or https with TLS: status, learning curves, designs, landscape,
+/// bodies, actors; with --tokens-file a client token views it and an operator token may also
+/// answer a waiting prototype step, the token given in the page's login form, never a URL).
 ///
 /// The values are the thesis's Eq. 5.6 with the population networks of the run's newest
 /// snapshot, averaged over a batch of `schedule.start-state-batch` start states drawn from the
@@ -55,11 +58,16 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     if args.max_score_batch == 0 {
         anyhow::bail!("--max-score-batch: 0 would refuse every request; at least 1");
     }
-    let source = load(&args.run_dir)?;
-    let cfg = ServeConfig { max_score_batch: args.max_score_batch, auth, ..ServeConfig::default() };
-    let server = coadapt_design_service::serve(addr, cfg, Arc::new(source)).with_context(|| format!("listening on {addr}"))?;
+    let source: Arc<dyn coadapt_design_service::ModelSource> = Arc::new(load(&args.run_dir)?);
+    let pages = coadapt_coadaptation::serve::page(&args.run_dir, source.clone(), &auth)?;
+    let https = auth.tls.is_some();
+    let cfg = ServeConfig { max_score_batch: args.max_score_batch, auth, pages: Some(pages), ..ServeConfig::default() };
+    let server = coadapt_design_service::serve(addr, cfg, source).with_context(|| format!("listening on {addr}"))?;
     let at = server.local_addr();
-    coadapt_log::logln!("serve: coadapt.v1.DesignService and design-critic (Open Inference Protocol) on {at} (Ctrl-C stops)");
+    coadapt_log::logln!(
+        "serve: coadapt.v1.DesignService and design-critic (Open Inference Protocol) on {at}; the run's operator page on {}://{at}/ (Ctrl-C stops)",
+        if https { "https" } else { "http" }
+    );
     coadapt_log::print_stdout_line(&format!("grpc://{at}"));
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the runtime")?;
     rt.block_on(crate::env_serve::wait_for_signal());

@@ -155,6 +155,8 @@ impl Sender<DesignRequest> for Nowhere {
 #[derive(Debug)]
 pub struct LiveService {
     source: Arc<LiveSource>,
+    /// What the operator page knows of the learner's progress.
+    page: Arc<crate::page::Live>,
     server: DesignServer,
 }
 
@@ -167,10 +169,16 @@ impl LiveService {
     pub fn design_started(&self, row: &coadapt_learner::run_dir::DesignRow) {
         self.source.upsert(crate::serve::history_row(row.clone()));
     }
+
+    /// Every event of the learner, for the operator page's status.
+    pub fn observe(&self, e: &coadapt_learner::coadapt::RunEvent<'_>) {
+        self.page.observe(e);
+    }
 }
 
 impl Drop for LiveService {
     fn drop(&mut self) {
+        self.page.finish();
         self.source.end();
     }
 }
@@ -209,11 +217,24 @@ pub fn start(
     links.design_requests = Box::new(RequestTee { inner, builder });
     let rows = source.clone();
     writer.observe_designs(DesignsObserver(Box::new(move |r| rows.upsert(crate::serve::history_row(r.clone())))));
+    let live = Arc::new(crate::page::Live::default());
+    let page = crate::page::Page::new(crate::page::PageSetup {
+        dir: std::fs::canonicalize(writer.dir()).unwrap_or_else(|_| writer.dir().to_path_buf()),
+        cfg: cfg.clone(),
+        spec: spec.clone(),
+        tokens: serve_cfg.auth.tokens.clone(),
+        tls: serve_cfg.auth.tls.is_some(),
+        live: Some(live.clone()),
+        model: Some(source.clone()),
+    });
+    serve_cfg.pages = Some(page.router());
+    let tls = serve_cfg.auth.tls.is_some();
     let server = coadapt_design_service::serve(addr, serve_cfg, source.clone())
         .with_context(|| format!("design-service.listen: serving on {addr}"))?;
     coadapt_log::logln!(
-        "learner: design service (coadapt.v1.DesignService, design-critic) on grpc://{} from the first design request on",
-        server.local_addr()
+        "learner: design service (coadapt.v1.DesignService, design-critic) on grpc://{0} from the first design request on; operator page on {1}://{0}/",
+        server.local_addr(),
+        if tls { "https" } else { "http" }
     );
-    Ok(Some(LiveService { source, server }))
+    Ok(Some(LiveService { source, page: live, server }))
 }

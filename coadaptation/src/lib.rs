@@ -15,7 +15,8 @@
 //!   optimiser's state found in it.
 //! - [`design_live`]: the learner's DesignService during the run; [`metrics`]: Prometheus
 //!   `/metrics` of the learner and the optimiser; [`health`]: the learner's progress for
-//!   gRPC health.
+//!   gRPC health; [`page`]: the operator page on the design service's listener (watch the run,
+//!   answer its prototype step from a browser).
 //! - [`serve`]: a run's design critic for the design service (a running learner's, or a
 //!   finished run's for `coadapt serve`).
 //! - [`action_space`]: `coadapt action-space`, the latent design-dependent action space (thesis
@@ -32,6 +33,7 @@ pub mod error;
 pub mod health;
 pub mod launch;
 pub mod metrics;
+pub mod page;
 pub mod plot;
 pub mod processes;
 pub mod resume;

@@ -282,8 +282,11 @@ pub fn learner(
     }
     let mut on_event = |e: &RunEvent<'_>| {
         crate::health::observe(e);
-        if let (Some(live), RunEvent::DesignStart { row, .. }) = (&design_service, e) {
-            live.design_started(row);
+        if let Some(live) = &design_service {
+            live.observe(e);
+            if let RunEvent::DesignStart { row, .. } = e {
+                live.design_started(row);
+            }
         }
         match e {
             RunEvent::Stats(s) => {

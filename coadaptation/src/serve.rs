@@ -1,7 +1,7 @@
 //! A run's design critic for the design service: Eq. 5.6 with the run's networks
 //! ([`design_model`], also what the live service of a running learner serves), a designs.csv row
 //! as a history row, and a finished run's model and history from its newest snapshot ([`load`],
-//! for `coadapt serve`).
+//! for `coadapt serve`) with its operator page ([`page`]).
 
 use std::path::Path;
 use std::sync::Arc;
@@ -100,4 +100,25 @@ pub fn load(dir: &Path) -> crate::Result<StaticSource> {
         manifest.label
     );
     Ok(StaticSource { model: Arc::new(model), history })
+}
+
+/// The operator page of the run in `dir` (`coadapt serve`: from its files, with `source`'s
+/// critic for the landscape until the run has written its own), behind `auth`'s tokens.
+pub fn page(
+    dir: &Path,
+    source: Arc<dyn coadapt_design_service::ModelSource>,
+    auth: &coadapt_auth::ServerAuth,
+) -> crate::Result<axum::Router> {
+    let cfg = crate::resume::stored_config(dir)?;
+    let spec = cfg.make_env()?.spec().clone();
+    let page = crate::page::Page::new(crate::page::PageSetup {
+        dir: std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()),
+        cfg,
+        spec,
+        tokens: auth.tokens.clone(),
+        tls: auth.tls.is_some(),
+        live: None,
+        model: Some(source),
+    });
+    Ok(page.router())
 }

@@ -36,5 +36,13 @@ pub use live::LiveSource;
 pub use model::{DesignEvent, DesignModel, HistoryError, HistoryPage, HistoryRow, ModelSource, StaticSource};
 pub use server::{DesignServer, ServeConfig, serve};
 
+/// The remote address of an HTTP request served beside gRPC ([`ServeConfig::pages`]), from the
+/// connection information the server attaches to every request (plaintext or TLS).
+pub fn peer_ip(extensions: &axum::http::Extensions) -> Option<std::net::IpAddr> {
+    use tonic::transport::server::{TcpConnectInfo, TlsConnectInfo};
+    let plain = extensions.get::<TcpConnectInfo>().and_then(|i| i.remote_addr());
+    plain.or_else(|| extensions.get::<TlsConnectInfo<TcpConnectInfo>>().and_then(|i| i.get_ref().remote_addr())).map(|a| a.ip())
+}
+
 /// The model name of the design critic in the Open Inference Protocol.
 pub const MODEL_NAME: &str = "design-critic";

@@ -43,7 +43,8 @@ impl Drop for DesignServer {
 }
 
 /// Binds `addr` (port 0 picks one) and serves the DesignService and the Open Inference
-/// Protocol from `source`, with grpc.health.v1 (per service and overall) and reflection.
+/// Protocol from `source`, with grpc.health.v1 (per service and overall) and reflection, and
+/// [`ServeConfig::pages`] beside them when set.
 pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -> std::io::Result<DesignServer> {
     let listener = std::net::TcpListener::bind(addr)?;
     listener.set_nonblocking(true)?;
@@ -116,15 +117,17 @@ pub fn serve(addr: SocketAddr, cfg: ServeConfig, source: Arc<dyn ModelSource>) -
     if let Some(tls) = &cfg.auth.tls {
         builder = builder.tls_config(tls.config()).map_err(std::io::Error::other)?;
     }
-    let router = builder
-        .timeout(cfg.rpc_timeout)
-        .max_concurrent_streams(64)
-        .http2_max_pending_accept_reset_streams(Some(32))
-        .add_service(design)
-        .add_service(inference)
-        .add_service(health)
-        .add_service(v1)
-        .add_service(v1alpha);
+    let mut routes = tonic::service::Routes::builder();
+    routes.add_service(design).add_service(inference).add_service(health).add_service(v1).add_service(v1alpha);
+    let mut routes = routes.routes();
+    if let Some(pages) = cfg.pages.clone() {
+        // A browser speaks HTTP/1.1 in plaintext (over TLS it takes h2, the only protocol the
+        // server's ALPN offers); gRPC clients keep HTTP/2 either way.
+        builder = builder.accept_http1(true);
+        routes = tonic::service::Routes::from(routes.into_axum_router().merge(pages));
+    }
+    let router =
+        builder.timeout(cfg.rpc_timeout).max_concurrent_streams(64).http2_max_pending_accept_reset_streams(Some(32)).add_routes(routes);
     let thread = std::thread::Builder::new().name("coadapt-design-service".into()).spawn(move || {
         let _reporter = reporter;
         rt.block_on(async move {

@@ -38,6 +38,10 @@ pub struct ServeConfig {
     /// the next query is). 1: no rest (a finished run's server); a learner serving during its
     /// run keeps most of its machine for training with a small share.
     pub max_busy_share: f64,
+    /// HTTP routes served on the same listener beside gRPC (the operator page), with the same
+    /// TLS, connection limits and deadline; they do their own authentication (the gRPC
+    /// interceptors see only gRPC calls). `None`: gRPC only (HTTP/2 alone is accepted).
+    pub pages: Option<axum::Router>,
 }
 
 impl Default for ServeConfig {
@@ -53,6 +57,7 @@ impl Default for ServeConfig {
             max_connections: 256,
             auth: coadapt_auth::ServerAuth::default(),
             max_busy_share: 1.0,
+            pages: None,
         }
     }
 }

@@ -159,6 +159,17 @@ pub enum ConfirmError {
     FixedDesign { index: usize },
     #[error("writing {}: {source}", .path.display())]
     Write { path: PathBuf, source: io::Error },
+    /// The answer was given to another proposal than the one awaiting now (the page showed an
+    /// older one): nothing was written. Indices from 0, said from 1.
+    #[error(
+        "this answer is to design {} (proposal {seen_proposal}), but design {} (proposal {awaiting_proposal}) awaits now: nothing was written; look at the new proposal first",
+        .seen_index + 1,
+        .awaiting_index + 1
+    )]
+    Stale { seen_index: usize, seen_proposal: usize, awaiting_index: usize, awaiting_proposal: usize },
+    /// The same for a reset; both as [`reset_name`] says them.
+    #[error("this answer is to {seen}, but {awaiting} awaits a reset now: nothing was written")]
+    StaleReset { seen: String, awaiting: String },
 }
 
 /// Why measured dimensions do not fit a prototype: the first bad entry (`entry` counts from 0,
@@ -331,6 +342,13 @@ pub fn accept_reset(r: &ResetRequest, decision: &ResetDecision) -> Result<(), De
 /// Answers the prototype awaiting in `dir`: writes `prototype-decision.json`. Refuses when
 /// nothing awaits, a fixed initial design is rejected, or the measured dimensions do not fit.
 pub fn confirm_prototype(dir: &Path, answer: &Answer) -> Result<Confirmation, ConfirmError> {
+    confirm_prototype_of(dir, None, answer)
+}
+
+/// [`confirm_prototype`], refused with [`ConfirmError::Stale`] unless the awaiting prototype is
+/// `seen` (index, proposal): the operator page answers the proposal it showed, never a newer
+/// one that replaced it meanwhile. `None`: whatever awaits (`coadapt confirm`).
+pub fn confirm_prototype_of(dir: &Path, seen: Option<(usize, usize)>, answer: &Answer) -> Result<Confirmation, ConfirmError> {
     let path = dir.join(PROTOTYPE_FILE);
     let nothing = |why: String| ConfirmError::NothingAwaits { dir: dir.to_path_buf(), what: "a prototype", why };
     let Some(p) = read_json::<Prototype>(&path)? else {
@@ -338,6 +356,11 @@ pub fn confirm_prototype(dir: &Path, answer: &Answer) -> Result<Confirmation, Co
     };
     if p.status != Status::Awaiting {
         return Err(nothing(format!("design {}'s prototype is {}", p.index + 1, status_word(p.status))));
+    }
+    if let Some((seen_index, seen_proposal)) = seen
+        && (seen_index, seen_proposal) != (p.index, p.proposal)
+    {
+        return Err(ConfirmError::Stale { seen_index, seen_proposal, awaiting_index: p.index, awaiting_proposal: p.proposal });
     }
     let (decision, as_built) = match answer {
         Answer::Confirm => (Verdict::Confirm, None),
@@ -358,12 +381,26 @@ pub fn confirm_prototype(dir: &Path, answer: &Answer) -> Result<Confirmation, Co
 /// Confirms the reset awaiting in `dir`: writes `reset-decision.json`. Returns the request
 /// answered and whether an unread earlier answer was replaced.
 pub fn confirm_reset(dir: &Path) -> Result<(ResetRequest, bool), ConfirmError> {
+    confirm_reset_of(dir, None)
+}
+
+/// [`confirm_reset`], refused with [`ConfirmError::StaleReset`] unless the awaiting reset is
+/// `seen` (design index, episode, mode), as [`confirm_prototype_of`].
+pub fn confirm_reset_of(dir: &Path, seen: Option<(usize, usize, ResetMode)>) -> Result<(ResetRequest, bool), ConfirmError> {
     let nothing = |why: String| ConfirmError::NothingAwaits { dir: dir.to_path_buf(), what: "a reset", why };
     let Some(r) = read_json::<ResetRequest>(&dir.join(RESET_FILE))? else {
         return Err(nothing(format!("no {RESET_FILE}: the run does not confirm resets, or has not reached an episode yet")));
     };
     if r.status != Status::Awaiting {
         return Err(nothing(format!("the reset before {} is {}", reset_name(r.mode, r.episode, r.design_index), status_word(r.status))));
+    }
+    if let Some((design_index, episode, mode)) = seen
+        && (design_index, episode, mode) != (r.design_index, r.episode, r.mode)
+    {
+        return Err(ConfirmError::StaleReset {
+            seen: reset_name(mode, episode, design_index),
+            awaiting: reset_name(r.mode, r.episode, r.design_index),
+        });
     }
     let decision = ResetDecision { design_index: r.design_index, episode: r.episode, mode: r.mode, decision: Verdict::Confirm };
     let out = dir.join(RESET_DECISION_FILE);

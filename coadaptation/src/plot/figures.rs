@@ -16,14 +16,20 @@ pub(super) type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 /// [`write_svg`] says which figure.
 pub(super) type Drawn<T = ()> = Result<T, DrawingAreaErrorKind<std::io::Error>>;
 
-/// Draws into an SVG string with `draw`, then writes it to `path`.
-pub(super) fn write_svg(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> Drawn) -> crate::Result<()> {
+/// Draws into an SVG string with `draw`; `what` names the figure in an error.
+pub(super) fn svg_text(what: &str, size: (u32, u32), draw: impl FnOnce(&Area) -> Drawn) -> crate::Result<String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         let drawn = root.fill(&WHITE).and_then(|()| draw(&root)).and_then(|()| root.present());
-        drawn.map_err(|e| AppError::failed(e).context(format!("drawing {}", path.display())))?;
+        drawn.map_err(|e| AppError::failed(e).context(format!("drawing {what}")))?;
     }
+    Ok(svg)
+}
+
+/// Draws into an SVG string with `draw`, then writes it to `path`.
+pub(super) fn write_svg(path: &Path, size: (u32, u32), draw: impl FnOnce(&Area) -> Drawn) -> crate::Result<()> {
+    let svg = svg_text(&path.display().to_string(), size, draw)?;
     // Aside, then renamed over the old file: a reader (a browser, the operator page) sees the
     // old plot or the new one, never a part, also while the run redraws them.
     let mut tmp = path.as_os_str().to_owned();

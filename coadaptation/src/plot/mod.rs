@@ -46,7 +46,65 @@ mod figures;
 pub use csv::{
     DesignRow, EpisodeRow, LandscapeDesign, LandscapePoint, read_designs, read_episodes, read_landscape, read_landscape_designs,
 };
-use figures::{best_return, compare_plot, landscape_plot, learning_curves, write_svg};
+use figures::{best_return, compare_plot, landscape_plot, learning_curves, svg_text, write_svg};
+
+/// The run's figures by name, as the operator page asks for them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Figure {
+    LearningCurves,
+    BestReturn,
+    Landscape,
+}
+
+impl Figure {
+    pub const ALL: [Figure; 3] = [Figure::LearningCurves, Figure::BestReturn, Figure::Landscape];
+
+    /// The file name under `plots/` (without `.svg`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Figure::LearningCurves => "learning_curves",
+            Figure::BestReturn => "best_return",
+            Figure::Landscape => "landscape",
+        }
+    }
+}
+
+/// `figure` of the run in `dir` drawn now from its files, as SVG text (what `coadapt plot`
+/// writes under `plots/`); `None` while the run has no data for it.
+pub fn figure_svg(dir: &Path, figure: Figure) -> crate::Result<Option<String>> {
+    match figure {
+        Figure::LearningCurves => {
+            let Some(eps) = read_episodes(&dir.join("episodes.csv"))? else { return Ok(None) };
+            if !eps.iter().any(|e| e.ret.is_some()) {
+                return Ok(None);
+            }
+            svg_text("learning_curves", (900, 560), |root| learning_curves(root, &eps)).map(Some)
+        }
+        Figure::BestReturn => {
+            let designs = read_designs(&dir.join("designs.csv"))?.unwrap_or_default();
+            let eps = read_episodes(&dir.join("episodes.csv"))?.unwrap_or_default();
+            let best = best_per_design(&designs, &eps);
+            if !best.iter().any(|b| b.best.is_some()) {
+                return Ok(None);
+            }
+            svg_text("best_return", (900, 560), |root| best_return(root, &best)).map(Some)
+        }
+        Figure::Landscape => {
+            let Some(points) = read_landscape(&dir.join("landscape.csv"))? else { return Ok(None) };
+            let tried = read_landscape_designs(&dir.join("landscape_designs.csv"))?.unwrap_or_default();
+            landscape_svg(&points, &tried)
+        }
+    }
+}
+
+/// The landscape figure (thesis Fig. 5.9) of `points` with the designs `tried` marked; `None`
+/// when no point has an objective.
+pub fn landscape_svg(points: &[LandscapePoint], tried: &[LandscapeDesign]) -> crate::Result<Option<String>> {
+    if !points.iter().any(|p| p.objective.is_some()) {
+        return Ok(None);
+    }
+    svg_text("landscape", (900, 700), |root| landscape_plot(root, points, tried)).map(Some)
+}
 
 /// Draws each run's plots (`into: None`), or one figure comparing the best evaluation
 /// return so far of all `runs` into the SVG file `into` (legend: `labels`, default the directory names).

@@ -4,6 +4,7 @@
 //! - [`scratch`], [`scratch_dir`]: a per-process temporary directory, emptied first.
 //! - [`workspace_file`], [`read_config`]: files of the workspace (configs, reference scripts)
 //!   from any crate's tests.
+//! - [`browser`]: Chromium and ChromeDriver for the browser test, installed on first use.
 //! - [`bridge_venv`]: the Python bridge's virtualenv (dm-env-rpc, gymnasium, MuJoCo,
 //!   TensorBoard's reader), made once per target directory.
 //! - [`reference`]: the statistics our PyTorch reference scripts print of a tensor, and the
@@ -81,6 +82,32 @@ pub fn bridge_venv(target_tmpdir: &str) -> &'static Path {
         }
         dir
     })
+}
+
+/// Chromium and ChromeDriver for a browser test, installed on first use by
+/// `scripts/setup_browser.sh` (Debian's packages); `None`, said loudly on stderr, where they
+/// are missing and cannot be installed (not root, no apt-get): the caller skips.
+pub fn browser() -> Option<(PathBuf, PathBuf)> {
+    static BROWSER: std::sync::OnceLock<Option<(PathBuf, PathBuf)>> = std::sync::OnceLock::new();
+    BROWSER
+        .get_or_init(|| {
+            let status = std::process::Command::new("bash")
+                .arg(workspace_file("scripts/setup_browser.sh"))
+                .status()
+                .unwrap_or_else(|e| panic!("running scripts/setup_browser.sh: {e}"));
+            match status.code() {
+                Some(0) => Some((PathBuf::from("chromium"), PathBuf::from("chromedriver"))),
+                Some(3) => {
+                    eprintln!(
+                        "\n*** SKIPPED: the browser test needs Debian's chromium and chromium-driver, which cannot be installed here \
+                         (scripts/setup_browser.sh: not root, or no apt-get) ***\n"
+                    );
+                    None
+                }
+                _ => panic!("scripts/setup_browser.sh failed: {status}"),
+            }
+        })
+        .clone()
 }
 
 pub fn workspace_file(rel: &str) -> PathBuf {
