@@ -17,6 +17,7 @@
 //! - [`groups`]: one GrouPS update; [`conv`]: the image embedding's convolutions; [`plan`]: one
 //!   planning step of Alg. 3 (each with percentiles and, for the first two, a `--dump` for the
 //!   Python peer's check).
+//! - [`page`]: the operator page of a reference-sized run, fetched over HTTP.
 //! - [`figure`]: the one-line figure, rates and percentiles they share.
 
 pub mod conv;
@@ -25,6 +26,7 @@ pub mod env;
 pub mod figure;
 pub mod groups;
 pub mod nn;
+pub mod page;
 pub mod plan;
 pub mod pso;
 pub mod sim;

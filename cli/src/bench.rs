@@ -3,7 +3,7 @@
 
 use anyhow::Context;
 use clap::Subcommand;
-use coadapt_bench::{conv, design, env, groups, nn, plan, pso, sim, snapshot, transport};
+use coadapt_bench::{conv, design, env, groups, nn, page, plan, pso, sim, snapshot, transport};
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
@@ -39,6 +39,10 @@ pub enum BenchCommand {
     /// Planning latency: one control step of Alg. 3 (L-BFGS, 20 iterations, over f_Q through
     /// the latent dynamics and critic) for horizons 1, 10 and 20, median and p10/p90 ms.
     Plan(plan::PlanOptions),
+    /// The operator page of a run of the reference protocol's size (50 designs, 6,000
+    /// episodes), fetched over HTTP on loopback as a browser does: ms per resource and for the
+    /// whole page, median and p90.
+    Page(page::PageOptions),
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
@@ -58,6 +62,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Groups(o) => groups::run(&o)?,
         BenchCommand::Conv(o) => conv::run(&o)?,
         BenchCommand::Plan(o) => plan::run(&o)?,
+        BenchCommand::Page(o) => page::run(&o)?,
     }
     Ok(())
 }

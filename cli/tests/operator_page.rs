@@ -1,5 +1,5 @@
 //! The operator page in a real browser: a tiny run that waits for each prototype serves the
-//! page (`--serve`, with role tokens); Chromium, driven over WebDriver by
+//! page (`--serve`, with TLS and role tokens); Chromium, driven over WebDriver by
 //! `python/page_check.py`, logs in with a client token (it sees the proposal and no button),
 //! has forged POSTs refused, then logs in as the operator and answers "as built" from the page;
 //! designs.csv then holds the measured dimensions. Also over plain HTTP without a browser: a
@@ -18,8 +18,9 @@ fn coadapt() -> Command {
     Command::new(env!("CARGO_BIN_EXE_coadapt"))
 }
 
-/// The tiny HalfCheetah config with every prototype to confirm and role tokens from `tokens`.
-fn config(dir: &Path, tokens: &Path) -> PathBuf {
+/// The tiny HalfCheetah config with every prototype to confirm, role tokens from `tokens` and,
+/// with `tls`, the server certificate of `coadapt tls new --out tls`.
+fn config(dir: &Path, tokens: &Path, tls: Option<&Path>) -> PathBuf {
     let mut t = std::fs::read_to_string(coadapt_test_support::workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
     for (from, to) in [
         ("landscape-grid = 12\n", "landscape-grid = 0\n"),
@@ -31,6 +32,10 @@ fn config(dir: &Path, tokens: &Path) -> PathBuf {
         t = t.replace(from, to);
     }
     t.push_str(&format!("\n[security]\ntokens-file = {:?}\n", tokens.display().to_string()));
+    if let Some(tls) = tls {
+        let p = |f: &str| tls.join(f).display().to_string();
+        t.push_str(&format!("tls-cert = {:?}\ntls-key = {:?}\n", p("server.pem"), p("server-key.pem")));
+    }
     let path = dir.join("run.toml");
     std::fs::write(&path, t).unwrap();
     path
@@ -109,8 +114,13 @@ fn an_operator_answers_as_built_from_the_page_in_a_real_browser() {
     }
     let dir = coadapt_test_support::scratch_dir("operator_page", "browser");
     let (operator, client) = (token(&dir, "operator"), token(&dir, "client"));
+    // Over TLS, as across machines (the browser takes HTTP/2, the server's only ALPN protocol).
+    let tls = dir.join("tls");
+    let o = coadapt().args(["tls", "new", "--out"]).arg(&tls).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let out = dir.join("run");
-    let (run, url) = start(&config(&dir, &dir.join("tokens")), &out);
+    let (run, url) = start(&config(&dir, &dir.join("tokens"), Some(&tls)), &out);
+    assert!(url.starts_with("https://"), "{url}");
     awaiting(&out, 0);
     let shot = dir.join("page.png");
     let o = Command::new("python3")
@@ -119,6 +129,7 @@ fn an_operator_answers_as_built_from_the_page_in_a_real_browser() {
         .arg(&shot)
         .env("PAGE_OPERATOR_TOKEN_FILE", &operator)
         .env("PAGE_CLIENT_TOKEN_FILE", &client)
+        .env("PAGE_CA_FILE", tls.join("ca.pem"))
         .output()
         .unwrap();
     let said: Vec<String> = run.stderr.try_iter().collect();
@@ -179,7 +190,7 @@ fn a_live_run_and_a_finished_one_show_their_page_and_refuse_what_they_must() {
     let actor = token(&dir, "actor");
     let operator = token(&dir, "operator");
     let out = dir.join("run");
-    let (mut run, url) = start(&config(&dir, &dir.join("tokens")), &out);
+    let (mut run, url) = start(&config(&dir, &dir.join("tokens"), None), &out);
     let addr = url.trim_start_matches("http://").to_string();
     awaiting(&out, 0);
     // No session: the login form, and the parts refuse.

@@ -2,8 +2,10 @@
 # The Secrets the manifests mount, made by coadapt itself (`coadapt tls new`, `coadapt token
 # new`): coadapt-tls (ca.pem, server.pem, server-key.pem for the learner's Service names),
 # coadapt-tokens (the learner's accepted tokens: SHA-256 hashes, no secret), coadapt-actor-token
-# and coadapt-optimizer-token (one token each), and a client token for design clients, written
-# to OUT/client.token only (give it to your tools; its hash is in coadapt-tokens).
+# and coadapt-optimizer-token (one token each), a client token for design clients and the
+# operator page's viewers, and an operator token for the page's prototype answers, written to
+# OUT/client.token and OUT/operator.token only (give them to your tools and the workshop; their
+# hashes are in coadapt-tokens).
 #
 # Usage: deploy/k8s/make-secrets.sh [--namespace NS] [--out DIR] [--bin COADAPT] [--apply]
 #   --out DIR     where the files go (default ./coadapt-secrets; created, must not exist)
@@ -18,7 +20,7 @@ bin=${COADAPT_BIN:-coadapt}
 apply=0
 while [[ $# -gt 0 ]]; do
   case $1 in
-    -h | --help) sed -n '2,11p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) sed -n '2,13p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     --namespace) [[ $# -ge 2 ]] || die "--namespace needs a value"; namespace=$2; shift 2 ;;
     --out) [[ $# -ge 2 ]] || die "--out needs a value"; out=$2; shift 2 ;;
     --bin) [[ $# -ge 2 ]] || die "--bin needs a value"; bin=$2; shift 2 ;;
@@ -33,7 +35,7 @@ umask 077
 mkdir -p -- "$out"
 "$bin" tls new --out "$out/tls" --host coadapt-learner --host "coadapt-learner.$namespace" \
   --host "coadapt-learner.$namespace.svc" --host "coadapt-learner.$namespace.svc.cluster.local"
-for role in actor optimizer client; do
+for role in actor optimizer client operator; do
   "$bin" token new --role "$role" --out "$out/$role.token" --tokens-file "$out/tokens"
 done
 secret() { kubectl create secret generic "$@" --namespace "$namespace" --dry-run=client -o yaml; }
@@ -49,7 +51,7 @@ secret() { kubectl create secret generic "$@" --namespace "$namespace" --dry-run
 } >"$out/secrets.yaml"
 if ((apply)); then
   kubectl apply -f "$out/secrets.yaml"
-  printf 'make-secrets.sh: Secrets applied in namespace %s; client token: %s\n' "$namespace" "$out/client.token" >&2
+  printf 'make-secrets.sh: Secrets applied in namespace %s; client token: %s, operator token: %s\n' "$namespace" "$out/client.token" "$out/operator.token" >&2
 else
-  printf 'make-secrets.sh: wrote %s (kubectl apply -f it); client token: %s\n' "$out/secrets.yaml" "$out/client.token" >&2
+  printf 'make-secrets.sh: wrote %s (kubectl apply -f it); client token: %s, operator token: %s\n' "$out/secrets.yaml" "$out/client.token" "$out/operator.token" >&2
 fi

@@ -114,13 +114,20 @@ impl Page {
         status::status(files, &self.schedule, self.live.as_deref())
     }
 
+    /// The run's files, with the design in training added.
+    fn files(&self) -> status::RunFiles {
+        let mut files = status::RunFiles::read(&self.dir);
+        files.add_current(self.live.as_ref().and_then(|l| l.current()));
+        files
+    }
+
     fn live_html(&self) -> String {
-        let files = status::RunFiles::read(&self.dir);
+        let files = self.files();
         let st = self.status(&files);
         let actors = status::actors(&files.episodes);
         let trained: Vec<_> = files.trained().collect();
         let mut bodies = Vec::new();
-        if let Some(d) = trained.last() {
+        if let Some(d) = trained.last().filter(|d| !d.design.is_empty()) {
             bodies.push((format!("design {} ({}), the current one", d.index + 1, d.kind), self.bodies.svg(&d.design, 320, 180)));
         }
         let best = trained

@@ -65,6 +65,37 @@ impl RunFiles {
         f
     }
 
+    /// Adds the design in training, which `designs.csv` shows only once it ends: the live
+    /// learner's row when it has one, else (a run's files alone) a row of what episodes.csv
+    /// says (its index; kind and design unknown until the row is written).
+    pub fn add_current(&mut self, live: Option<DesignRow>) {
+        let last_row = self.trained().map(|d| d.index).max();
+        let Some(index) = self.episodes.last().map(|e| e.design).or(live.as_ref().map(|d| d.index)) else { return };
+        if last_row.is_some_and(|l| l >= index) {
+            return;
+        }
+        let episodes = self.episodes.iter().filter(|e| e.design == index).count();
+        let row = match live.filter(|d| d.index == index) {
+            Some(mut d) => {
+                d.episodes = episodes;
+                d
+            }
+            None => DesignRow {
+                index,
+                kind: "?".into(),
+                design: Vec::new(),
+                episodes,
+                best_eval_return: None,
+                last_eval_return: None,
+                predicted_objective: None,
+                design_rollouts: 0,
+                method: "in training: its row is written when it ends".into(),
+                prototype: String::new(),
+            },
+        };
+        self.designs.push(row);
+    }
+
     /// The designs trained on (rejected proposals left out).
     pub fn trained(&self) -> impl Iterator<Item = &DesignRow> {
         self.designs.iter().filter(|d| d.prototype != run_dir::PROTOTYPE_REJECTED)
@@ -136,6 +167,8 @@ pub struct Live {
     /// Milliseconds since the Unix epoch of the learner's last event.
     last_event_ms: AtomicU64,
     finished: AtomicBool,
+    /// The design in training: `designs.csv` gets its row only when it ends.
+    current: std::sync::Mutex<Option<DesignRow>>,
 }
 
 fn now_ms() -> u64 {
@@ -144,8 +177,16 @@ fn now_ms() -> u64 {
 
 impl Live {
     /// Notes an event of the learner.
-    pub fn observe(&self, _e: &RunEvent<'_>) {
+    pub fn observe(&self, e: &RunEvent<'_>) {
         self.last_event_ms.store(now_ms(), Relaxed);
+        if let RunEvent::DesignStart { row, .. } = e {
+            *self.current.lock().unwrap_or_else(|e| e.into_inner()) = Some((*row).clone());
+        }
+    }
+
+    /// The design in training, as chosen.
+    pub fn current(&self) -> Option<DesignRow> {
+        self.current.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     /// The run has ended (finished, or stopped): the page says so.
@@ -199,7 +240,7 @@ pub fn status(f: &RunFiles, sched: &ScheduleConfig, live: Option<&Live>) -> Stat
     let episodes_total = sched.total_episodes();
     let last = trained.last();
     let design_episodes = last.map_or((0, 0), |d| (d.episodes, sched.episodes_of(d.index)));
-    let done_all = trained.len() >= sched.designs && last.is_some_and(|d| d.episodes >= sched.episodes_of(d.index));
+    let done_all = trained.len() >= sched.designs && last.is_some_and(|d| d.episodes >= sched.episodes_of(d.index) && !d.design.is_empty());
     let finished = live.map_or(done_all, |l| l.finished.load(Relaxed) || done_all);
     let eps = &f.episodes;
     let eta_secs = (!finished && eps.len() >= 2).then(|| {
@@ -265,6 +306,35 @@ pub fn actors(eps: &[Episode]) -> Vec<Actor> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_design_in_training_is_shown_before_its_row_is_written() {
+        let ep = |design, episode| Episode { design, episode, global: 0, ret: 0.0, eval: None, seconds: 0.0, actor: 0, lag: 0 };
+        let row = |index, episodes| DesignRow {
+            index,
+            kind: "exploit".into(),
+            design: vec![1.0],
+            episodes,
+            best_eval_return: None,
+            last_eval_return: None,
+            predicted_objective: Some(3.0),
+            design_rollouts: 0,
+            method: "pso-q".into(),
+            prototype: String::new(),
+        };
+        let mut f = RunFiles { designs: vec![row(0, 2)], episodes: vec![ep(0, 0), ep(0, 1), ep(1, 0)], ..Default::default() };
+        f.add_current(None);
+        assert_eq!((f.designs.len(), f.designs[1].index, f.designs[1].episodes, f.designs[1].kind.as_str()), (2, 1, 1, "?"));
+        let mut f = RunFiles { designs: vec![row(0, 2)], episodes: vec![ep(0, 0), ep(0, 1), ep(1, 0)], ..Default::default() };
+        f.add_current(Some(row(1, 0)));
+        assert_eq!((f.designs[1].kind.as_str(), f.designs[1].episodes, f.designs[1].predicted_objective), ("exploit", 1, Some(3.0)));
+        // Nothing to add once the row is written, or before any design.
+        f.add_current(Some(row(1, 0)));
+        assert_eq!(f.designs.len(), 2);
+        let mut f = RunFiles::default();
+        f.add_current(None);
+        assert!(f.designs.is_empty());
+    }
 
     #[test]
     fn episodes_parse_by_name_and_a_line_being_written_waits() {
