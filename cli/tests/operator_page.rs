@@ -31,7 +31,7 @@ fn config(dir: &Path, tokens: &Path, tls: Option<&Path>) -> PathBuf {
         assert!(t.contains(from), "configs/half-cheetah-tiny.toml has no {from:?}");
         t = t.replace(from, to);
     }
-    t.push_str(&format!("\n[security]\ntokens-file = {:?}\n", tokens.display().to_string()));
+    t.push_str(&format!("\n[metrics]\nlearner-listen = \"127.0.0.1:0\"\n\n[security]\ntokens-file = {:?}\n", tokens.display().to_string()));
     if let Some(tls) = tls {
         let p = |f: &str| tls.join(f).display().to_string();
         t.push_str(&format!("tls-cert = {:?}\ntls-key = {:?}\n", p("server.pem"), p("server-key.pem")));
@@ -91,6 +91,18 @@ fn start(cfg: &Path, out: &Path) -> (Run, String) {
             return (Run { child, stderr: rx }, at.trim().trim_end_matches('/').to_string());
         }
         assert!(t.elapsed() < Duration::from_secs(120), "no page address");
+    }
+}
+
+impl Run {
+    /// The first line of the run's stderr from now on that holds `needle`.
+    fn line(&self, needle: &str) -> String {
+        loop {
+            let line = self.stderr.recv_timeout(Duration::from_secs(120)).unwrap_or_else(|_| panic!("the run never said {needle:?}"));
+            if line.contains(needle) {
+                return line;
+            }
+        }
     }
 }
 
@@ -192,6 +204,7 @@ fn a_live_run_and_a_finished_one_show_their_page_and_refuse_what_they_must() {
     let out = dir.join("run");
     let (mut run, url) = start(&config(&dir, &dir.join("tokens"), None), &out);
     let addr = url.trim_start_matches("http://").to_string();
+    let metrics = run.line("metrics on http://").split("http://").nth(1).unwrap().trim_end_matches("/metrics").to_string();
     awaiting(&out, 0);
     // No session: the login form, and the parts refuse.
     let (status, head, body) = get(&addr, "/", "");
@@ -212,6 +225,18 @@ fn a_live_run_and_a_finished_one_show_their_page_and_refuse_what_they_must() {
     assert!(status == 200 && body.contains("Build design 1") && body.contains("View only") && !body.contains("id=\"confirm\""), "{body}");
     let (status, _, body) = get(&addr, "/plot/nope.svg", &cookie);
     assert!(status == 404 && body.contains("learning_curves.svg"), "{body}");
+    // A POST from a client's session is refused, and so is one without the form's CSRF field.
+    let (status, _, body) = post(&addr, "/act", &cookie, "action=confirm&index=0&proposal=1");
+    assert!(status == 403 && body.contains("csrf"), "{status} {body}");
+    // Every refusal so far is counted where an operator looks: the learner's /metrics.
+    let (_, _, m) = get(&metrics, "/metrics", "");
+    let count = |reason: &str| -> f64 {
+        m.lines()
+            .filter(|l| l.starts_with(&format!("coadapt_refusals_total{{server=\"operator_page\",reason=\"{reason}\"")))
+            .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+            .sum()
+    };
+    assert_eq!((count("unauthenticated"), count("csrf")), (3.0, 1.0), "{m}");
     // An operator answers a proposal the page showed; an answer to an older one is refused.
     let (_, head, _) = post(&addr, "/login", "", &format!("token={}", read(&operator)));
     let op = session_cookie(&head);

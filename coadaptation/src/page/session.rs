@@ -22,7 +22,7 @@ pub const COOKIE: &str = "coadapt_session";
 const IDLE: Duration = Duration::from_secs(12 * 3600);
 /// Sessions kept at most (the oldest is dropped first): a flood of logins cannot grow memory.
 const MAX_SESSIONS: usize = 1024;
-/// The name refusals are counted under in `/metrics` (`coadapt_refused_total{server=...}`).
+/// The name refusals are counted under in `/metrics` (`coadapt_refusals_total{server=...}`).
 pub const SERVER: &str = "operator_page";
 
 /// One browser's session.
