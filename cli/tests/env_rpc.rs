@@ -113,6 +113,70 @@ fn sac_learns_gymnasium_pendulum_served_by_the_python_bridge() {
     assert!(csv.lines().skip(1).all(|l| l.split(',').nth(3) == Some("200")), "{csv}");
 }
 
+#[test]
+fn sac_learns_from_a_dm_env_rpc_server_not_written_for_coadapt() {
+    // gymnasium's Pendulum-v1 behind a server written from the protocol's text: no `design`,
+    // its own uids, an action named `torque`, and every setting refused.
+    let mut c = Command::new(venv().join("bin/python"));
+    c.arg(workspace_file("cli/tests/python/plain_dm_env_server.py"));
+    let server = start(c);
+    let out = tmpdir("plain");
+    let o = coadapt(&[
+        "train",
+        "--env",
+        &server.url,
+        "--steps",
+        "20000",
+        "--seed",
+        "1",
+        "--target-return",
+        "-200",
+        "--stop-at-target",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
+    eprintln!("Pendulum-v1 from a plain dm_env_rpc server: {s}");
+    let reached = s["first_step_reaching_target"].as_u64().unwrap_or_else(|| panic!("never above -200: {s}"));
+    assert!(reached <= 20_000 && s["mean_return_last_10"].as_f64().unwrap() > -200.0, "{s}");
+    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert!(csv.lines().skip(1).all(|l| l.split(',').nth(3) == Some("200")), "{csv}");
+    // Co-adaptation needs a design: refused as a setting (exit 78), saying what to do instead.
+    let dir = tmpdir("plain-run");
+    let cfg = tiny_config(&dir, &server.url, "", "");
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", cfg.to_str().unwrap(), "--out"])
+        .arg(dir.join("run"))
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(78), "{e}");
+    assert!(e.contains("has no design parameters to optimise") && e.contains("coadapt train"), "{e}");
+    // A run of one fixed design (no design to choose): its actor processes step the server.
+    let fixed = dir.join("fixed.toml");
+    std::fs::write(
+        &fixed,
+        format!(
+            "env = \"{}\"\nseed = 1\nlandscape-grid = 0\n\n[schedule]\ndesigns = 1\ninitial-episodes = 3\ninitial-designs = [[]]\n\
+             eval-every = 1\n\n[learner]\nindividual-updates = 20\npopulation-updates = 10\nwarmup-episodes = 1\n\n[learner.sac]\nhidden = [32, 32]\n",
+            server.url
+        ),
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+        .args(["run", "--config", fixed.to_str().unwrap(), "--actors", "2", "--out"])
+        .arg(dir.join("fixed"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let eps = std::fs::read_to_string(dir.join("fixed/episodes.csv")).unwrap();
+    assert_eq!(eps.lines().count(), 1 + 3, "{eps}");
+    let designs = std::fs::read_to_string(dir.join("fixed/designs.csv")).unwrap();
+    assert!(designs.lines().nth(1).is_some_and(|l| l.starts_with("0,initial,,3,")), "{designs}");
+}
+
 /// The tiny protocol on a remote env: `configs/half-cheetah-tiny.toml` with `env` replaced.
 fn tiny_config(dir: &Path, url: &str, top: &str, tables: &str) -> PathBuf {
     let text = std::fs::read_to_string(workspace_file("configs/half-cheetah-tiny.toml")).unwrap();

@@ -209,7 +209,10 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> crate::Result<()> {
         crate::error::bail_config!("actors: must be at least 1");
     }
     if cfg.schedule.designs > cfg.schedule.initial_designs.len() && spec.design_dim() == 0 {
-        crate::error::bail_config!("env {}: has no design parameters to optimise", cfg.env);
+        crate::error::bail_config!(
+            "env {}: has no design parameters to optimise (a dm_env_rpc server without a `design` observation is a fixed-design environment: train on it with coadapt train, or give schedule.designs no more designs than schedule.initial-designs)",
+            cfg.env
+        );
     }
     for (i, d) in cfg.schedule.initial_designs.iter().enumerate() {
         spec.design.check("design", d).map_err(|e| crate::AppError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;

@@ -147,12 +147,14 @@ async fn open(url: String, endpoint: String, opts: RemoteOptions) -> Result<(Con
     };
     let specs = j.specs.ok_or_else(|| RemoteError::Protocol { url: url.clone(), request: "JoinWorld", what: "no specs".into() })?;
     let (profile, uids) = Profile::from_specs(&specs).map_err(|e| RemoteError::Profile(e, url.clone()))?;
-    let step = pb::StepRequest { actions: HashMap::new(), requested_observations: vec![uids.design] };
+    // A server of no design (not a coadapt environment) has no default design to read.
+    let Some(design_uid) = uids.design else { return Ok((conn, profile, uids, Vec::new())) };
+    let step = pb::StepRequest { actions: HashMap::new(), requested_observations: vec![design_uid] };
     let Resp::Step(s) = call(&mut conn, &url, "Step", Req::Step(step), t).await? else {
         return Err(unexpected("Step"));
     };
     let mut design = Vec::new();
-    let t = s.observations.get(&uids.design).ok_or_else(|| RemoteError::Bad(url.clone(), "first step: no `design` observation".into()))?;
+    let t = s.observations.get(&design_uid).ok_or_else(|| RemoteError::Bad(url.clone(), "first step: no `design` observation".into()))?;
     tensor::read_f32("design", t, &[profile.design.dim()], Accept::AnyFloat, &mut design)
         .map_err(|e| RemoteError::Bad(url.clone(), e.to_string()))?;
     Ok((conn, profile, uids, design))
@@ -315,15 +317,41 @@ impl RemoteEnv {
     }
 
     fn reset_inner(&mut self, seed: u64, design: &[f32]) -> Result<(), RemoteError> {
-        let world = self.conn.as_ref().map(|c| c.world.clone()).unwrap_or_default();
-        let settings = HashMap::from([
-            (profile::SETTING_DESIGN.to_string(), tensor::floats(design, &[design.len()])),
-            (profile::SETTING_SEED.to_string(), tensor::scalar_u64(seed)),
-        ]);
-        let Resp::ResetWorld(_) = self.request("ResetWorld", Req::ResetWorld(pb::ResetWorldRequest { world_name: world, settings }))?
-        else {
-            return Err(RemoteError::Protocol { url: self.url.clone(), request: "ResetWorld", what: "a response of another kind".into() });
-        };
+        if self.uids.coadapt() {
+            let world = self.conn.as_ref().map(|c| c.world.clone()).unwrap_or_default();
+            let settings = HashMap::from([
+                (profile::SETTING_DESIGN.to_string(), tensor::floats(design, &[design.len()])),
+                (profile::SETTING_SEED.to_string(), tensor::scalar_u64(seed)),
+            ]);
+            let Resp::ResetWorld(_) = self.request("ResetWorld", Req::ResetWorld(pb::ResetWorldRequest { world_name: world, settings }))?
+            else {
+                return Err(RemoteError::Protocol {
+                    url: self.url.clone(),
+                    request: "ResetWorld",
+                    what: "a response of another kind".into(),
+                });
+            };
+        } else {
+            // A plain dm_env_rpc server: the agent's next sequence, with no settings (it knows
+            // no design and no seed: its episodes' randomness is its own, as a real robot's).
+            let Resp::Reset(r) = self.request("Reset", Req::Reset(pb::ResetRequest { settings: HashMap::new() }))? else {
+                return Err(RemoteError::Protocol { url: self.url.clone(), request: "Reset", what: "a response of another kind".into() });
+            };
+            // The specs may change on a Reset (the protocol allows it); ours may not.
+            if let Some(specs) = r.specs {
+                let (profile, uids) = Profile::from_specs(&specs).map_err(|e| RemoteError::Profile(e, self.url.clone()))?;
+                if profile.state_dim != self.spec.state_dim || profile.action != self.server_action || profile.design.dim() != 0 {
+                    return Err(RemoteError::SpecChanged {
+                        url: self.url.clone(),
+                        what: format!(
+                            "on Reset: state {} -> {}, action box {:?} -> {:?}",
+                            self.spec.state_dim, profile.state_dim, self.server_action, profile.action
+                        ),
+                    });
+                }
+                self.uids = uids;
+            }
+        }
         let step = pb::StepRequest { actions: HashMap::new(), requested_observations: self.requested() };
         let Resp::Step(s) = self.request("Step", Req::Step(step))? else {
             return Err(RemoteError::Protocol { url: self.url.clone(), request: "Step", what: "a response of another kind".into() });

@@ -48,17 +48,41 @@ impl Profile {
         }
     }
 
-    /// Reads a server's specs: the four observations and the action by name (any uids), fixed
-    /// one-dimensional float shapes, a bounded action.
+    /// Reads a server's specs: the action, and the observations `observation`, `reward` and
+    /// `discount` by name (any uids), fixed one-dimensional float shapes, a bounded action. The
+    /// `design` observation is optional: a server without one (any dm_env_rpc server not
+    /// written for coadapt) is a fixed-design environment of design dimension 0, reset with
+    /// `Reset` and no settings ([`Uids::coadapt`] says which kind). A server with one action
+    /// of another name than `action`, or one float observation of another name than
+    /// `observation` beside `reward` and `discount`, is read by that one.
     pub fn from_specs(specs: &ActionObservationSpecs) -> Result<(Profile, Uids), ProfileError> {
-        let find = |map: &std::collections::HashMap<u64, TensorSpec>, name: &'static str, what: &'static str| {
-            map.iter().find(|(_, s)| s.name == name).map(|(&uid, s)| (uid, s.clone())).ok_or(ProfileError::Missing { what, name })
+        let names = |map: &std::collections::HashMap<u64, TensorSpec>| {
+            let mut n: Vec<String> = map.values().map(|s| format!("`{}`", s.name)).collect();
+            n.sort();
+            if n.is_empty() { "none".to_string() } else { n.join(", ") }
         };
-        let (action_uid, action) = find(&specs.actions, "action", "action")?;
-        let (obs_uid, obs) = find(&specs.observations, "observation", "observation")?;
+        let find = |map: &std::collections::HashMap<u64, TensorSpec>, name: &'static str, what: &'static str| {
+            map.iter().find(|(_, s)| s.name == name).map(|(&uid, s)| (uid, s.clone())).ok_or_else(|| ProfileError::Missing {
+                what,
+                name,
+                has: names(map),
+            })
+        };
+        // By name, else the only candidate.
+        let find_or_only = |map: &std::collections::HashMap<u64, TensorSpec>, name: &'static str, what: &'static str, others: &[&str]| {
+            find(map, name, what).or_else(|e| {
+                let mut rest = map.iter().filter(|(_, s)| !others.contains(&s.name.as_str()));
+                match (rest.next(), rest.next()) {
+                    (Some((&uid, s)), None) => Ok((uid, s.clone())),
+                    _ => Err(e),
+                }
+            })
+        };
+        let (action_uid, action) = find_or_only(&specs.actions, "action", "action", &[])?;
         let (reward_uid, reward) = find(&specs.observations, "reward", "observation")?;
         let (discount_uid, discount) = find(&specs.observations, "discount", "observation")?;
-        let (design_uid, design) = find(&specs.observations, "design", "observation")?;
+        let design = find(&specs.observations, "design", "observation").ok();
+        let (obs_uid, obs) = find_or_only(&specs.observations, "observation", "observation", &["reward", "discount", "design"])?;
         let vector = |s: &TensorSpec| -> Result<tensor::FloatSpec, ProfileError> {
             let f = tensor::read_float_spec(s)?;
             if f.dims.len() != 1 {
@@ -79,11 +103,17 @@ impl Profile {
         }
         let action = BoxSpace::new(lo, hi).map_err(|e| ProfileError::Box { name: "action", why: e.to_string() })?;
         let s = vector(&obs)?;
-        let d = vector(&design)?;
-        let design = match d.bounds {
-            Some((lo, hi)) => BoxSpace::new(lo, hi).map_err(|e| ProfileError::Box { name: "design", why: e.to_string() })?,
-            None if d.dims[0] == 0 => BoxSpace::uniform(0, 0.0, 0.0),
-            None => return Err(ProfileError::Unbounded("design")),
+        let (design_uid, design) = match design {
+            None => (None, BoxSpace::uniform(0, 0.0, 0.0)),
+            Some((uid, d)) => {
+                let d = vector(&d)?;
+                let b = match d.bounds {
+                    Some((lo, hi)) => BoxSpace::new(lo, hi).map_err(|e| ProfileError::Box { name: "design", why: e.to_string() })?,
+                    None if d.dims[0] == 0 => BoxSpace::uniform(0, 0.0, 0.0),
+                    None => return Err(ProfileError::Unbounded("design")),
+                };
+                (Some(uid), b)
+            }
         };
         let uids = Uids { action: action_uid, observation: obs_uid, reward: reward_uid, discount: discount_uid, design: design_uid };
         Ok((Profile { state_dim: s.dims[0], action, design }, uids))
@@ -97,14 +127,23 @@ pub struct Uids {
     pub observation: u64,
     pub reward: u64,
     pub discount: u64,
-    pub design: u64,
+    /// `None`: a server without a `design` observation (not a coadapt environment).
+    pub design: Option<u64>,
+}
+
+impl Uids {
+    /// The server speaks the coadapt profile (it has a `design` observation and takes the
+    /// `design` and `seed` settings on ResetWorld); else it is a plain dm_env_rpc server.
+    pub fn coadapt(&self) -> bool {
+        self.design.is_some()
+    }
 }
 
 /// A server's specs do not follow the coadapt profile.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ProfileError {
-    #[error("the server's specs have no {what} named `{name}` (see the coadapt profile in proto/README.md)")]
-    Missing { what: &'static str, name: &'static str },
+    #[error("the server's specs have no {what} named `{name}` (its {what}s: {has}; see the coadapt profile in proto/README.md)")]
+    Missing { what: &'static str, name: &'static str, has: String },
     #[error(transparent)]
     Tensor(#[from] TensorError),
     #[error("spec `{name}` has shape {dims:?}, {want} expected")]
