@@ -1,6 +1,7 @@
-//! `coadapt serve RUN_DIR` through the binary, queried by the Python client example
-//! (clients/python/example.py: stubs generated from proto/ by grpcio-tools, and Triton's
-//! Open Inference Protocol client from PyPI) in a virtualenv that clients/python/setup_venv.sh
+//! `coadapt serve RUN_DIR` through the binary, queried by the coadapt-client package
+//! (`pip install ./clients/python`: stubs generated from proto/ as it builds) with its own
+//! pytest suite, and by the example (clients/python/example.py: the package and Triton's Open
+//! Inference Protocol client from PyPI), in a virtualenv that clients/python/setup_venv.sh
 //! creates once under the target directory.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
@@ -337,4 +338,56 @@ impl WaitLog for std::process::Child {
         let _ = self.wait();
         s
     }
+}
+
+/// Runs the coadapt-client package's own tests (`clients/python/tests`, pytest) with `env`.
+fn client_tests(env: &[(&str, &str)], select: &str) -> String {
+    let o = Command::new(venv().join("bin/python"))
+        .args(["-m", "pytest", "-q", "-p", "no:cacheprovider", "-k", select])
+        .arg(workspace_file("clients/python/tests"))
+        .envs(env.iter().copied())
+        .env_remove("COADAPT_TOKEN")
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "pytest failed:\n{out}\n{}", String::from_utf8_lossy(&o.stderr));
+    out
+}
+
+#[test]
+fn the_python_client_package_passes_its_tests_against_a_finished_run_and_a_running_fleet() {
+    // `pip install ./clients/python` (setup_venv.sh does it as a user would): a finished run.
+    let run = finished_run("package");
+    let mut server = Server(coadapt().arg("serve").arg(&run).args(["--listen", "127.0.0.1:0"]).stdout(Stdio::piped()).spawn().unwrap());
+    let addr = read_addr(&mut server);
+    let out = client_tests(&[("COADAPT_TEST_SERVER", &addr), ("COADAPT_TEST_RUN_DIR", run.to_str().unwrap())], "not live");
+    assert!(out.contains("8 passed"), "{out}");
+    drop(server);
+    // A fleet of processes (shared memory) whose learner serves while it runs: watched to its end.
+    let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-package-live", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut fleet = Fleet(
+        coadapt()
+            .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap(), "--serve", "127.0.0.1:0"])
+            .arg("--out")
+            .arg(&dir)
+            .stderr(Stdio::piped())
+            .stdout(Stdio::null())
+            .process_group(0)
+            .spawn()
+            .unwrap(),
+    );
+    let stderr = fleet.0.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if let Some(at) = line.split("design service").nth(1).and_then(|r| r.split("grpc://").nth(1)) {
+                let _ = tx.send(at.split_whitespace().next().unwrap_or_default().to_string());
+            }
+        }
+    });
+    let live = rx.recv_timeout(std::time::Duration::from_secs(60)).expect("no design service address");
+    let out = client_tests(&[("COADAPT_TEST_LIVE", &live)], "live");
+    assert!(out.contains("1 passed"), "{out}");
+    assert!(fleet.0.wait().unwrap().success());
 }
