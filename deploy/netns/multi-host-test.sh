@@ -6,6 +6,15 @@
 # also gets its own /dev/shm, so nothing can pass through shared memory. A tiny co-adaptation
 # runs to the end, then the run directory is checked. Every namespace is removed on exit.
 #
+# Faults (issue 33): --latency MS [--jitter MS] delays every byte between the actor hosts and the
+# learner both ways (deploy/netns/delay_proxy.py: this machine's kernel has no netem, so a proxy
+# in the learner's namespace stands in for `tc netem delay`); --loss PCT drops that share of the
+# packets leaving every host (nftables' random numgen, a real loss that TCP must retransmit);
+# --partition SECS cuts the second actor host off entirely (nftables drops all its traffic) once
+# the run has --partition-after episodes, then heals it. --compare runs the same config in one
+# process afterwards and checks that the rows are the undisturbed run's (lock-step is
+# deterministic); --report FILE appends one JSON line of what the faults cost (BENCHMARKS.md).
+#
 # Needs: Linux, root (or CAP_NET_ADMIN + CAP_SYS_ADMIN), iproute2 (`ip`, `ss`), util-linux
 # (`unshare`), bash >= 5.1.
 # Exit: 0 pass; 1 fail; 2 usage; 77 skipped (no namespaces here: the reason is printed).
@@ -23,6 +32,16 @@ Usage: deploy/netns/multi-host-test.sh [options] [COADAPT_BIN]
   --keep             keep the run directory (under $TMPDIR) after a pass
   --plumbing-only    check only the namespaces and the bridge with a stand-in server
                      (python3 -m http.server and a python3 client); no coadapt needed
+  --designs N        the config's schedule.designs set to N (a longer run under faults)
+  --latency MS       delay every byte between actor hosts and the learner by MS, both ways
+  --jitter MS        the delay's standard deviation (default: a fifth of the latency)
+  --loss PCT         drop PCT % of the packets leaving every host (needs nftables)
+  --partition SECS   cut the second actor host off for SECS once the run has
+                     --partition-after N episodes (default 4) (needs nftables)
+  --lease SECS       flow.assignment-lease-secs (default the config's: 60 s): how long a
+                     silent actor's episode waits before it goes to another actor
+  --compare          then run the same config in one process and require the same rows
+  --report FILE      append one JSON line: the faults, the learner's waiting time, throughput
   -h, --help         this help
 Exit status: 0 pass, 1 fail, 2 usage error, 77 skipped (why is printed).
 EOF
@@ -46,6 +65,15 @@ timeout=900
 subnet=10.213.0
 keep=0
 plumbing_only=0
+designs=""
+latency=0
+jitter=""
+loss=0
+partition=0
+partition_after=4
+compare=0
+report=""
+lease=""
 while [[ $# -gt 0 ]]; do
   case $1 in
     -h | --help) usage; exit 0 ;;
@@ -54,6 +82,15 @@ while [[ $# -gt 0 ]]; do
     --subnet) [[ $# -ge 2 && $2 =~ ^10\.[0-9]+\.[0-9]+$ ]] || usage_err "--subnet needs 10.B.C"; subnet=$2; shift 2 ;;
     --keep) keep=1; shift ;;
     --plumbing-only) plumbing_only=1; shift ;;
+    --designs) [[ $# -ge 2 && $2 =~ ^[1-9][0-9]*$ ]] || usage_err "--designs needs a count"; designs=$2; shift 2 ;;
+    --latency) [[ $# -ge 2 && $2 =~ ^[0-9]+$ ]] || usage_err "--latency needs milliseconds"; latency=$2; shift 2 ;;
+    --jitter) [[ $# -ge 2 && $2 =~ ^[0-9]+$ ]] || usage_err "--jitter needs milliseconds"; jitter=$2; shift 2 ;;
+    --loss) [[ $# -ge 2 && $2 =~ ^[0-9]+(\.[0-9]{1,2})?$ ]] || usage_err "--loss needs a percentage like 2 or 0.5"; loss=$2; shift 2 ;;
+    --partition) [[ $# -ge 2 && $2 =~ ^[0-9]+$ ]] || usage_err "--partition needs seconds"; partition=$2; shift 2 ;;
+    --partition-after) [[ $# -ge 2 && $2 =~ ^[0-9]+$ ]] || usage_err "--partition-after needs episodes"; partition_after=$2; shift 2 ;;
+    --lease) [[ $# -ge 2 && $2 =~ ^[1-9][0-9]*$ ]] || usage_err "--lease needs seconds"; lease=$2; shift 2 ;;
+    --compare) compare=1; shift ;;
+    --report) [[ $# -ge 2 ]] || usage_err "--report needs a file"; report=$2; shift 2 ;;
     -*) usage_err "unknown option '$1'" ;;
     *) bin=$1; shift ;;
   esac
@@ -67,6 +104,18 @@ command -v ss >/dev/null 2>&1 || skip "'ss' not found: install iproute2"
 command -v unshare >/dev/null 2>&1 || skip "'unshare' not found: install util-linux"
 [[ $EUID -eq 0 ]] || skip "needs root (or CAP_NET_ADMIN and CAP_SYS_ADMIN) for 'ip netns add'; run with sudo"
 command -v python3 >/dev/null 2>&1 || skip "python3 not found (the stand-in server and the run-directory checks use it)"
+[[ -n $jitter ]] || jitter=$((latency / 5))
+loss_per_10k=$(python3 -c 'import sys; print(round(float(sys.argv[1]) * 100))' "$loss")
+if ((loss_per_10k > 0 || partition > 0)) && ! command -v nft >/dev/null 2>&1; then
+  # The project installs what its tests need (Debian's nftables: the userspace side of the
+  # kernel's nf_tables, which this kernel has).
+  if command -v apt-get >/dev/null 2>&1; then
+    say "installing nftables (apt-get install nftables) for --loss/--partition"
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -q nftables >/dev/null 2>&1 ||
+      { apt-get update -q >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -q nftables >/dev/null 2>&1; } || true
+  fi
+  command -v nft >/dev/null 2>&1 || skip "--loss and --partition need nftables ('nft'), which could not be installed"
+fi
 
 if ((!plumbing_only)); then
   [[ -n $bin ]] || bin=$REPO_ROOT/target/release/coadapt
@@ -81,6 +130,24 @@ if ((!plumbing_only)); then
     [[ -f $config ]] || config=$REPO_ROOT/configs/half-cheetah-tiny.toml
   fi
   [[ -r $config ]] || usage_err "config '$config' is not readable"
+fi
+
+if [[ -n $designs$lease ]] && ((!plumbing_only)); then
+  changed=$(mktemp "${TMPDIR:-/tmp}/coadapt-netns-config.XXXXXX.toml")
+  python3 - "$config" "$changed" "$designs" "$lease" <<'PY' || usage_err "cannot set schedule.designs or the lease in '$config'"
+import re, sys
+text = open(sys.argv[1]).read()
+if sys.argv[3]:
+    text, n = re.subn(r"(?m)^designs = \d+$", f"designs = {sys.argv[3]}", text)
+    if n != 1:
+        sys.exit(f"{sys.argv[1]} has no single `designs = N` line")
+if sys.argv[4]:
+    if re.search(r"(?m)^\[flow\]", text):
+        sys.exit(f"{sys.argv[1]} has a [flow] table already")
+    text += f"\n[flow]\nassignment-lease-secs = {sys.argv[4]}\n"
+open(sys.argv[2], "w").write(text)
+PY
+  config=$changed
 fi
 
 tag="cx$$"                # namespaces and links are named after this process: runs can overlap
@@ -158,6 +225,15 @@ attach "$ns_l" 1
 attach "$ns_a1" 2
 attach "$ns_a2" 3
 say "namespaces: $ns_l ($learner_ip), $ns_a1 ($subnet.2), $ns_a2 ($subnet.3), bridged in $ns_sw"
+if ((loss_per_10k > 0)); then
+  for ns in "$ns_l" "$ns_a1" "$ns_a2"; do
+    ip netns exec "$ns" nft add table inet coadapt_loss
+    ip netns exec "$ns" nft add chain inet coadapt_loss out '{ type filter hook output priority 0 ; }'
+    ip netns exec "$ns" nft add rule inet coadapt_loss out oifname eth0 numgen random mod 10000 '<' "$loss_per_10k" drop ||
+      skip "nftables cannot drop packets here (numgen random)"
+  done
+  say "faults: $loss % of the packets leaving every host dropped"
+fi
 
 # in_host NS CMD...: CMD in namespace NS with a /dev/shm of its own (as on a separate machine).
 in_host() {
@@ -223,12 +299,35 @@ bg_pids+=("$learner_host")
 wait_port "$ns_a1" "$learner_ip" 50051 60 ||
   fail "the learner is not listening on $learner_ip:50051 after 60 s (see $run_dir/logs/learner-0.log)"
 say "learner listening on $learner_ip:50051"
+learner_url="http://$learner_ip:50051"
+if ((latency > 0)); then
+  ip netns exec "$ns_l" python3 "$SCRIPT_DIR/delay_proxy.py" "$learner_ip:50052" "$learner_ip:50051" "$latency" "$jitter" \
+    >"$work/delay-proxy.log" 2>&1 &
+  bg_pids+=("$!")
+  wait_port "$ns_a1" "$learner_ip" 50052 15 || fail "the delay proxy is not listening (see $work/delay-proxy.log)"
+  learner_url="http://$learner_ip:50052"
+  say "faults: actors reach the learner through a $latency ms (sd $jitter ms) delay each way"
+fi
+if ((partition > 0)); then
+  # Cut the second actor host off once the run is under way, heal it after $partition s.
+  (
+    until [[ -f $run_dir/episodes.csv ]] && (($(wc -l <"$run_dir/episodes.csv") > partition_after)); do sleep 0.2; done
+    ip netns exec "$ns_a2" nft add table inet coadapt_cut
+    ip netns exec "$ns_a2" nft add chain inet coadapt_cut in '{ type filter hook input priority 0 ; policy drop ; }'
+    ip netns exec "$ns_a2" nft add chain inet coadapt_cut out '{ type filter hook output priority 0 ; policy drop ; }'
+    echo "cut $(date +%s.%N) $(($(wc -l <"$run_dir/episodes.csv") - 1))" >>"$work/partition.log"
+    sleep "$partition"
+    echo "healed $(date +%s.%N) $(($(wc -l <"$run_dir/episodes.csv") - 1))" >>"$work/partition.log"
+    ip netns exec "$ns_a2" nft delete table inet coadapt_cut
+  ) &
+  bg_pids+=("$!")
+fi
 actor_hosts=()
 actor_ns=("$ns_a1" "$ns_a2")
 actor_failures=()
 i=0
 for ns in "$ns_a1" "$ns_a2"; do
-  in_host "$ns" "$REPO_ROOT/deploy/multi-host/actor-host.sh" "http://$learner_ip:50051" 1 \
+  in_host "$ns" "$REPO_ROOT/deploy/multi-host/actor-host.sh" "$learner_url" 1 \
     --first-id $((i * 100)) --bin "$bin" --config "$config" --fleet "$fleet" \
     --log-dir "$work/$ns-logs" -- --grace 20 --tls-dir "$sec/tls" --actor-token "$sec/actor.token" \
     >"$work/$ns.out" 2>&1 &
@@ -242,9 +341,9 @@ declare -A connected=()
 deadline=$((SECONDS + timeout))
 while kill -0 "$learner_host" 2>/dev/null; do
   for ns in "$ns_a1" "$ns_a2"; do
-    if [[ -z ${connected[$ns]:-} ]] && ip netns exec "$ns" ss -tnH state established "dst $learner_ip" 2>/dev/null | grep -q ":50051"; then
+    if [[ -z ${connected[$ns]:-} ]] && ip netns exec "$ns" ss -tnH state established "dst $learner_ip" 2>/dev/null | grep -q ":${learner_url##*:}"; then
       connected[$ns]=1
-      say "$ns has a gRPC connection to $learner_ip:50051"
+      say "$ns has a gRPC connection to ${learner_url#http://}"
     fi
   done
   if ((SECONDS >= deadline)); then
@@ -260,7 +359,9 @@ for ((k = 0; k < ${#actor_hosts[@]}; k++)); do
   for _ in $(seq 60); do kill -0 "$pid" 2>/dev/null || break; sleep 1; done
   if kill -0 "$pid" 2>/dev/null; then
     say "warning: actor host $k still running 60 s after the learner finished; stopping it"
-    kill -INT "$pid" 2>/dev/null || true
+    # SIGINT to what runs in its namespace (fleet.sh and the actors: both stop cleanly on it);
+    # the launcher's subshell would not pass it on.
+    for p in $(ip netns pids "${actor_ns[$k]}" 2>/dev/null); do kill -INT "$p" 2>/dev/null || true; done
   fi
   st=0
   wait "$pid" || st=$?
@@ -324,5 +425,53 @@ for role in actor optimizer; do
   fi
 done
 say "the fleet spoke TLS with role tokens across hosts; no token in any log"
+if ((partition > 0)); then
+  [[ -s $work/partition.log ]] || fail "the partition never happened (the run ended before $partition_after episodes?)"
+  say "partition: $(tr '\n' ' ' <"$work/partition.log")"
+  if grep -q '^healed' "$work/partition.log"; then
+    # Did the cut-off host come back? Episodes after the heal that its actor (id 100) ran.
+    healed_at=$(awk '/^healed/ {print $3}' "$work/partition.log")
+    back=$(python3 -c 'import csv,sys; r=list(csv.DictReader(open(sys.argv[1]))); print(sum(1 for x in r[int(sys.argv[2]):] if x.get("actor") == "100"))' \
+      "$run_dir/episodes.csv" "$healed_at")
+    say "partition: the cut-off actor host ran $back episodes after it was healed"
+  else
+    say "note: the run ended while the second actor host was still cut off"
+  fi
+fi
+if ((compare)); then
+  # Lock-step is deterministic: the same config in one process must write the same rows (but
+  # the wall clock, which actor ran an episode, and its policy lag).
+  "$bin" run --config "$config" --transport in-process --out "$work/undisturbed" >"$work/undisturbed.out" 2>"$work/undisturbed.err" ||
+    fail "the undisturbed in-process run failed (see $work/undisturbed.err)"
+  python3 - "$run_dir" "$work/undisturbed" <<'PY' || fail "the rows differ from the undisturbed run's"
+import csv, sys
+def rows(d, name, drop):
+    with open(f"{d}/{name}", newline="") as f:
+        return [{k: v for k, v in r.items() if k not in drop} for r in csv.DictReader(f)]
+bad = 0
+for name, drop in (("designs.csv", ()), ("episodes.csv", ("seconds", "actor", "policy_lag"))):
+    a, b = rows(sys.argv[1], name, drop), rows(sys.argv[2], name, drop)
+    if a != b:
+        bad += 1
+        first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
+        print(f"  {name}: {len(a)} rows against {len(b)}; first difference at row {first}:"
+              f" {a[first] if first < len(a) else None} vs {b[first] if first < len(b) else None}", file=sys.stderr)
+    else:
+        print(f"  {name}: {len(a)} rows, equal to the undisturbed run's", file=sys.stderr)
+sys.exit(1 if bad else 0)
+PY
+  say "every row equals the undisturbed run's: no transition lost or counted twice"
+fi
+if [[ -n $report ]]; then
+  python3 - "$summary" "$latency" "$jitter" "$loss" "$partition" "${lease:-60}" >>"$report" <<'PY'
+import json, sys
+s = json.loads(sys.argv[1].strip().splitlines()[-1])
+secs = s["seconds"]
+print(json.dumps({"bench": "fleet under faults", "config": f"latency {sys.argv[2]} ms sd {sys.argv[3]}, loss {sys.argv[4]} %, partition {sys.argv[5]} s, lease {sys.argv[6]} s",
+                  "seconds": round(secs, 2), "learner_waiting_seconds": round(s["learner_waiting_seconds"], 2),
+                  "transitions_per_second": round(s["replay_transitions"] / secs, 1), "transitions": s["replay_transitions"],
+                  "episodes_reissued": s["episodes_reissued"], "impl": "coadapt"}))
+PY
+fi
 passed=1
 say "PASS: learner + optimiser in $ns_l, actors in $ns_a1 and $ns_a2, gRPC across the bridge; run directory checked"
