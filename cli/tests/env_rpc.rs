@@ -114,7 +114,7 @@ fn sac_learns_gymnasium_pendulum_served_by_the_python_bridge() {
 }
 
 #[test]
-fn sac_learns_from_a_dm_env_rpc_server_not_written_for_coadapt() {
+fn sac_and_latent_learn_from_a_dm_env_rpc_server_not_written_for_coadapt() {
     // gymnasium's Pendulum-v1 behind a server written from the protocol's text: no `design`,
     // its own uids, an action named `torque`, and every setting refused.
     let mut c = Command::new(venv().join("bin/python"));
@@ -175,6 +175,20 @@ fn sac_learns_from_a_dm_env_rpc_server_not_written_for_coadapt() {
     assert_eq!(eps.lines().count(), 1 + 3, "{eps}");
     let designs = std::fs::read_to_string(dir.join("fixed/designs.csv")).unwrap();
     assert!(designs.lines().nth(1).is_some_and(|l| l.starts_with("0,initial,,3,")), "{designs}");
+    // The same server showing a 16-pixel camera frame instead of its state: `coadapt latent`
+    // (pixels to a time-contrastive embedding, DDPG planning in it) learns from it as it is.
+    let mut c = Command::new(venv().join("bin/python"));
+    c.arg(workspace_file("cli/tests/python/plain_dm_env_server.py")).args(["--pixels", "16"]);
+    let pixels = start(c);
+    let tiny = std::fs::read_to_string(workspace_file("configs/latent/pendulum-tiny.toml")).unwrap();
+    assert!(tiny.contains("robot = \"pendulum\""));
+    let latent_cfg = dir.join("latent.toml");
+    std::fs::write(&latent_cfg, tiny.replace("robot = \"pendulum\"", &format!("robot = \"{}\"", pixels.url))).unwrap();
+    let o = coadapt(&["latent", "--config", latent_cfg.to_str().unwrap(), "--out", dir.join("latent").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
+    assert_eq!((s["runs"].as_u64(), s["episodes"].as_u64()), (Some(2), Some(3)), "{s}");
+    assert!(s["final_eval_return_mean"].as_f64().is_some_and(f64::is_finite), "{s}");
 }
 
 /// The tiny protocol on a remote env: `configs/half-cheetah-tiny.toml` with `env` replaced.

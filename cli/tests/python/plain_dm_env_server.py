@@ -5,13 +5,18 @@ here, not coadapt's), no `design`, no settings of any kind: a CreateWorld, Reset
 with settings is refused with INVALID_ARGUMENT, as a strict server would. Written for
 cli/tests/env_rpc.rs from the protocol's text, not from coadapt's bridge.
 
-    python plain_dm_env_server.py        (prints `listening on 127.0.0.1:PORT` once it is)
+    python plain_dm_env_server.py [--pixels SIDE]   (prints `listening on 127.0.0.1:PORT` once it is)
+
+With --pixels SIDE the observation is a camera frame instead of the state: SIDE x SIDE RGB,
+channel-major, in [0, 1] (the pendulum's rod drawn from the centre), as `coadapt latent` learns
+from.
 
 Sequences: the first Step after JoinWorld, Reset or ResetWorld ignores its actions and answers
 the first observation (RUNNING); Pendulum's 200-step limit ends a sequence TERMINATED with
 discount 1 (a truncation), and the next Step starts the next sequence.
 """
 
+import argparse
 import sys
 from concurrent import futures
 
@@ -37,14 +42,33 @@ def spec(name, shape, lo=None, hi=None):
     return s
 
 
-SPECS = pb.ActionObservationSpecs(
-    actions={ACTION: spec("torque", [1], [-2.0], [2.0])},
-    observations={
-        OBSERVATION: spec("observation", [3]),
-        REWARD: spec("reward", []),
-        DISCOUNT: spec("discount", [], [0.0], [1.0]),
-    },
-)
+PIXELS = 0  # --pixels: the side of the camera frame (0: the state)
+
+
+def obs_dim():
+    return 3 * PIXELS * PIXELS if PIXELS else 3
+
+
+def specs():
+    return pb.ActionObservationSpecs(
+        actions={ACTION: spec("torque", [1], [-2.0], [2.0])},
+        observations={
+            OBSERVATION: spec("observation", [obs_dim()]),
+            REWARD: spec("reward", []),
+            DISCOUNT: spec("discount", [], [0.0], [1.0]),
+        },
+    )
+
+
+def frame(state):
+    """The pendulum seen from the front: a white rod from the centre towards its tip."""
+    cos, sin = float(state[0]), float(state[1])
+    img = np.zeros((3, PIXELS, PIXELS), dtype=np.float32)
+    c = (PIXELS - 1) / 2.0
+    for t in np.linspace(0.0, 1.0, 4 * PIXELS):
+        x, y = int(round(c + t * c * sin)), int(round(c - t * c * cos))
+        img[:, y, x] = 1.0
+    return img.reshape(-1)
 
 
 class Refused(Exception):
@@ -65,7 +89,8 @@ class Agent:
         self.episodes = 0
 
     def observations(self, requested):
-        values = {OBSERVATION: floats(self.obs, [3]), REWARD: floats([self.reward], []), DISCOUNT: floats([self.discount], [])}
+        seen = frame(self.obs) if PIXELS else self.obs
+        values = {OBSERVATION: floats(seen, [obs_dim()]), REWARD: floats([self.reward], []), DISCOUNT: floats([self.discount], [])}
         out = {}
         for uid in requested:
             if uid not in values:
@@ -122,13 +147,13 @@ class Server(dm_env_rpc_pb2_grpc.EnvironmentServicer):
                     if request.join_world.world_name != world:
                         raise Refused(code_pb2.NOT_FOUND, f"no world {request.join_world.world_name!r}")
                     agent.env = gym.make("Pendulum-v1")
-                    yield pb.EnvironmentResponse(join_world=pb.JoinWorldResponse(specs=SPECS))
+                    yield pb.EnvironmentResponse(join_world=pb.JoinWorldResponse(specs=specs()))
                 elif kind == "step":
                     yield pb.EnvironmentResponse(step=agent.step(request.step))
                 elif kind == "reset":
                     no_settings(request.reset.settings, "Reset")
                     agent.running = False
-                    yield pb.EnvironmentResponse(reset=pb.ResetResponse(specs=SPECS))
+                    yield pb.EnvironmentResponse(reset=pb.ResetResponse(specs=specs()))
                 elif kind == "reset_world":
                     no_settings(request.reset_world.settings, "ResetWorld")
                     agent.running = False
@@ -148,6 +173,10 @@ class Server(dm_env_rpc_pb2_grpc.EnvironmentServicer):
 
 
 def main():
+    global PIXELS
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--pixels", type=int, default=0)
+    PIXELS = ap.parse_args().pixels
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=8))
     dm_env_rpc_pb2_grpc.add_EnvironmentServicer_to_server(Server(), server)
     port = server.add_insecure_port("127.0.0.1:0")
