@@ -17,10 +17,6 @@ fn tmpdir(name: &str) -> PathBuf {
     coadapt_test_support::scratch("confirm", name)
 }
 
-fn workspace_file(rel: &str) -> PathBuf {
-    coadapt_test_support::workspace_file(rel)
-}
-
 fn confirm(dir: &Path, flags: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_coadapt")).arg("confirm").arg(dir).args(flags).output().unwrap()
 }
@@ -47,16 +43,7 @@ fn awaiting(dir: &Path, index: usize, proposal: usize, child: &mut std::process:
 /// The tiny HalfCheetah config, shrunk (2 episodes per initial design, 1 per chosen one, no
 /// landscape), with every design's prototype to confirm.
 fn confirming_config(name: &str) -> PathBuf {
-    let mut t = std::fs::read_to_string(workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
-    for (from, to) in [
-        ("landscape-grid = 12\n", "landscape-grid = 0\n"),
-        ("initial-episodes = 3\n", "initial-episodes = 2\n"),
-        ("episodes-per-design = 2\n", "episodes-per-design = 1\n"),
-        ("[schedule]\n", "[schedule]\nconfirm-designs = true\nconfirm-poll-secs = 0.05\n"),
-    ] {
-        assert!(t.contains(from), "configs/half-cheetah-tiny.toml has no {from:?}");
-        t = t.replace(from, to);
-    }
+    let t = coadapt_test_support::confirming_tiny_config();
     let path = tmpdir(name).with_extension("toml");
     std::fs::write(&path, t).unwrap();
     path

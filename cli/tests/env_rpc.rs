@@ -87,11 +87,17 @@ fn deepminds_compliance_suites_and_dm_env_adaptor_pass_against_env_serve() {
 #[test]
 fn sac_learns_gymnasium_pendulum_served_by_the_python_bridge() {
     let server = gym_serve(&["--env", "Pendulum-v1", "--port", "0"]);
-    let out = tmpdir("pendulum");
+    sac_reaches_minus_200_on_pendulum(&server.url, "pendulum");
+}
+
+/// SAC on gymnasium's Pendulum-v1 served at `url` reaches -200 within 20,000 steps, every
+/// episode whole (Pendulum-v1 truncates at 200 steps).
+fn sac_reaches_minus_200_on_pendulum(url: &str, name: &str) {
+    let out = tmpdir(name);
     let o = coadapt(&[
         "train",
         "--env",
-        &server.url,
+        url,
         "--steps",
         "20000",
         "--seed",
@@ -105,10 +111,9 @@ fn sac_learns_gymnasium_pendulum_served_by_the_python_bridge() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
-    eprintln!("Pendulum-v1 over dm_env_rpc: {s}");
+    eprintln!("Pendulum-v1 over dm_env_rpc ({name}): {s}");
     let reached = s["first_step_reaching_target"].as_u64().unwrap_or_else(|| panic!("never above -200: {s}"));
     assert!(reached <= 20_000 && s["mean_return_last_10"].as_f64().unwrap() > -200.0, "{s}");
-    // gymnasium's Pendulum-v1 truncates at 200 steps: every episode is whole.
     let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
     assert!(csv.lines().skip(1).all(|l| l.split(',').nth(3) == Some("200")), "{csv}");
 }
@@ -120,29 +125,7 @@ fn sac_and_latent_learn_from_a_dm_env_rpc_server_not_written_for_coadapt() {
     let mut c = Command::new(venv().join("bin/python"));
     c.arg(workspace_file("cli/tests/python/plain_dm_env_server.py"));
     let server = start(c);
-    let out = tmpdir("plain");
-    let o = coadapt(&[
-        "train",
-        "--env",
-        &server.url,
-        "--steps",
-        "20000",
-        "--seed",
-        "1",
-        "--target-return",
-        "-200",
-        "--stop-at-target",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();
-    eprintln!("Pendulum-v1 from a plain dm_env_rpc server: {s}");
-    let reached = s["first_step_reaching_target"].as_u64().unwrap_or_else(|| panic!("never above -200: {s}"));
-    assert!(reached <= 20_000 && s["mean_return_last_10"].as_f64().unwrap() > -200.0, "{s}");
-    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
-    assert!(csv.lines().skip(1).all(|l| l.split(',').nth(3) == Some("200")), "{csv}");
+    sac_reaches_minus_200_on_pendulum(&server.url, "plain");
     // Co-adaptation needs a design: refused as a setting (exit 78), saying what to do instead.
     let dir = tmpdir("plain-run");
     let cfg = tiny_config(&dir, &server.url, "", "");

@@ -21,16 +21,7 @@ fn coadapt() -> Command {
 /// The tiny HalfCheetah config with every prototype to confirm, role tokens from `tokens` and,
 /// with `tls`, the server certificate of `coadapt tls new --out tls`.
 fn config(dir: &Path, tokens: &Path, tls: Option<&Path>) -> PathBuf {
-    let mut t = std::fs::read_to_string(coadapt_test_support::workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
-    for (from, to) in [
-        ("landscape-grid = 12\n", "landscape-grid = 0\n"),
-        ("initial-episodes = 3\n", "initial-episodes = 2\n"),
-        ("episodes-per-design = 2\n", "episodes-per-design = 1\n"),
-        ("[schedule]\n", "[schedule]\nconfirm-designs = true\nconfirm-poll-secs = 0.05\n"),
-    ] {
-        assert!(t.contains(from), "configs/half-cheetah-tiny.toml has no {from:?}");
-        t = t.replace(from, to);
-    }
+    let mut t = coadapt_test_support::confirming_tiny_config();
     t.push_str(&format!("\n[metrics]\nlearner-listen = \"127.0.0.1:0\"\n\n[security]\ntokens-file = {:?}\n", tokens.display().to_string()));
     if let Some(tls) = tls {
         let p = |f: &str| tls.join(f).display().to_string();

@@ -177,15 +177,16 @@ impl Drop for Fleet {
     }
 }
 
-#[test]
-fn python_clients_query_a_running_fleet_and_watch_its_designs() {
-    let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-live", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+/// `coadapt run` of the tiny config with `extra` flags into `dir`, serving design queries on a
+/// port of its choosing: the fleet, the service's address (from the learner's stderr line) and
+/// the log so far.
+fn serving_fleet(extra: &[&str], dir: &Path) -> (Fleet, String, std::sync::Arc<std::sync::Mutex<String>>) {
     let mut fleet = Fleet(
         coadapt()
-            .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap(), "--transport", "grpc"])
-            .args(["--designs", "60", "--serve", "127.0.0.1:0", "--out"])
-            .arg(&dir)
+            .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap()])
+            .args(extra)
+            .args(["--serve", "127.0.0.1:0", "--out"])
+            .arg(dir)
             .stderr(Stdio::piped())
             .stdout(Stdio::null())
             .process_group(0)
@@ -208,6 +209,14 @@ fn python_clients_query_a_running_fleet_and_watch_its_designs() {
     let addr = rx
         .recv_timeout(std::time::Duration::from_secs(60))
         .unwrap_or_else(|_| panic!("no design service address: {}", log.lock().unwrap()));
+    (fleet, addr, log)
+}
+
+#[test]
+fn python_clients_query_a_running_fleet_and_watch_its_designs() {
+    let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-live", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (mut fleet, addr, log) = serving_fleet(&["--transport", "grpc", "--designs", "60"], &dir);
     let o = Command::new(venv().join("bin/python"))
         .arg(workspace_file("clients/python/example.py"))
         .args(["--server", &addr, "--watch-rows", "12"])
@@ -366,27 +375,7 @@ fn the_python_client_package_passes_its_tests_against_a_finished_run_and_a_runni
     // A fleet of processes (shared memory) whose learner serves while it runs: watched to its end.
     let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-package-live", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let mut fleet = Fleet(
-        coadapt()
-            .args(["run", "--config", workspace_file("configs/half-cheetah-tiny.toml").to_str().unwrap(), "--serve", "127.0.0.1:0"])
-            .arg("--out")
-            .arg(&dir)
-            .stderr(Stdio::piped())
-            .stdout(Stdio::null())
-            .process_group(0)
-            .spawn()
-            .unwrap(),
-    );
-    let stderr = fleet.0.stderr.take().unwrap();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            if let Some(at) = line.split("design service").nth(1).and_then(|r| r.split("grpc://").nth(1)) {
-                let _ = tx.send(at.split_whitespace().next().unwrap_or_default().to_string());
-            }
-        }
-    });
-    let live = rx.recv_timeout(std::time::Duration::from_secs(60)).expect("no design service address");
+    let (mut fleet, live, _log) = serving_fleet(&[], &dir);
     let out = client_tests(&[("COADAPT_TEST_LIVE", &live)], "live");
     assert!(out.contains("1 passed"), "{out}");
     assert!(fleet.0.wait().unwrap().success());

@@ -3,7 +3,7 @@
 //! # Layout
 //! - [`scratch`], [`scratch_dir`]: a per-process temporary directory, emptied first.
 //! - [`workspace_file`], [`read_config`]: files of the workspace (configs, reference scripts)
-//!   from any crate's tests.
+//!   from any crate's tests; [`confirming_tiny_config`]: the tiny run that waits for prototypes.
 //! - [`browser`]: Chromium and ChromeDriver for the browser test, installed on first use.
 //! - [`bridge_venv`]: the Python bridge's virtualenv (dm-env-rpc, gymnasium, MuJoCo,
 //!   TensorBoard's reader), made once per target directory.
@@ -112,6 +112,23 @@ pub fn browser() -> Option<(PathBuf, PathBuf)> {
 
 pub fn workspace_file(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
+}
+
+/// The text of `configs/half-cheetah-tiny.toml` shrunk (2 episodes per initial design, 1 per
+/// chosen one, no landscape) with every design's prototype to confirm (polled every 50 ms):
+/// the run the prototype-step tests answer, from the command line and from the operator page.
+pub fn confirming_tiny_config() -> String {
+    let mut t = std::fs::read_to_string(workspace_file("configs/half-cheetah-tiny.toml")).unwrap();
+    for (from, to) in [
+        ("landscape-grid = 12\n", "landscape-grid = 0\n"),
+        ("initial-episodes = 3\n", "initial-episodes = 2\n"),
+        ("episodes-per-design = 2\n", "episodes-per-design = 1\n"),
+        ("[schedule]\n", "[schedule]\nconfirm-designs = true\nconfirm-poll-secs = 0.05\n"),
+    ] {
+        assert!(t.contains(from), "configs/half-cheetah-tiny.toml has no {from:?}");
+        t = t.replace(from, to);
+    }
+    t
 }
 
 /// The TOML file `rel` of the workspace as `T` (a run's config, a search's).
