@@ -199,10 +199,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let security = crate::security::from_args(&args.security);
     let mut env =
         coadapt_fleet::make_env_with(&cfg.env, &coadapt_robots::World::default(), &coadapt_fleet::RemoteEnvConfig::default(), &security)?;
-    // Refuse a bad design before anything is written.
-    if let Some(d) = &cfg.design {
-        env.spec().design.check("design", d).map_err(coadapt_core::EnvError::Design)?;
-    }
+    // Refuse what the run would refuse (a bad design, network sizes, weights) before anything
+    // is written: a refused command leaves no run directory behind.
+    train::check(&cfg, env.spec()).with_context(|| format!("training {} on {}", cfg.algo, cfg.env))?;
     let dir = match &args.out {
         Some(d) => d.clone(),
         None => {

@@ -69,12 +69,16 @@ fn bad_input_gets_a_clear_error_naming_what_is_wrong() {
         (&["train", "--config", "/nonexistent/coadapt.toml"], "reading config"),
         (&["train", "--algo", "ppo"], "invalid value 'ppo'"),
     ];
+    // In a directory of its own: a refused command must leave no run directory behind.
+    let cwd = tmpdir("bad-input");
+    std::fs::create_dir_all(&cwd).unwrap();
     for (args, needle) in cases {
-        let o = coadapt(args);
+        let o = Command::new(env!("CARGO_BIN_EXE_coadapt")).args(*args).current_dir(&cwd).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "{args:?} should fail");
         assert!(err.contains(needle), "{args:?}: stderr `{err}` does not mention `{needle}`");
         assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+        assert!(!cwd.join("runs").exists(), "{args:?} left a run directory behind");
     }
 }
 

@@ -166,7 +166,10 @@ fn sac_and_latent_learn_from_a_dm_env_rpc_server_not_written_for_coadapt() {
     let tiny = std::fs::read_to_string(workspace_file("configs/latent/pendulum-tiny.toml")).unwrap();
     assert!(tiny.contains("robot = \"pendulum\""));
     let latent_cfg = dir.join("latent.toml");
-    std::fs::write(&latent_cfg, tiny.replace("robot = \"pendulum\"", &format!("robot = \"{}\"", pixels.url))).unwrap();
+    let tiny = tiny
+        .replace("robot = \"pendulum\"", &format!("robot = \"{}\"", pixels.url))
+        .replace("[embedding]\n", &format!("[embedding]\npath = {:?}\n", dir.join("embedding.safetensors").display().to_string()));
+    std::fs::write(&latent_cfg, tiny).unwrap();
     let o = coadapt(&["latent", "--config", latent_cfg.to_str().unwrap(), "--out", dir.join("latent").to_str().unwrap()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s: serde_json::Value = serde_json::from_str(String::from_utf8(o.stdout).unwrap().trim()).unwrap();

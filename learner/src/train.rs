@@ -228,6 +228,26 @@ pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize) -> Result<B
     })
 }
 
+/// Everything [`run`] refuses before its first step, checked without writing anything: the
+/// config, the design against `spec`'s box, the networks (their sizes), the weights to start
+/// from, the action space to explore through. A command checks this before it makes a run
+/// directory, so that a refused run leaves nothing behind.
+pub fn check(cfg: &TrainConfig, spec: &coadapt_core::EnvSpec) -> Result<(), TrainError> {
+    cfg.validate()?;
+    let design = cfg.design.clone().unwrap_or_else(|| spec.default_design.clone());
+    spec.design.check("design", &design).map_err(EnvError::Design)?;
+    let (obs_dim, act_dim) = (spec.obs_dim(), spec.act_dim());
+    let mut agent = make_agent(cfg, obs_dim, act_dim)?;
+    if let Some(path) = &cfg.init_weights {
+        agent.load(path)?;
+    }
+    if let Some(l) = &cfg.latent_exploration {
+        crate::action_space::ActionAutoencoder::from_file(&l.action_space, obs_dim, act_dim)
+            .map_err(|e| TrainError::Config { field: "latent-exploration.action-space", why: e.to_string() })?;
+    }
+    Ok(())
+}
+
 /// Trains on `env` until `cfg.steps` steps, the target, or `shutdown`; writes `episodes.csv` and
 /// `checkpoint.safetensors` into `run_dir` and calls `on_episode` after every episode.
 pub fn run(
