@@ -233,6 +233,14 @@ pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize) -> Result<B
 /// from, the action space to explore through. A command checks this before it makes a run
 /// directory, so that a refused run leaves nothing behind.
 pub fn check(cfg: &TrainConfig, spec: &coadapt_core::EnvSpec) -> Result<(), TrainError> {
+    prepare(cfg, spec).map(|_| ())
+}
+
+/// What [`check`] refuses, and what [`run`] starts from: the design, the agent (with its
+/// starting weights), the action space to explore through.
+type Prepared = (Vec<f32>, Box<dyn Agent>, Option<crate::action_space::ActionAutoencoder>);
+
+fn prepare(cfg: &TrainConfig, spec: &coadapt_core::EnvSpec) -> Result<Prepared, TrainError> {
     cfg.validate()?;
     let design = cfg.design.clone().unwrap_or_else(|| spec.default_design.clone());
     spec.design.check("design", &design).map_err(EnvError::Design)?;
@@ -241,11 +249,14 @@ pub fn check(cfg: &TrainConfig, spec: &coadapt_core::EnvSpec) -> Result<(), Trai
     if let Some(path) = &cfg.init_weights {
         agent.load(path)?;
     }
-    if let Some(l) = &cfg.latent_exploration {
-        crate::action_space::ActionAutoencoder::from_file(&l.action_space, obs_dim, act_dim)
-            .map_err(|e| TrainError::Config { field: "latent-exploration.action-space", why: e.to_string() })?;
-    }
-    Ok(())
+    let latent = match &cfg.latent_exploration {
+        Some(l) => Some(
+            crate::action_space::ActionAutoencoder::from_file(&l.action_space, obs_dim, act_dim)
+                .map_err(|e| TrainError::Config { field: "latent-exploration.action-space", why: e.to_string() })?,
+        ),
+        None => None,
+    };
+    Ok((design, agent, latent))
 }
 
 /// Trains on `env` until `cfg.steps` steps, the target, or `shutdown`; writes `episodes.csv` and
@@ -257,26 +268,18 @@ pub fn run(
     shutdown: &AtomicBool,
     on_episode: &mut dyn FnMut(&EpisodeRecord),
 ) -> Result<TrainSummary, TrainError> {
-    cfg.validate()?;
     let spec = env.spec().clone();
-    let design = cfg.design.clone().unwrap_or_else(|| spec.default_design.clone());
-    spec.design.check("design", &design).map_err(EnvError::Design)?;
+    let (design, mut agent, ae) = prepare(cfg, &spec)?;
     let (obs_dim, act_dim) = (spec.obs_dim(), spec.act_dim());
-    let mut agent = make_agent(cfg, obs_dim, act_dim)?;
-    if let Some(path) = &cfg.init_weights {
-        agent.load(path)?;
-    }
     let mut replay = ReplayBuffer::new(obs_dim, act_dim, cfg.replay_capacity);
     let mut batch = Batch::new(agent.batch_size(), obs_dim, act_dim);
     let mut rng = rng(cfg.seed, 2);
-    let mut latent = match &cfg.latent_exploration {
-        Some(l) => {
-            let ae = crate::action_space::ActionAutoencoder::from_file(&l.action_space, obs_dim, act_dim)
-                .map_err(|e| TrainError::Config { field: "latent-exploration.action-space", why: e.to_string() })?;
+    let mut latent = match (ae, &cfg.latent_exploration) {
+        (Some(ae), Some(l)) => {
             let z = vec![0.0f32; ae.latent_dim()];
             Some((ae, l.beta, z, vec![0.0f32; act_dim]))
         }
-        None => None,
+        _ => None,
     };
 
     let csv_path = run_dir.join("episodes.csv");
