@@ -273,6 +273,12 @@ pub struct QueueReceiver<T> {
     limits: Limits,
     /// A sender has been seen; before that, no sender means "not started yet", not "closed".
     seen_sender: bool,
+    /// The senders' notifier ids at the last look, and how many have gone from that list
+    /// since the receiver opened (a sender killed and restarted between two looks still
+    /// counts: its id is new).
+    sender_ids: Vec<u128>,
+    sender_ids_now: Vec<u128>,
+    departures: u64,
     unannounced: usize,
     announce_every: usize,
     janitor: Janitor,
@@ -295,6 +301,9 @@ impl<T: Codec> QueueReceiver<T> {
         space.notify().map_err(|e| io("announcing the receiver", e))?;
         Ok(Self {
             seen_sender: s.to_rx.dynamic_config().number_of_notifiers() > 0,
+            sender_ids: notifier_ids(&s.to_rx, Vec::with_capacity(shape.peers)),
+            sender_ids_now: Vec::with_capacity(shape.peers),
+            departures: 0,
             subscriber,
             data,
             space,
@@ -323,6 +332,14 @@ impl<T: Codec> QueueReceiver<T> {
         }
     }
 
+    /// The live senders now, counting those gone since the last look as departures.
+    fn count_senders(&mut self) -> usize {
+        let now = notifier_ids(&self.senders, std::mem::take(&mut self.sender_ids_now));
+        self.departures += self.sender_ids.iter().filter(|id| !now.contains(id)).count() as u64;
+        self.sender_ids_now = std::mem::replace(&mut self.sender_ids, now);
+        self.sender_ids.len()
+    }
+
     /// The next message within `timeout`. With `report_closed`, `Err(Closed)` once every
     /// sender has gone and the buffer is drained; without, it keeps waiting for new senders.
     pub(crate) fn next(&mut self, timeout: Duration, report_closed: bool) -> Result<Option<T>, TransportError> {
@@ -330,7 +347,7 @@ impl<T: Codec> QueueReceiver<T> {
         loop {
             // Senders are counted before looking at the buffer: whatever a sender that has
             // gone by now sent (its goodbye included) is already in it.
-            let senders = self.senders.dynamic_config().number_of_notifiers();
+            let senders = self.count_senders();
             self.seen_sender |= senders > 0;
             let received = self.subscriber.receive().map_err(|e| io(&format!("receiving on {}", self.name), e))?;
             if let Some(sample) = received {
@@ -375,6 +392,21 @@ impl<T: Codec> Receiver<T> for QueueReceiver<T> {
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<T>, TransportError> {
         self.next(timeout, true)
     }
+
+    fn departures(&self) -> u64 {
+        self.departures
+    }
+}
+
+/// The ids of the notifiers on an event service (a queue's senders on its `to-rx`), into
+/// `ids` (cleared first; its capacity is reused, so a poll does not allocate).
+fn notifier_ids(event: &ipc::Event, mut ids: Vec<u128>) -> Vec<u128> {
+    ids.clear();
+    event.dynamic_config().list_notifiers(|d| {
+        ids.push(d.notifier_id.value());
+        CallbackProgression::Continue
+    });
+    ids
 }
 
 #[cfg(test)]
@@ -397,5 +429,27 @@ mod tests {
         garbage.send(Credit(u64::MAX)).expect("send");
         good.send(chunk(3)).expect("send");
         assert_eq!(rx.recv_timeout(wait).expect("receive"), Some(chunk(3)));
+    }
+
+    /// A sender replaced between two receives (a restarted peer) never shows as zero senders,
+    /// so the receiver does not report the queue closed; it counts the departure instead.
+    #[test]
+    fn a_sender_replaced_between_two_receives_counts_as_a_departure() {
+        let name = format!("coadapt-test-{}-replaced/q", std::process::id());
+        let shape = QueueShape { peers: 4, depth: 8 };
+        let mut rx = QueueReceiver::<ExperienceChunk>::open(&name, shape, Limits::default()).expect("receiver");
+        let node = ipc::node("coadapt-test").expect("node");
+        let wait = Duration::from_secs(5);
+        let mut first = QueueSender::<ExperienceChunk>::open(&node, &name, shape, wait, 1024).expect("sender");
+        first.send(chunk(3)).expect("send");
+        assert_eq!(rx.recv_timeout(wait).expect("receive"), Some(chunk(3)));
+        assert_eq!(rx.departures(), 0);
+        drop(first);
+        let mut second = QueueSender::<ExperienceChunk>::open(&node, &name, shape, wait, 1024).expect("sender");
+        second.send(chunk(4)).expect("send");
+        assert_eq!(rx.recv_timeout(wait).expect("receive"), Some(chunk(4)));
+        assert_eq!(rx.departures(), 1);
+        assert_eq!(rx.recv_timeout(Duration::from_millis(50)).expect("still open"), None);
+        assert_eq!(rx.departures(), 1);
     }
 }

@@ -25,6 +25,15 @@ pub trait Sender<T>: Send {
 pub trait Receiver<T>: Send {
     /// The next message, or `Ok(None)` when none came within `timeout`.
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<T>, TransportError>;
+
+    /// How many senders have left (closed or died) since the receiver opened, as far as
+    /// `recv_timeout` has seen. A receiver waiting for the reply to a request its only peer had
+    /// taken learns from it that the request may be lost, even when a restarted peer took the
+    /// old one's place before the receiver ever saw zero senders. Transports where peers do
+    /// not come and go under one receiver say 0.
+    fn departures(&self) -> u64 {
+        0
+    }
 }
 
 /// A message with a version: a topic's readers only ever move forward.

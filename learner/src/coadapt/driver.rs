@@ -300,6 +300,10 @@ impl Learner<'_> {
         // The optimiser's end of the replies closed (it died): a restarted one never saw the
         // request, so it is sent again as soon as the new one is there, not after `resend`.
         let mut optimiser_gone = false;
+        // Over shared memory a killed optimiser may be cleaned up only after the supervisor's
+        // new one has joined, so the replies never look closed: a sender that left while the
+        // request was out says the same.
+        let mut departures = self.links.design_replies.departures();
         let result = loop {
             if self.shutdown.load(Ordering::Relaxed) {
                 break Ok(None);
@@ -319,7 +323,12 @@ impl Learner<'_> {
                 }
                 sent = Instant::now();
             }
-            let reply = match self.links.design_replies.recv_timeout(POLL) {
+            let received = self.links.design_replies.recv_timeout(POLL);
+            if self.links.design_replies.departures() != departures {
+                departures = self.links.design_replies.departures();
+                optimiser_gone = true;
+            }
+            let reply = match received {
                 Ok(Some(reply)) => reply,
                 Ok(None) if optimiser_gone => {
                     // An optimiser is back (its end of the replies is open again).
