@@ -46,7 +46,7 @@ fn scripts_pass_shellcheck() {
             let p = e.path();
             if p.is_dir() && !p.ends_with(".venv") {
                 dirs.push(p);
-            } else if p.extension().is_some_and(|x| x == "sh") {
+            } else if p.extension().is_some_and(|x| x == "sh" || x == "sbatch") {
                 scripts.push(p);
             }
         }

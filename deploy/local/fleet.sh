@@ -326,7 +326,9 @@ client=()
 [[ $transport == grpc ]] && client=(--connect "$connect")
 
 if ((want_optimizer && !stopping)); then
-  oargs=(optimizer "${common[@]}" "${client[@]}" "${client_tls[@]}")
+  # Its state beside the run (as `coadapt run` keeps it), so that a restarted optimiser, or
+  # one of a resumed run, answers as the one before it did: the same designs.
+  oargs=(optimizer "${common[@]}" "${client[@]}" "${client_tls[@]}" --state-dir "$out/optimizer")
   [[ -n $optimizer_token ]] && oargs+=(--token-file "$optimizer_token")
   start optimizer-0 "${oargs[@]}"
 fi
