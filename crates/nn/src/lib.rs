@@ -1,6 +1,8 @@
 //! Multilayer perceptrons on faer for the coadapt learner and design optimiser.
 //!
 //! # Layout
+//! - [`bf16`]: products with bfloat16 operands and f32 accumulation (AVX-512 BF16, detected at run
+//!   time), the kernel of the mixed-precision path.
 //! - [`mlp`]: the network shape ([`Mlp`]), allocation-free forward and backward passes over
 //!   row-major batches into preallocated [`Activations`].
 //! - [`optim`]: [`Adam`] (and [`MomentsMismatch`], restoring it from another size), element-wise
@@ -15,6 +17,7 @@
 //! `[out, in]` row-major, then the bias `[out]`. That buffer is what transports broadcast and
 //! what a PyTorch user loads.
 
+pub mod bf16;
 pub mod conv;
 pub mod io;
 pub mod mlp;

@@ -1,0 +1,768 @@
+//! Matrix products in bfloat16 with f32 accumulation (issue 34): `C = A B` (or `C += A B`)
+//! with `A`, `B` and `C` in f32, the operands rounded to bfloat16 (round to nearest even) as
+//! they are packed, every product accumulated in f32. On x86-64 with AVX-512 BF16 the inner
+//! loop is `vdpbf16ps`: 32 multiply-adds per instruction against the 16 of an f32 FMA.
+//!
+//! Why our own kernel: faer and the `gemm` crates it uses have f32, f64 and f16 products but no
+//! bf16; `gemmkit` (0.1) has a `vdpbf16ps` kernel but stores `C` in bf16, and the networks
+//! keep activations and gradients in f32 (only the products' operands are rounded).
+//!
+//! Layout of the packed operands (what `vdpbf16ps` multiplies lane by lane): each 32-bit lane
+//! holds a pair of consecutive-k values, the even one in the low half. `A` is packed row by row
+//! as `m x ceil(k/2)` pairs; `B` as `ceil(k/2) x n16` pairs (n rounded up to 16, zero
+//! padding), so that lane j of a 512-bit load holds `(B[2p][j], B[2p+1][j])`. A broadcast pair
+//! of `A` times that load adds `A[i][2p] B[2p][j] + A[i][2p+1] B[2p+1][j]` into lane j.
+
+/// Which arithmetic the products use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    /// f32 products (faer), on every CPU.
+    F32,
+    /// bf16 products with f32 accumulation; only where [`bf16_available`] says so.
+    Bf16,
+}
+
+/// Whether this CPU runs the bf16 kernel (AVX-512F, BW and BF16), detected at run time.
+pub fn bf16_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512bw")
+            && std::arch::is_x86_feature_detected!("avx512bf16")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// f32 to bfloat16 bits, rounding to nearest even (as `vcvtneps2bf16` and PyTorch do); NaN
+/// stays a (quiet) NaN.
+#[inline]
+pub fn to_bf16(x: f32) -> u16 {
+    let b = x.to_bits();
+    if x.is_nan() {
+        return ((b >> 16) | 0x40) as u16;
+    }
+    let round = 0x7fff + ((b >> 16) & 1);
+    (b.wrapping_add(round) >> 16) as u16
+}
+
+/// bfloat16 bits back to f32 (exact).
+#[inline]
+pub fn from_bf16(h: u16) -> f32 {
+    f32::from_bits(u32::from(h) << 16)
+}
+
+/// A strided read-only view of an f32 matrix: element (i, j) at `i * rs + j * cs`.
+#[derive(Debug, Clone, Copy)]
+pub struct View<'a> {
+    pub data: &'a [f32],
+    pub rows: usize,
+    pub cols: usize,
+    pub rs: usize,
+    pub cs: usize,
+}
+
+impl<'a> View<'a> {
+    /// A row-major `rows x cols` matrix.
+    pub fn row_major(data: &'a [f32], rows: usize, cols: usize) -> Self {
+        Self { data, rows, cols, rs: cols, cs: 1 }
+    }
+
+    /// The transpose (no copy).
+    pub fn t(self) -> Self {
+        Self { data: self.data, rows: self.cols, cols: self.rows, rs: self.cs, cs: self.rs }
+    }
+
+    #[inline]
+    fn at(&self, i: usize, j: usize) -> f32 {
+        self.data[i * self.rs + j * self.cs]
+    }
+}
+
+/// Packing buffers, kept between calls so that a product allocates nothing once warm.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    a: Vec<u32>,
+    b: Vec<u32>,
+    t: Vec<u32>,
+}
+
+#[inline]
+fn pair(lo: f32, hi: f32) -> u32 {
+    u32::from(to_bf16(lo)) | (u32::from(to_bf16(hi)) << 16)
+}
+
+/// Packs `lines` lines of `k` values, each contiguous from `data[l * ls]`, as `lines x kp`
+/// pairs.
+fn pack_contiguous(data: &[f32], lines: usize, ls: usize, k: usize, out: &mut [u32], simd: bool) {
+    let kp = k.div_ceil(2);
+    for l in 0..lines {
+        let src = &data[l * ls..l * ls + k];
+        let dst = &mut out[l * kp..(l + 1) * kp];
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd {
+            #[allow(unsafe_code)] // see the module avx512
+            // SAFETY: the CPU has the kernel's features (`simd` is bf16_available()); src has k
+            // values and dst k / 2 pairs, of which the function writes whole 32-value blocks.
+            {
+                done = unsafe { avx512::pack_contiguous(src, dst) };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = simd;
+        for (p, w) in dst.iter_mut().enumerate().skip(done) {
+            let hi = if 2 * p + 1 < k { src[2 * p + 1] } else { 0.0 };
+            *w = pair(src[2 * p], hi);
+        }
+    }
+}
+
+/// Packs pairs across lines: pair p of element j is `(row 2p, row 2p + 1)` at column j, each
+/// row `len` values contiguous from `data[r * rs]`; out is `kp x ld` (ld >= len).
+#[allow(clippy::too_many_arguments)] // the source and destination shapes, spelled out
+fn pack_across(data: &[f32], k: usize, rs: usize, len: usize, out: &mut [u32], ld: usize, simd: bool) {
+    for p in 0..k.div_ceil(2) {
+        let lo = &data[2 * p * rs..2 * p * rs + len];
+        let hi = (2 * p + 1 < k).then(|| &data[(2 * p + 1) * rs..(2 * p + 1) * rs + len]);
+        let dst = &mut out[p * ld..p * ld + len];
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd {
+            #[allow(unsafe_code)] // see the module avx512
+            // SAFETY: the kernel's features are there; lo, hi and dst have len values each.
+            {
+                done = unsafe { avx512::pack_across(lo, hi, dst) };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = simd;
+        for j in done..len {
+            dst[j] = pair(lo[j], hi.map_or(0.0, |h| h[j]));
+        }
+    }
+}
+
+fn check_view(v: &View<'_>, what: &str) {
+    if v.rows > 0 && v.cols > 0 {
+        let last = (v.rows - 1) * v.rs + (v.cols - 1) * v.cs;
+        assert!(
+            last < v.data.len(),
+            "{what}: a {}x{} view with strides ({}, {}) reads past its {} values",
+            v.rows,
+            v.cols,
+            v.rs,
+            v.cs,
+            v.data.len()
+        );
+    }
+}
+
+/// `C = A B` (`accumulate`: `C += A B`) with bf16 operands and f32 accumulation; `C` is
+/// row-major `a.rows x b.cols`. Runs the AVX-512 BF16 kernel where the CPU has it, else the
+/// same arithmetic in scalar code (the reference the kernel is tested against). Packing is
+/// fastest when an operand is contiguous along either of its dimensions (every layer product
+/// of [`crate::Mlp`] is).
+///
+/// # Panics
+/// On mismatched shapes or a `C` of the wrong length: the callers size them.
+pub fn matmul(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch: &mut Scratch) {
+    matmul_on(c, accumulate, a, b, scratch, true);
+}
+
+/// [`matmul`], on AMX tiles only if `tiles` (tests run both kernels on CPUs that have both).
+fn matmul_on(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch: &mut Scratch, tiles: bool) {
+    let (m, k, n) = (a.rows, a.cols, b.cols);
+    assert_eq!(b.rows, k, "inner dimensions");
+    assert_eq!(c.len(), m * n, "C is m x n");
+    check_view(&a, "A");
+    check_view(&b, "B");
+    if m == 0 || n == 0 {
+        return;
+    }
+    let simd = bf16_available();
+    #[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
+    let _ = tiles;
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    if tiles && simd && amx::available() && m >= 16 && n >= 16 && k >= 32 {
+        amx_matmul(c, accumulate, a, b, scratch);
+        return;
+    }
+    let kp = k.div_ceil(2);
+    let n16 = n.div_ceil(16) * 16;
+    // A as pairs, rows along m: [m][kp] (a_rs = kp, a_ps = 1) or [kp][m] (a_rs = 1, a_ps = m).
+    scratch.a.clear();
+    scratch.a.resize(m * kp, 0);
+    let (a_rs, a_ps) = if a.cs == 1 {
+        pack_contiguous(a.data, m, a.rs, k, &mut scratch.a, simd);
+        (kp, 1)
+    } else if a.rs == 1 {
+        pack_across(a.data, k, a.cs, m, &mut scratch.a, m, simd);
+        (1, m)
+    } else {
+        for i in 0..m {
+            for p in 0..kp {
+                let hi = if 2 * p + 1 < k { a.at(i, 2 * p + 1) } else { 0.0 };
+                scratch.a[i * kp + p] = pair(a.at(i, 2 * p), hi);
+            }
+        }
+        (kp, 1)
+    };
+    // B as pairs, [kp][n16] with zero padding.
+    scratch.b.clear();
+    scratch.b.resize(kp * n16, 0);
+    if b.cs == 1 {
+        pack_across(b.data, k, b.rs, n, &mut scratch.b, n16, simd);
+    } else if b.rs == 1 {
+        // Columns contiguous along k (a layer's weight seen transposed): pack them as lines,
+        // then transpose the pairs.
+        scratch.t.clear();
+        scratch.t.resize(n * kp, 0);
+        pack_contiguous(b.data, n, b.cs, k, &mut scratch.t, simd);
+        for j in 0..n {
+            for p in 0..kp {
+                scratch.b[p * n16 + j] = scratch.t[j * kp + p];
+            }
+        }
+    } else {
+        for p in 0..kp {
+            for j in 0..n {
+                let hi = if 2 * p + 1 < k { b.at(2 * p + 1, j) } else { 0.0 };
+                scratch.b[p * n16 + j] = pair(b.at(2 * p, j), hi);
+            }
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    if simd {
+        #[allow(unsafe_code)] // the intrinsics' kernel: see the module avx512
+        // SAFETY: the CPU has avx512f and avx512bf16 (checked above); the packed A has m x kp
+        // pairs at strides (a_rs, a_ps), the packed B kp x n16, and C is m x n (asserted).
+        unsafe {
+            avx512::product(c, accumulate, m, n, kp, n16, &scratch.a, a_rs, a_ps, &scratch.b)
+        };
+        return;
+    }
+    scalar_product(c, accumulate, m, n, kp, n16, &scratch.a, a_rs, a_ps, &scratch.b);
+}
+
+/// The product on AMX tiles: A packed as `m32 x kp16` pairs, B as `kp16 x n32`, zero-padded.
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+fn amx_matmul(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch: &mut Scratch) {
+    let (m, k, n) = (a.rows, a.cols, b.cols);
+    let kp16 = k.div_ceil(32) * 16;
+    let m32 = m.div_ceil(32) * 32;
+    let n32 = n.div_ceil(32) * 32;
+    // Row strides off powers of two: tile loads of 16 rows 512 or 1024 bytes apart fall into
+    // the same cache sets (measured: 256 x 256 x 256 at half the speed of 200 x 256 x 200).
+    let lda = if kp16 % 64 == 0 { kp16 + 16 } else { kp16 };
+    let ldb = if n32 % 128 == 0 { n32 + 32 } else { n32 };
+    scratch.a.clear();
+    scratch.a.resize(m32 * lda, 0);
+    if a.cs == 1 {
+        pack_contiguous_ld(a.data, m, a.rs, k, &mut scratch.a, lda);
+    } else {
+        // Pairs across A's rows come out as [kp][m]: transpose them to rows of pairs.
+        let kp = k.div_ceil(2);
+        scratch.t.clear();
+        scratch.t.resize(kp * m, 0);
+        if a.rs == 1 {
+            pack_across(a.data, k, a.cs, m, &mut scratch.t, m, true);
+        } else {
+            for p in 0..kp {
+                for i in 0..m {
+                    let hi = if 2 * p + 1 < k { a.at(i, 2 * p + 1) } else { 0.0 };
+                    scratch.t[p * m + i] = pair(a.at(i, 2 * p), hi);
+                }
+            }
+        }
+        for p in 0..kp {
+            for i in 0..m {
+                scratch.a[i * lda + p] = scratch.t[p * m + i];
+            }
+        }
+    }
+    scratch.b.clear();
+    scratch.b.resize(kp16 * ldb, 0);
+    if b.cs == 1 {
+        pack_across(b.data, k, b.rs, n, &mut scratch.b, ldb, true);
+    } else {
+        let kp = k.div_ceil(2);
+        scratch.t.clear();
+        scratch.t.resize(n * kp, 0);
+        if b.rs == 1 {
+            pack_contiguous(b.data, n, b.cs, k, &mut scratch.t, true);
+        } else {
+            for j in 0..n {
+                for p in 0..kp {
+                    let hi = if 2 * p + 1 < k { b.at(2 * p + 1, j) } else { 0.0 };
+                    scratch.t[j * kp + p] = pair(b.at(2 * p, j), hi);
+                }
+            }
+        }
+        for j in 0..n {
+            for p in 0..kp {
+                scratch.b[p * ldb + j] = scratch.t[j * kp + p];
+            }
+        }
+    }
+    #[allow(unsafe_code)] // see the module amx
+    // SAFETY: AMX is available (the caller checked); A is m32 x kp16, B kp16 x n32, C m x n.
+    unsafe {
+        amx::product(c, accumulate, m, n, kp16, lda, ldb, &scratch.a, &scratch.b)
+    };
+}
+
+/// [`pack_contiguous`] into rows of `ld` pairs (zero padding after the `ceil(k / 2)` real ones).
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+fn pack_contiguous_ld(data: &[f32], lines: usize, ls: usize, k: usize, out: &mut [u32], ld: usize) {
+    let kp = k.div_ceil(2);
+    for l in 0..lines {
+        pack_contiguous(&data[l * ls..l * ls + k], 1, k, k, &mut out[l * ld..l * ld + kp], true);
+    }
+}
+
+/// The packed product in scalar code: the same pairs, each pair's two products summed first
+/// and then added, as `vdpbf16ps` does per lane (the order of the f32 sums may differ).
+#[allow(clippy::too_many_arguments)] // the packed shapes, spelled out
+fn scalar_product(
+    c: &mut [f32],
+    accumulate: bool,
+    m: usize,
+    n: usize,
+    kp: usize,
+    n16: usize,
+    a: &[u32],
+    a_rs: usize,
+    a_ps: usize,
+    b: &[u32],
+) {
+    for i in 0..m {
+        for j in 0..n {
+            let mut s = 0.0f32;
+            for p in 0..kp {
+                let (x, y) = (a[i * a_rs + p * a_ps], b[p * n16 + j]);
+                s += from_bf16(x as u16) * from_bf16(y as u16) + from_bf16((x >> 16) as u16) * from_bf16((y >> 16) as u16);
+            }
+            let out = &mut c[i * n + j];
+            *out = if accumulate { *out + s } else { s };
+        }
+    }
+}
+
+/// The workspace's only unsafe code (`unsafe_code` is denied everywhere else): SIMD
+/// intrinsics under `target_feature` need it, for their raw-pointer loads and stores and for the
+/// calls into functions compiled for features the caller has only checked at run time.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+mod avx512 {
+    use std::arch::x86_64::*;
+
+    /// Rows of `A` per micro-tile.
+    const MR: usize = 6;
+    /// 16-lane vectors of `B` per micro-tile (64 columns): 6 x 4 accumulators, 4 loads and a
+    /// broadcast, 29 of the 32 registers.
+    const NV: usize = 4;
+
+    #[target_feature(enable = "avx512f,avx512bf16")]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) unsafe fn product(
+        c: &mut [f32],
+        accumulate: bool,
+        m: usize,
+        n: usize,
+        kp: usize,
+        n16: usize,
+        a: &[u32],
+        a_rs: usize,
+        a_ps: usize,
+        b: &[u32],
+    ) {
+        let mut j0 = 0;
+        while j0 < n {
+            let cols = (n - j0).min(16 * NV);
+            let nv = cols.div_ceil(16);
+            let mut i0 = 0;
+            while i0 < m {
+                let rows = (m - i0).min(MR);
+                // SAFETY: rows x cols of C at (i0, j0) and the packed panels they read are in
+                // bounds: i0 + rows <= m, j0 + 16 nv <= n16, and C's row stride is n.
+                unsafe {
+                    let ap = a.as_ptr().add(i0 * a_rs);
+                    let bp = b.as_ptr().add(j0);
+                    let cp = c.as_mut_ptr().add(i0 * n + j0);
+                    macro_rules! tile {
+                        ($r:literal, $v:literal) => {
+                            micro::<$r, $v>(kp, ap, a_rs, a_ps, bp, n16, cp, n, cols, accumulate)
+                        };
+                    }
+                    match (rows, nv) {
+                        (6, 4) => tile!(6, 4),
+                        (6, 3) => tile!(6, 3),
+                        (6, 2) => tile!(6, 2),
+                        (6, 1) => tile!(6, 1),
+                        (5, 4) => tile!(5, 4),
+                        (5, 3) => tile!(5, 3),
+                        (5, 2) => tile!(5, 2),
+                        (5, 1) => tile!(5, 1),
+                        (4, 4) => tile!(4, 4),
+                        (4, 3) => tile!(4, 3),
+                        (4, 2) => tile!(4, 2),
+                        (4, 1) => tile!(4, 1),
+                        (3, 4) => tile!(3, 4),
+                        (3, 3) => tile!(3, 3),
+                        (3, 2) => tile!(3, 2),
+                        (3, 1) => tile!(3, 1),
+                        (2, 4) => tile!(2, 4),
+                        (2, 3) => tile!(2, 3),
+                        (2, 2) => tile!(2, 2),
+                        (2, 1) => tile!(2, 1),
+                        (1, 4) => tile!(1, 4),
+                        (1, 3) => tile!(1, 3),
+                        (1, 2) => tile!(1, 2),
+                        _ => tile!(1, 1),
+                    }
+                }
+                i0 += rows;
+            }
+            j0 += cols;
+        }
+    }
+
+    /// Converts whole blocks of 32 values of `src` into 16 pairs each (`vcvtne2ps2bf16`, round
+    /// to nearest even); returns the pairs written (the caller packs the tail).
+    #[target_feature(enable = "avx512f,avx512bf16")]
+    pub(super) unsafe fn pack_contiguous(src: &[f32], dst: &mut [u32]) -> usize {
+        let blocks = src.len() / 32;
+        for q in 0..blocks {
+            // SAFETY: values 32 q .. 32 q + 32 of src and pairs 16 q .. 16 q + 16 of dst exist
+            // (dst holds ceil(len / 2) pairs).
+            unsafe {
+                let v0 = _mm512_loadu_ps(src.as_ptr().add(32 * q));
+                let v1 = _mm512_loadu_ps(src.as_ptr().add(32 * q + 16));
+                let h = _mm512_cvtne2ps_pbh(v1, v0);
+                _mm512_storeu_si512(dst.as_mut_ptr().add(16 * q).cast(), std::mem::transmute::<__m512bh, __m512i>(h));
+            }
+        }
+        16 * blocks
+    }
+
+    /// Pairs (lo[j], hi[j]) for whole blocks of 16 j; returns how many were written.
+    #[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
+    pub(super) unsafe fn pack_across(lo: &[f32], hi: Option<&[f32]>, dst: &mut [u32]) -> usize {
+        // 16-bit lane 2t takes lo's t-th value (lane t of the conversion), lane 2t + 1 hi's
+        // (lane 16 + t).
+        let idx = _mm512_set_epi16(
+            31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7, 22, 6, 21, 5, 20, 4, 19, 3, 18, 2, 17, 1, 16, 0,
+        );
+        let blocks = lo.len() / 16;
+        for q in 0..blocks {
+            // SAFETY: lo, hi and dst have at least 16 (q + 1) values.
+            unsafe {
+                let l = _mm512_loadu_ps(lo.as_ptr().add(16 * q));
+                let h = match hi {
+                    Some(hi) => _mm512_loadu_ps(hi.as_ptr().add(16 * q)),
+                    None => _mm512_setzero_ps(),
+                };
+                let both = std::mem::transmute::<__m512bh, __m512i>(_mm512_cvtne2ps_pbh(h, l));
+                _mm512_storeu_si512(dst.as_mut_ptr().add(16 * q).cast(), _mm512_permutexvar_epi16(idx, both));
+            }
+        }
+        16 * blocks
+    }
+
+    /// One `R x 16V` tile of C: `cols` (<= 16 V) of its columns are real, the rest padding.
+    #[target_feature(enable = "avx512f,avx512bf16")]
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn micro<const R: usize, const V: usize>(
+        kp: usize,
+        a: *const u32,
+        a_rs: usize,
+        a_ps: usize,
+        b: *const u32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        cols: usize,
+        accumulate: bool,
+    ) {
+        let mut acc = [[_mm512_setzero_ps(); V]; R];
+        for p in 0..kp {
+            let mut bv = [_mm512_setzero_si512(); V];
+            for (v, x) in bv.iter_mut().enumerate() {
+                // SAFETY: row p of the packed B panel has 16 V lanes from here (n16 padding).
+                *x = unsafe { _mm512_loadu_si512(b.add(p * ldb + 16 * v).cast()) };
+            }
+            for (r, row) in acc.iter_mut().enumerate() {
+                // SAFETY: row r of the packed A has kp pairs.
+                let ar = _mm512_set1_epi32(unsafe { *a.add(r * a_rs + p * a_ps) } as i32);
+                for (v, x) in row.iter_mut().enumerate() {
+                    // SAFETY: both are 512 plain bits; __m512bh only renames them as 32 bf16.
+                    let (av, bw) =
+                        unsafe { (std::mem::transmute::<__m512i, __m512bh>(ar), std::mem::transmute::<__m512i, __m512bh>(bv[v])) };
+                    *x = _mm512_dpbf16_ps(*x, av, bw);
+                }
+            }
+        }
+        for (r, row) in acc.iter().enumerate() {
+            for (v, x) in row.iter().enumerate() {
+                let left = cols.saturating_sub(16 * v).min(16);
+                let mask: __mmask16 = if left == 16 { 0xffff } else { (1u16 << left) - 1 };
+                // SAFETY: the mask keeps the store within the tile's real columns.
+                unsafe {
+                    let dst = c.add(r * ldc + 16 * v);
+                    let out = if accumulate { _mm512_add_ps(_mm512_maskz_loadu_ps(mask, dst), *x) } else { *x };
+                    _mm512_mask_storeu_ps(dst, mask, out);
+                }
+            }
+        }
+    }
+}
+
+/// Intel AMX: `tdpbf16ps` multiplies a 16 x 32 bf16 tile by a 32 x 16 one into a 16 x 16 f32
+/// tile, 8,192 multiply-adds per instruction. Its operand layouts are the packed ones above: a
+/// tile of A is 16 rows of 16 pairs, a tile of B 16 rows of pairs (the "VNNI" layout) of 16
+/// columns. The instructions are written in inline assembly (Rust's AMX intrinsics are not
+/// stable); Linux must first grant the process the tile state (`arch_prctl`).
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+#[allow(unsafe_code)]
+pub(crate) mod amx {
+    use std::arch::asm;
+    use std::arch::x86_64::__cpuid_count;
+    use std::sync::OnceLock;
+
+    /// AMX-TILE and AMX-BF16 in CPUID, and Linux's permission for the tile data granted.
+    pub(crate) fn available() -> bool {
+        static OK: OnceLock<bool> = OnceLock::new();
+        *OK.get_or_init(|| {
+            // CPUID leaf 7, subleaf 0, EDX: bit 22 AMX-BF16, bit 24 AMX-TILE.
+            let edx = __cpuid_count(7, 0).edx;
+            if edx & (1 << 22) == 0 || edx & (1 << 24) == 0 {
+                return false;
+            }
+            let ret: i64;
+            // SAFETY: arch_prctl(ARCH_REQ_XCOMP_PERM = 0x1023, XFEATURE_XTILEDATA = 18) only
+            // asks the kernel to allow the tile state in this process; it touches no memory.
+            unsafe {
+                asm!("syscall", inlateout("rax") 158i64 => ret, in("rdi") 0x1023i64, in("rsi") 18i64,
+                     lateout("rcx") _, lateout("r11") _, options(nostack));
+            }
+            ret == 0
+        })
+    }
+
+    /// The tile configuration: palette 1; tmm0-3 the 2 x 2 tiles of C (16 rows of 16 f32),
+    /// tmm4-5 two tiles of A and tmm6-7 two of B (16 rows of 64 bytes each).
+    #[repr(C, align(64))]
+    struct Config([u8; 64]);
+
+    fn config() -> Config {
+        let mut c = [0u8; 64];
+        c[0] = 1;
+        for t in 0..8 {
+            c[16 + 2 * t..18 + 2 * t].copy_from_slice(&64u16.to_le_bytes());
+            c[48 + t] = 16;
+        }
+        Config(c)
+    }
+
+    /// C (m x n, row-major) = or += A B from packed A (`m32` rows of `kp16` pairs, row stride
+    /// lda) and packed B (`kp16` rows of `n32` pairs, stride ldb), zero-padded to whole tiles.
+    ///
+    /// # Safety
+    /// `available()` is true; the packed buffers have the sizes above; `c` is m x n.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) unsafe fn product(
+        c: &mut [f32],
+        accumulate: bool,
+        m: usize,
+        n: usize,
+        kp16: usize,
+        lda: usize,
+        ldb: usize,
+        a: &[u32],
+        b: &[u32],
+    ) {
+        let cfg = config();
+        let mut out = [0f32; 32 * 32];
+        let (sa, sb, so) = (4 * lda, 4 * ldb, 4 * 32usize);
+        // SAFETY: loads the configuration above (valid for palette 1).
+        unsafe { asm!("ldtilecfg [{}]", in(reg) cfg.0.as_ptr(), options(nostack)) };
+        for i0 in (0..m).step_by(32) {
+            for j0 in (0..n).step_by(32) {
+                // SAFETY: every tile load reads 16 rows of 64 bytes inside the padded buffers
+                // (rows i0..i0 + 32 < m32 of A, pair rows < kp16 of B, columns j0..j0 + 32 <= n32);
+                // the stores write the 32 x 32 f32 of `out`.
+                unsafe {
+                    asm!("tilezero tmm0", "tilezero tmm1", "tilezero tmm2", "tilezero tmm3", options(nostack));
+                    for q in (0..kp16).step_by(16) {
+                        let a0 = a.as_ptr().add(i0 * lda + q);
+                        let a1 = a.as_ptr().add((i0 + 16) * lda + q);
+                        let b0 = b.as_ptr().add(q * ldb + j0);
+                        let b1 = b.as_ptr().add(q * ldb + j0 + 16);
+                        asm!(
+                            "tileloadd tmm4, [{a0} + {sa} * 1]",
+                            "tileloadd tmm5, [{a1} + {sa} * 1]",
+                            "tileloadd tmm6, [{b0} + {sb} * 1]",
+                            "tileloadd tmm7, [{b1} + {sb} * 1]",
+                            "tdpbf16ps tmm0, tmm4, tmm6",
+                            "tdpbf16ps tmm1, tmm4, tmm7",
+                            "tdpbf16ps tmm2, tmm5, tmm6",
+                            "tdpbf16ps tmm3, tmm5, tmm7",
+                            a0 = in(reg) a0, a1 = in(reg) a1, b0 = in(reg) b0, b1 = in(reg) b1,
+                            sa = in(reg) sa, sb = in(reg) sb, options(nostack, readonly),
+                        );
+                    }
+                    let o = out.as_mut_ptr();
+                    asm!(
+                        "tilestored [{o0} + {so} * 1], tmm0",
+                        "tilestored [{o1} + {so} * 1], tmm1",
+                        "tilestored [{o2} + {so} * 1], tmm2",
+                        "tilestored [{o3} + {so} * 1], tmm3",
+                        o0 = in(reg) o, o1 = in(reg) o.add(16), o2 = in(reg) o.add(16 * 32), o3 = in(reg) o.add(16 * 32 + 16),
+                        so = in(reg) so, options(nostack),
+                    );
+                }
+                for r in 0..32.min(m - i0) {
+                    let cols = 32.min(n - j0);
+                    let dst = &mut c[(i0 + r) * n + j0..(i0 + r) * n + j0 + cols];
+                    let src = &out[r * 32..r * 32 + cols];
+                    if accumulate {
+                        dst.iter_mut().zip(src).for_each(|(d, s)| *d += s);
+                    } else {
+                        dst.copy_from_slice(src);
+                    }
+                }
+            }
+        }
+        // SAFETY: releases the tile state this function configured.
+        unsafe { asm!("tilerelease", options(nostack)) };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn random(n: usize, rng: &mut rand_pcg::Pcg64) -> Vec<f32> {
+        (0..n).map(|_| rng.random_range(-1.0f32..1.0)).collect()
+    }
+
+    /// f64 product of the bf16-rounded operands: what the kernel computes, but for the order of
+    /// its f32 sums.
+    fn reference(a: View<'_>, b: View<'_>) -> Vec<f64> {
+        let r = |x: f32| f64::from(from_bf16(to_bf16(x)));
+        let mut c = vec![0.0; a.rows * b.cols];
+        for i in 0..a.rows {
+            for j in 0..b.cols {
+                c[i * b.cols + j] = (0..a.cols).map(|p| r(a.at(i, p)) * r(b.at(p, j))).sum();
+            }
+        }
+        c
+    }
+
+    #[test]
+    fn rounding_matches_round_to_nearest_even() {
+        assert_eq!(to_bf16(1.0), 0x3f80);
+        // 1 + 2^-8 is halfway between 1 and 1 + 2^-7: ties to even (1.0).
+        assert_eq!(to_bf16(1.0 + 1.0 / 256.0), 0x3f80);
+        // 1 + 3 * 2^-8 is halfway between 1 + 2^-7 and 1 + 2^-6: ties to even (1 + 2^-6).
+        assert_eq!(to_bf16(1.0 + 3.0 / 256.0), 0x3f82);
+        assert_eq!(to_bf16(1.0 + 1.0 / 256.0 + 1.0 / 65536.0), 0x3f81);
+        assert_eq!(from_bf16(to_bf16(-2.5)), -2.5);
+        assert!(from_bf16(to_bf16(f32::NAN)).is_nan());
+        assert_eq!(from_bf16(to_bf16(f32::INFINITY)), f32::INFINITY);
+    }
+
+    /// Every tile shape and tail (rows 1-13, columns 1-70 across the 64-column tiles, odd and
+    /// even depths), with plain and transposed operands, replaced and accumulated.
+    #[test]
+    fn the_product_equals_the_rounded_operands_product_in_every_shape() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let mut scratch = Scratch::default();
+        for &(m, k, n) in
+            &[(1, 1, 1), (6, 2, 16), (7, 5, 17), (13, 33, 70), (12, 200, 64), (5, 64, 65), (256, 23, 200), (16, 32, 16), (47, 65, 33)]
+        {
+            let a = random(m * k, &mut rng);
+            let b = random(n * k, &mut rng);
+            // Every layout a layer product uses: A rows contiguous (X, delta) or columns
+            // (delta transposed); B columns contiguous (a weight transposed) or rows (W, X).
+            for (a_t, b_t, accumulate) in
+                [(false, true, false), (false, true, true), (false, false, false), (true, false, true), (true, true, false)]
+            {
+                let av = if a_t { View::row_major(&a, k, m).t() } else { View::row_major(&a, m, k) };
+                let bv = if b_t { View::row_major(&b, n, k).t() } else { View::row_major(&b, k, n) };
+                let want = reference(av, bv);
+                // Both kernels where the CPU has both (tiles: AMX from 16 x 32 x 16 up).
+                for tiles in [true, false] {
+                    let start = random(m * n, &mut rng);
+                    let mut c = start.clone();
+                    matmul_on(&mut c, accumulate, av, bv, &mut scratch, tiles);
+                    for (idx, (&got, &w)) in c.iter().zip(&want).enumerate() {
+                        let w = if accumulate { w + f64::from(start[idx]) } else { w };
+                        // f32 accumulation over k terms of size <= 1: a few ulps of k.
+                        let tol = 1e-6 * (k as f64) + 1e-6 * w.abs();
+                        assert!(
+                            (f64::from(got) - w).abs() <= tol,
+                            "{m}x{k}x{n} At {a_t} Bt {b_t} acc {accumulate} tiles {tiles} at {idx}: {got} vs {w}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// The scalar path (CPUs without AVX-512 BF16) and the kernel agree on the same packing.
+    #[test]
+    fn the_scalar_path_and_the_kernel_agree() {
+        if !bf16_available() {
+            eprintln!("SKIPPED: no AVX-512 BF16 here; the scalar path is what the other tests ran");
+            return;
+        }
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(9);
+        let (m, k, n) = (19, 47, 83);
+        let a = random(m * k, &mut rng);
+        let b = random(k * n, &mut rng);
+        let mut scratch = Scratch::default();
+        let mut fast = vec![0.0; m * n];
+        matmul_on(&mut fast, false, View::row_major(&a, m, k), View::row_major(&b, k, n), &mut scratch, false);
+        let mut slow = vec![0.0; m * n];
+        let kp = k.div_ceil(2);
+        scalar_product(&mut slow, false, m, n, kp, n.div_ceil(16) * 16, &scratch.a, kp, 1, &scratch.b);
+        for (x, y) in fast.iter().zip(&slow) {
+            assert!((x - y).abs() <= 1e-5 * (1.0 + y.abs()), "{x} vs {y}");
+        }
+    }
+
+    /// Against the f32 product of the unrounded operands the error is bf16's: each operand
+    /// rounded by at most 2^-9 relative, so a k-term dot product of values in [-1, 1] is off by
+    /// about sqrt(k) 2^-9 at the typical entry, never more than k 2^-8.
+    #[test]
+    fn the_error_against_f32_is_that_of_bf16_operands() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
+        let (m, k, n) = (64, 200, 200);
+        let a = random(m * k, &mut rng);
+        let b = random(k * n, &mut rng);
+        let mut c = vec![0.0; m * n];
+        matmul(&mut c, false, View::row_major(&a, m, k), View::row_major(&b, k, n), &mut Scratch::default());
+        let mut sq = 0.0f64;
+        let mut worst = 0.0f64;
+        for i in 0..m {
+            for j in 0..n {
+                let exact: f64 = (0..k).map(|p| f64::from(a[i * k + p]) * f64::from(b[p * n + j])).sum();
+                let e = (f64::from(c[i * n + j]) - exact).abs();
+                sq += e * e;
+                worst = worst.max(e);
+            }
+        }
+        let rms = (sq / (m * n) as f64).sqrt();
+        let typical = (k as f64).sqrt() * 2f64.powi(-9);
+        assert!(rms < typical, "rms error {rms} against sqrt(k) 2^-9 = {typical}");
+        assert!(rms > typical / 100.0, "rms error {rms}: the operands were not rounded to bf16?");
+        assert!(worst < k as f64 * 2f64.powi(-8), "worst error {worst}");
+    }
+}
