@@ -169,11 +169,23 @@ fn check_view(v: &View<'_>, what: &str) {
 /// # Panics
 /// On mismatched shapes or a `C` of the wrong length: the callers size them.
 pub fn matmul(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch: &mut Scratch) {
-    matmul_on(c, accumulate, a, b, scratch, true);
+    matmul_on(c, accumulate, a, b, scratch, Kernel::Best);
 }
 
-/// [`matmul`], on AMX tiles only if `tiles` (tests run both kernels on CPUs that have both).
-fn matmul_on(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch: &mut Scratch, tiles: bool) {
+/// Which kernel [`matmul_on`] may use: tests run each one the CPU has.
+#[cfg_attr(not(test), allow(dead_code))] // only the tests ask for less than the best
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kernel {
+    /// AMX tiles where available, else AVX-512 BF16, else scalar.
+    Best,
+    /// AVX-512 BF16 where available, else scalar.
+    Vector,
+    /// Scalar code only.
+    Scalar,
+}
+
+/// [`matmul`] with the kernels `kernel` allows.
+fn matmul_on(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch: &mut Scratch, kernel: Kernel) {
     let (m, k, n) = (a.rows, a.cols, b.cols);
     assert_eq!(b.rows, k, "inner dimensions");
     assert_eq!(c.len(), m * n, "C is m x n");
@@ -182,11 +194,9 @@ fn matmul_on(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch:
     if m == 0 || n == 0 {
         return;
     }
-    let simd = bf16_available();
-    #[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
-    let _ = tiles;
+    let simd = kernel != Kernel::Scalar && bf16_available();
     #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
-    if tiles && simd && amx::available() && m >= 16 && n >= 16 && k >= 32 {
+    if kernel == Kernel::Best && simd && amx::available() && m >= 16 && n >= 16 && k >= 32 {
         amx_matmul(c, accumulate, a, b, scratch);
         return;
     }
@@ -697,18 +707,18 @@ mod tests {
                 let av = if a_t { View::row_major(&a, k, m).t() } else { View::row_major(&a, m, k) };
                 let bv = if b_t { View::row_major(&b, n, k).t() } else { View::row_major(&b, k, n) };
                 let want = reference(av, bv);
-                // Both kernels where the CPU has both (tiles: AMX from 16 x 32 x 16 up).
-                for tiles in [true, false] {
+                // Every kernel the CPU has (AMX tiles from 16 x 32 x 16 up).
+                for kernel in [Kernel::Best, Kernel::Vector, Kernel::Scalar] {
                     let start = random(m * n, &mut rng);
                     let mut c = start.clone();
-                    matmul_on(&mut c, accumulate, av, bv, &mut scratch, tiles);
+                    matmul_on(&mut c, accumulate, av, bv, &mut scratch, kernel);
                     for (idx, (&got, &w)) in c.iter().zip(&want).enumerate() {
                         let w = if accumulate { w + f64::from(start[idx]) } else { w };
                         // f32 accumulation over k terms of size <= 1: a few ulps of k.
                         let tol = 1e-6 * (k as f64) + 1e-6 * w.abs();
                         assert!(
                             (f64::from(got) - w).abs() <= tol,
-                            "{m}x{k}x{n} At {a_t} Bt {b_t} acc {accumulate} tiles {tiles} at {idx}: {got} vs {w}"
+                            "{m}x{k}x{n} At {a_t} Bt {b_t} acc {accumulate} {kernel:?} at {idx}: {got} vs {w}"
                         );
                     }
                 }
@@ -729,7 +739,7 @@ mod tests {
         let b = random(k * n, &mut rng);
         let mut scratch = Scratch::default();
         let mut fast = vec![0.0; m * n];
-        matmul_on(&mut fast, false, View::row_major(&a, m, k), View::row_major(&b, k, n), &mut scratch, false);
+        matmul_on(&mut fast, false, View::row_major(&a, m, k), View::row_major(&b, k, n), &mut scratch, Kernel::Vector);
         let mut slow = vec![0.0; m * n];
         let kp = k.div_ceil(2);
         scalar_product(&mut slow, false, m, n, kp, n.div_ceil(16) * 16, &scratch.a, kp, 1, &scratch.b);
