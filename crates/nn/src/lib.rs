@@ -24,6 +24,7 @@ pub mod mlp;
 pub mod optim;
 pub mod squashed;
 
+pub use bf16::Precision;
 pub use conv::{Conv2d, ConvScratch, ConvTranspose2d};
 pub use io::{NamedNetwork, load_networks, save_networks};
 pub use mlp::{Activations, HiddenInit, Layer, Mlp};

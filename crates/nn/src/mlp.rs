@@ -10,6 +10,7 @@ use faer::{Accum, MatMut, MatRef, Par};
 use rand::Rng;
 
 use crate::NnError;
+use crate::bf16::{self, Precision, View};
 
 /// rlkit's `b_init_value`: every hidden bias starts at this constant.
 pub const RLKIT_HIDDEN_BIAS: f32 = 0.1;
@@ -39,12 +40,24 @@ pub struct Layer {
 /// The shape of an MLP `sizes[0] -> sizes[1] -> ... -> sizes[k]` with ReLU between layers and no
 /// activation after the last. Holds no parameters: those live in a flat `&[f32]` of
 /// [`Mlp::n_params`] values, so one shape serves online, target and copied networks alike.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug)]
 pub struct Mlp {
     sizes: Vec<usize>,
     layers: Vec<Layer>,
     n_params: usize,
+    /// The products' arithmetic ([`Mlp::with_precision`]); not part of the shape.
+    precision: Precision,
 }
+
+/// Two networks are equal when their shapes are: the precision of their products is how they
+/// are computed, not what they are.
+impl PartialEq for Mlp {
+    fn eq(&self, other: &Self) -> bool {
+        self.sizes == other.sizes
+    }
+}
+
+impl Eq for Mlp {}
 
 /// Per-layer outputs kept by [`Mlp::forward`] for [`Mlp::backward`], plus backward scratch.
 /// Grows to the largest batch seen and is reused, so warm passes do not allocate.
@@ -53,6 +66,8 @@ pub struct Activations {
     outs: Vec<Vec<f32>>,
     delta: [Vec<f32>; 2],
     rows: usize,
+    /// Packing buffers of the bf16 products.
+    packed: bf16::Scratch,
 }
 
 impl Activations {
@@ -88,7 +103,19 @@ impl Mlp {
             layers.push(Layer { n_in, n_out, w: off, b: off + n_in * n_out });
             off += n_in * n_out + n_out;
         }
-        Ok(Self { sizes: sizes.to_vec(), layers, n_params: off })
+        Ok(Self { sizes: sizes.to_vec(), layers, n_params: off, precision: Precision::F32 })
+    }
+
+    /// The same network with its products in `precision`: with [`Precision::Bf16`] every layer
+    /// product that [`bf16::runs_in_bf16`] admits takes bf16 operands with f32 accumulation
+    /// (parameters, activations, gradients and the rest stay f32); the others stay f32.
+    pub fn with_precision(mut self, precision: Precision) -> Self {
+        self.precision = precision;
+        self
+    }
+
+    pub fn precision(&self) -> Precision {
+        self.precision
     }
 
     /// `[n_in, hidden..., n_out]`.
@@ -192,7 +219,7 @@ impl Mlp {
             let (done, rest) = act.outs.split_at_mut(i);
             let input: &[f32] = if i == 0 { x } else { &done[i - 1][..rows * l.n_in] };
             let out = &mut rest[0][..rows * l.n_out];
-            affine(params, l, input, rows, out);
+            affine(params, l, input, rows, out, self.precision, &mut act.packed);
             if i != last {
                 for v in out.iter_mut() {
                     *v = v.max(0.0);
@@ -231,9 +258,14 @@ impl Mlp {
             let input: &[f32] = if i == 0 { &x[r0 * l.n_in..(r0 + n) * l.n_in] } else { &act.outs[i - 1][r0 * l.n_in..(r0 + n) * l.n_in] };
             let delta = &cur[..n * l.n_out];
             if let Some(g) = grad.as_deref_mut() {
-                let gw = MatMut::from_row_major_slice_mut(&mut g[l.w..l.b], l.n_out, l.n_in);
-                let dm = MatRef::from_row_major_slice(delta, n, l.n_out).transpose();
-                matmul(gw, Accum::Replace, dm, MatRef::from_row_major_slice(input, n, l.n_in), 1.0f32, Par::Seq);
+                if self.precision == Precision::Bf16 && bf16::runs_in_bf16(l.n_out, n, l.n_in) {
+                    let (dv, iv) = (View::row_major(delta, n, l.n_out).t(), View::row_major(input, n, l.n_in));
+                    bf16::matmul(&mut g[l.w..l.b], false, dv, iv, &mut act.packed);
+                } else {
+                    let gw = MatMut::from_row_major_slice_mut(&mut g[l.w..l.b], l.n_out, l.n_in);
+                    let dm = MatRef::from_row_major_slice(delta, n, l.n_out).transpose();
+                    matmul(gw, Accum::Replace, dm, MatRef::from_row_major_slice(input, n, l.n_in), 1.0f32, Par::Seq);
+                }
                 let gb = &mut g[l.b..l.b + l.n_out];
                 gb.fill(0.0);
                 for r in delta.chunks_exact(l.n_out) {
@@ -244,7 +276,7 @@ impl Mlp {
             }
             if i == 0 {
                 if let Some(dx) = dx {
-                    input_grad(params, &l, delta, n, dx);
+                    input_grad(params, &l, delta, n, dx, self.precision, &mut act.packed);
                 }
                 break;
             }
@@ -252,7 +284,7 @@ impl Mlp {
                 break;
             }
             let din = &mut next[..n * l.n_in];
-            input_grad(params, &l, delta, n, din);
+            input_grad(params, &l, delta, n, din, self.precision, &mut act.packed);
             // ReLU: the gradient passes where the layer's output was positive.
             for (d, &h) in din.iter_mut().zip(input) {
                 if h <= 0.0 {
@@ -265,10 +297,15 @@ impl Mlp {
 }
 
 /// `out = input . W^T + b` for one layer.
-fn affine(params: &[f32], l: &Layer, input: &[f32], rows: usize, out: &mut [f32]) {
-    let w = MatRef::from_row_major_slice(&params[l.w..l.b], l.n_out, l.n_in);
-    let om = MatMut::from_row_major_slice_mut(out, rows, l.n_out);
-    matmul(om, Accum::Replace, MatRef::from_row_major_slice(input, rows, l.n_in), w.transpose(), 1.0f32, Par::Seq);
+fn affine(params: &[f32], l: &Layer, input: &[f32], rows: usize, out: &mut [f32], precision: Precision, packed: &mut bf16::Scratch) {
+    if precision == Precision::Bf16 && bf16::runs_in_bf16(rows, l.n_in, l.n_out) {
+        let w = View::row_major(&params[l.w..l.b], l.n_out, l.n_in);
+        bf16::matmul(out, false, View::row_major(input, rows, l.n_in), w.t(), packed);
+    } else {
+        let w = MatRef::from_row_major_slice(&params[l.w..l.b], l.n_out, l.n_in);
+        let om = MatMut::from_row_major_slice_mut(out, rows, l.n_out);
+        matmul(om, Accum::Replace, MatRef::from_row_major_slice(input, rows, l.n_in), w.transpose(), 1.0f32, Par::Seq);
+    }
     let bias = &params[l.b..l.b + l.n_out];
     for r in out.chunks_exact_mut(l.n_out) {
         for (v, b) in r.iter_mut().zip(bias) {
@@ -278,8 +315,13 @@ fn affine(params: &[f32], l: &Layer, input: &[f32], rows: usize, out: &mut [f32]
 }
 
 /// `dx = delta . W` for one layer.
-fn input_grad(params: &[f32], l: &Layer, delta: &[f32], rows: usize, dx: &mut [f32]) {
-    let w = MatRef::from_row_major_slice(&params[l.w..l.b], l.n_out, l.n_in);
-    let dm = MatMut::from_row_major_slice_mut(&mut dx[..rows * l.n_in], rows, l.n_in);
-    matmul(dm, Accum::Replace, MatRef::from_row_major_slice(delta, rows, l.n_out), w, 1.0f32, Par::Seq);
+fn input_grad(params: &[f32], l: &Layer, delta: &[f32], rows: usize, dx: &mut [f32], precision: Precision, packed: &mut bf16::Scratch) {
+    if precision == Precision::Bf16 && bf16::runs_in_bf16(rows, l.n_out, l.n_in) {
+        let w = View::row_major(&params[l.w..l.b], l.n_out, l.n_in);
+        bf16::matmul(&mut dx[..rows * l.n_in], false, View::row_major(delta, rows, l.n_out), w, packed);
+    } else {
+        let w = MatRef::from_row_major_slice(&params[l.w..l.b], l.n_out, l.n_in);
+        let dm = MatMut::from_row_major_slice_mut(&mut dx[..rows * l.n_in], rows, l.n_in);
+        matmul(dm, Accum::Replace, MatRef::from_row_major_slice(delta, rows, l.n_out), w, 1.0f32, Par::Seq);
+    }
 }
