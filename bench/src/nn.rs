@@ -6,6 +6,7 @@
 use coadapt_core::{Batch, rng};
 use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
 use coadapt_learner::{Sac, SacConfig};
+use coadapt_nn::Precision;
 use rand::Rng;
 
 use crate::figure::{emit, rate};
@@ -26,6 +27,19 @@ pub struct NnOptions {
     /// Run only the figures whose bench name contains this (e.g. `sac`, `forward`).
     #[cfg_attr(feature = "clap", arg(long))]
     pub only: Option<String>,
+    /// The SAC updates' products: f32, or bf16 (`learner.sac.precision`; the figures' config
+    /// names end in `-bf16`).
+    #[cfg_attr(feature = "clap", arg(long, value_parser = parse_precision, default_value = "f32"))]
+    pub precision: Precision,
+}
+
+/// `f32` or `bf16`.
+pub fn parse_precision(s: &str) -> Result<Precision, String> {
+    match s {
+        "f32" => Ok(Precision::F32),
+        "bf16" => Ok(Precision::Bf16),
+        _ => Err(format!("`{s}`: the precision is f32 or bf16")),
+    }
 }
 
 pub fn run(a: &NnOptions) -> Result<(), AppError> {
@@ -109,13 +123,14 @@ pub fn random_batch(rows: usize, obs: usize, act: usize, seed: u64) -> Batch {
 fn sac_updates(a: &NnOptions) -> Result<(), AppError> {
     for (config, hidden, obs) in [("3x256-obs17", vec![256; 3], 17), ("3x200-obs23", vec![200; 3], 23), ("2x256-obs17", vec![256; 2], 17)] {
         let act = 6;
-        let cfg = SacConfig { hidden, auto_alpha: true, ..SacConfig::default() };
+        let cfg = SacConfig { hidden, auto_alpha: true, precision: a.precision, ..SacConfig::default() };
         let mut sac = Sac::new(obs, act, cfg, 1)?;
         let batch = random_batch(256, obs, act, 2);
         let r = rate(a.seconds, || {
             sac.update(&batch);
         });
-        emit("sac_update", config, r, "updates/s");
+        let config = if a.precision == Precision::Bf16 { format!("{config}-bf16") } else { config.to_owned() };
+        emit("sac_update", &config, r, "updates/s");
     }
     Ok(())
 }

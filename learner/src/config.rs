@@ -1,7 +1,7 @@
 //! Learner hyper-parameters. Defaults are the reference settings (DESIGN.md section 2). And
 //! [`ConfigError`], a run's setting that cannot work.
 
-use coadapt_nn::HiddenInit;
+use coadapt_nn::{HiddenInit, Precision};
 use serde::{Deserialize, Serialize};
 
 /// A setting of a co-adaptation run (`[schedule]`, `[flow]`, `[snapshot]`) that cannot work;
@@ -62,6 +62,11 @@ pub struct SacConfig {
     pub policy_final_init: f32,
     /// Uniform init range of the critics' last layer.
     pub critic_final_init: f32,
+    /// Arithmetic of the networks' matrix products: `f32`, or `bf16` (bfloat16 operands with
+    /// f32 accumulation, on CPUs with AMX or AVX-512 BF16, f32 elsewhere; parameters,
+    /// optimiser states and element-wise work stay f32). Experimental (issue 34): f32 until
+    /// the learning checks pass.
+    pub precision: Precision,
 }
 
 impl Default for SacConfig {
@@ -82,6 +87,7 @@ impl Default for SacConfig {
             hidden_init: HiddenInit::Rlkit,
             policy_final_init: 1e-3,
             critic_final_init: 3e-3,
+            precision: Precision::F32,
         }
     }
 }

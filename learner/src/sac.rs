@@ -230,8 +230,8 @@ impl Critic {
 impl Sac {
     /// A freshly initialised agent for observations of `obs_dim` and actions of `act_dim`.
     pub fn new(obs_dim: usize, act_dim: usize, cfg: SacConfig, seed: u64) -> Result<Self, NnError> {
-        let policy = gaussian_policy(obs_dim, act_dim, &cfg.hidden)?;
-        let critic = critic(obs_dim, act_dim, &cfg.hidden)?;
+        let policy = gaussian_policy(obs_dim, act_dim, &cfg.hidden)?.with_precision(cfg.precision);
+        let critic = critic(obs_dim, act_dim, &cfg.hidden)?.with_precision(cfg.precision);
         let mut rng = coadapt_core::rng(seed, 1);
         let mut phi = policy.zeros();
         policy.init_with(cfg.hidden_init, &mut phi, cfg.policy_final_init, &mut rng);

@@ -13,12 +13,14 @@
 //! padding), so that lane j of a 512-bit load holds `(B[2p][j], B[2p+1][j])`. A broadcast pair
 //! of `A` times that load adds `A[i][2p] B[2p][j] + A[i][2p+1] B[2p+1][j]` into lane j.
 
-/// Which arithmetic the products use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Which arithmetic the products use (`f32` or `bf16` in a config).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Precision {
     /// f32 products (faer), on every CPU.
+    #[default]
     F32,
-    /// bf16 products with f32 accumulation; only where [`bf16_available`] says so.
+    /// bf16 products with f32 accumulation where [`runs_in_bf16`] says so, f32 elsewhere.
     Bf16,
 }
 
