@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
 # Five-seed Pendulum study: for each seed, trains for 20,000 steps and reports the first step at
 # which the mean return of the last 10 episodes exceeds -200, and the final mean.
-#   usage: scripts/pendulum_seeds.sh [sac|ddpg] [extra `coadapt train` flags...]
-# Writes runs/pendulum-seeds-<algo>/seed<N>/ and runs/pendulum-seeds-<algo>/summary.jsonl, and
+#   usage: [PENDULUM_TAG=name] scripts/pendulum_seeds.sh [sac|ddpg] [extra `coadapt train` flags...]
+# Writes runs/pendulum-seeds-<algo>[-<tag>]/seed<N>/ and .../summary.jsonl, and
 # prints a Markdown table for docs/EXPERIMENTS.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 algo=${1:-sac}
 shift || true
-out=runs/pendulum-seeds-$algo
+out=runs/pendulum-seeds-$algo${PENDULUM_TAG:+-$PENDULUM_TAG}
 mkdir -p "$out"
 : > "$out/summary.jsonl"
 cargo build --release -q
