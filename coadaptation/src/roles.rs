@@ -351,8 +351,10 @@ pub fn optimizer(
     state_dir: Option<&Path>,
 ) -> crate::Result<()> {
     let hidden = &cfg.learner.sac.hidden;
-    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
-    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
+    // The design objective's products in the learner's precision (learner.sac.precision).
+    let precision = cfg.learner.sac.precision;
+    let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?.with_precision(precision);
+    let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?.with_precision(precision);
     let ospec = OptimizerSpec {
         policy: policy.clone(),
         critic,

@@ -116,7 +116,8 @@ fn tail(mlp: &Mlp, p: &[f32], out_rows: Option<usize>) -> Result<(Mlp, Vec<f32>)
     if let Some(n) = out_rows {
         *sizes.last_mut().expect("a tail has layers") = n;
     }
-    let t = Mlp::new(&sizes).map_err(|e| ObjectiveError::Shape { what: "network", why: e.to_string() })?;
+    // The tail computes as the network it comes from (f32 or bf16 products).
+    let t = Mlp::new(&sizes).map_err(|e| ObjectiveError::Shape { what: "network", why: e.to_string() })?.with_precision(mlp.precision());
     let last = mlp.layers().len() - 1;
     let mut params = Vec::with_capacity(t.n_params());
     for (i, l) in mlp.layers().iter().enumerate().skip(1) {

@@ -4,7 +4,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
 use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
-use coadapt_nn::{Mlp, squashed};
+use coadapt_nn::bf16::bf16_available;
+use coadapt_nn::{Mlp, Precision, squashed};
 use rand::Rng;
 
 #[test]
@@ -163,4 +164,43 @@ fn ensemble_heads_score_the_mean_minus_k_sd_over_every_head() {
         twin.evaluate(&designs, mode, 64, &mut b, &mut [ObjectiveWorkspace::default()]);
         assert_eq!(a, b, "{mode:?}");
     }
+}
+
+/// With bf16 networks (issue 34) the objective's tails compute in bf16 and the scores stay within
+/// bf16's error of the f32 ones: FEAR's shapes (3 x 200, 23 inputs of which 6 design), 700
+/// particles over 32 start states, so that the hidden products fill AMX tiles.
+#[test]
+fn the_objective_in_bf16_scores_as_in_f32_to_bf16_precision() {
+    if !bf16_available() {
+        eprintln!("SKIPPED: this CPU has no AVX-512 BF16: Precision::Bf16 runs f32 products here");
+        return;
+    }
+    let (obs, act, design_at, design_dim, n_states, particles) = (23, 6, 17, 6, 32, 700);
+    let mut rng = coadapt_core::rng(5, 0);
+    let policy = Mlp::new(&[obs, 200, 200, 200, 2 * act]).unwrap();
+    let critic = Mlp::new(&[obs + act, 200, 200, 200, 1]).unwrap();
+    let mut phi = policy.zeros();
+    policy.init(&mut phi, 0.5, &mut rng);
+    let mut q1 = critic.zeros();
+    critic.init(&mut q1, 0.5, &mut rng);
+    let start: Vec<f32> = (0..n_states * obs).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let designs: Vec<f32> = (0..particles * design_dim).map(|_| rng.random_range(0.8..2.0)).collect();
+    let score = |precision: Precision| {
+        let (p, c) = (policy.clone().with_precision(precision), critic.clone().with_precision(precision));
+        let f = DesignObjective::new(&p, &phi, &c, &[&q1], &start, design_at, design_dim).unwrap();
+        let mut out = vec![0.0; particles];
+        f.evaluate(&designs, QMode::First, 256, &mut out, &mut [ObjectiveWorkspace::default()]);
+        out
+    };
+    let (f32s, bf16s) = (score(Precision::F32), score(Precision::Bf16));
+    let num: f64 = f32s.iter().zip(&bf16s).map(|(a, b)| f64::from(a - b).powi(2)).sum();
+    let den: f64 = f32s.iter().map(|a| f64::from(*a).powi(2)).sum();
+    let rel = (num / den).sqrt();
+    eprintln!("design objective, bf16 against f32: relative error {rel:.2e}");
+    assert!(rel < 2f64.powi(-5), "relative error {rel}");
+    assert!(rel > 1e-6, "relative error {rel}: nothing ran in bf16?");
+    // The order PSO sees: the best particle under bf16 is among f32's best few.
+    let best = bf16s.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).unwrap().0;
+    let better = f32s.iter().filter(|v| **v > f32s[best]).count();
+    assert!(better < 10, "bf16's best particle ranks {} under f32", better + 1);
 }
