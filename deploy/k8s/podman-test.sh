@@ -222,26 +222,7 @@ cp /var/lib/containers/storage/volumes/coadapt-runs/_data/run/{designs,episodes}
   fail "cannot read the run directory from the coadapt-runs volume"
 "$bin" run --config "$work/run.toml" --transport in-process --out "$work/undisturbed" >"$work/undisturbed.out" 2>"$work/undisturbed.err" ||
   fail "the undisturbed in-process run failed (see $work/undisturbed.err)"
-python3 - "$work/run" "$work/undisturbed" "$designs" <<'PY' || fail "the rows differ from the undisturbed run's"
-import csv, sys
-def rows(d, name, drop):
-    with open(f"{d}/{name}", newline="") as f:
-        return [{k: v for k, v in r.items() if k not in drop} for r in csv.DictReader(f)]
-bad = 0
-for name, drop in (("designs.csv", ()), ("episodes.csv", ("seconds", "actor", "policy_lag"))):
-    a, b = rows(sys.argv[1], name, drop), rows(sys.argv[2], name, drop)
-    if a != b:
-        bad += 1
-        first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
-        print(f"  {name}: {len(a)} rows against {len(b)}; first difference at row {first}:"
-              f" {a[first] if first < len(a) else None} vs {b[first] if first < len(b) else None}", file=sys.stderr)
-    else:
-        print(f"  {name}: {len(a)} rows, equal to the undisturbed run's", file=sys.stderr)
-if len(rows(sys.argv[1], "designs.csv", ())) != int(sys.argv[3]):
-    bad += 1
-    print(f"  designs.csv does not have the {sys.argv[3]} designs asked for", file=sys.stderr)
-sys.exit(1 if bad else 0)
-PY
+python3 "$REPO_ROOT/deploy/compare_runs.py" "$work/run" "$work/undisturbed" "$designs" || fail "the rows differ from the undisturbed run's"
 for tok in "$work"/secrets/*.token; do
   for c in $(podman ps -a --format '{{.Names}}' | grep -v infra); do
     if podman logs "$c" 2>&1 | grep -qF -- "$(<"$tok")"; then fail "a token ($tok) appears in the log of $c"; fi

@@ -443,23 +443,7 @@ if ((compare)); then
   # the wall clock, which actor ran an episode, and its policy lag).
   "$bin" run --config "$config" --transport in-process --out "$work/undisturbed" >"$work/undisturbed.out" 2>"$work/undisturbed.err" ||
     fail "the undisturbed in-process run failed (see $work/undisturbed.err)"
-  python3 - "$run_dir" "$work/undisturbed" <<'PY' || fail "the rows differ from the undisturbed run's"
-import csv, sys
-def rows(d, name, drop):
-    with open(f"{d}/{name}", newline="") as f:
-        return [{k: v for k, v in r.items() if k not in drop} for r in csv.DictReader(f)]
-bad = 0
-for name, drop in (("designs.csv", ()), ("episodes.csv", ("seconds", "actor", "policy_lag"))):
-    a, b = rows(sys.argv[1], name, drop), rows(sys.argv[2], name, drop)
-    if a != b:
-        bad += 1
-        first = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
-        print(f"  {name}: {len(a)} rows against {len(b)}; first difference at row {first}:"
-              f" {a[first] if first < len(a) else None} vs {b[first] if first < len(b) else None}", file=sys.stderr)
-    else:
-        print(f"  {name}: {len(a)} rows, equal to the undisturbed run's", file=sys.stderr)
-sys.exit(1 if bad else 0)
-PY
+  python3 "$REPO_ROOT/deploy/compare_runs.py" "$run_dir" "$work/undisturbed" || fail "the rows differ from the undisturbed run's"
   say "every row equals the undisturbed run's: no transition lost or counted twice"
 fi
 if [[ -n $report ]]; then
