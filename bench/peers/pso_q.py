@@ -5,7 +5,11 @@ whose objective is Eq. 5.6 with 32 start states: actor 23-256-256-256-6 (mean he
 critic 29-256-256-256-1, evaluated under no_grad in chunks of 1024 rows, 2 threads. Random
 networks and states (the time does not depend on the weights).
 
-usage: .venv-peers/bin/python bench/peers/pso_q.py [--iterations 250] [--states 32]
+With --autocast the objective's forward passes run under torch.autocast("cpu", bfloat16): bf16
+products (PyTorch's mixed precision, the peer of `coadapt bench pso --precision bf16`), "impl":
+"pytorch-bf16".
+
+usage: .venv-peers/bin/python bench/peers/pso_q.py [--iterations 250] [--states 32] [--autocast]
 prints: {"bench": "pso_over_q", "config": "700x250x32", "value": <s>, "unit": "s", "impl": "pytorch"}
 """
 import argparse
@@ -30,6 +34,7 @@ def main():
     ap.add_argument("--states", type=int, default=32)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=1024)
+    ap.add_argument("--autocast", action="store_true", help="bf16 products under torch.autocast")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
@@ -39,6 +44,7 @@ def main():
     n, dim, lo, hi = 700, 6, 0.8, 2.0
 
     @torch.no_grad()
+    @torch.autocast("cpu", dtype=torch.bfloat16, enabled=args.autocast)
     def objective(xi):
         x = states.repeat(n, 1)
         x[:, 17:23] = torch.from_numpy(np.repeat(xi, args.states, axis=0)).float()
@@ -46,7 +52,7 @@ def main():
         for i in range(0, x.shape[0], args.chunk):
             c = x[i:i + args.chunk]
             a = torch.tanh(actor(c))
-            q[i:i + args.chunk] = critic(torch.cat([c, a], 1)).squeeze(1)
+            q[i:i + args.chunk] = critic(torch.cat([c, a.to(c.dtype)], 1)).squeeze(1).float()
         return q.view(n, args.states).mean(1).numpy()
 
     t0 = time.perf_counter()
@@ -62,7 +68,7 @@ def main():
         v = 0.9 * v + 0.5 * r1 * (pbest - x) + 0.3 * r2 * (g - x)
         x = np.clip(x + v, lo, hi)
     secs = time.perf_counter() - t0
-    print(json.dumps({"bench": "pso_over_q", "config": f"{n}x{args.iterations}x{args.states}", "value": round(secs, 3), "unit": "s", "impl": "pytorch"}))
+    print(json.dumps({"bench": "pso_over_q", "config": f"{n}x{args.iterations}x{args.states}", "value": round(secs, 3), "unit": "s", "impl": "pytorch-bf16" if args.autocast else "pytorch"}))
 
 
 if __name__ == "__main__":

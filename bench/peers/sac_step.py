@@ -6,7 +6,12 @@ policy, q1 and q2 (four Adams, lr 3e-4), then Polyak averaging (tau 0.005) of
 the two target Q networks.  Data are random (fixed seed), pre-generated and
 cycled, so the timing covers only the update itself.
 
-Run:  .venv-peers/bin/python bench/peers/sac_step.py [--seconds 10] [--threads 2]
+With --autocast the losses (every forward pass, so every product of the forward and backward
+passes) run under `torch.autocast("cpu", dtype=torch.bfloat16)`: PyTorch's own mixed precision,
+bf16 products with f32 master weights and Adam states (the peer of `coadapt bench nn
+--precision bf16`); the lines then say "impl": "pytorch-bf16".
+
+Run:  .venv-peers/bin/python bench/peers/sac_step.py [--seconds 10] [--threads 2] [--autocast]
 Prints one JSON line per config, e.g.
   {"bench": "sac_update", "config": "3x256-obs17", "value": 38.9, "unit": "updates/s", "impl": "pytorch"}
 """
@@ -82,7 +87,12 @@ class SAC:
         self.qf1_optimizer = torch.optim.Adam(self.qf1.parameters(), lr=LR)
         self.qf2_optimizer = torch.optim.Adam(self.qf2.parameters(), lr=LR)
 
-    def update(self, obs, actions, rewards, next_obs, terminals):
+    def update(self, obs, actions, rewards, next_obs, terminals, autocast=False):
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=autocast):
+            losses = self.losses(obs, actions, rewards, next_obs, terminals)
+        self.step(*(loss.float() for loss in losses))
+
+    def losses(self, obs, actions, rewards, next_obs, terminals):
         # --- losses (rlkit SACTrainer.compute_loss) ---
         new_actions, log_pi = self.policy(obs)
         alpha_loss = -(self.log_alpha * (log_pi + self.target_entropy).detach()).mean()
@@ -98,7 +108,9 @@ class SAC:
         q_target = (rewards + (1.0 - terminals) * GAMMA * target_q).detach()
         qf1_loss = F.mse_loss(q1_pred, q_target)
         qf2_loss = F.mse_loss(q2_pred, q_target)
+        return alpha_loss, policy_loss, qf1_loss, qf2_loss
 
+    def step(self, alpha_loss, policy_loss, qf1_loss, qf2_loss):
         # --- optimisation (rlkit SACTrainer.train_from_torch) ---
         for opt, loss in ((self.alpha_optimizer, alpha_loss), (self.policy_optimizer, policy_loss),
                           (self.qf1_optimizer, qf1_loss), (self.qf2_optimizer, qf2_loss)):
@@ -121,16 +133,16 @@ def make_batches(obs_dim, act_dim, n, gen):
              (torch.rand(BATCH, 1, generator=gen) < 0.05).float()) for _ in range(n)]
 
 
-def bench(name, seconds, warmup):
+def bench(name, seconds, warmup, autocast=False):
     hidden, obs_dim, act_dim = CONFIGS[name]
     torch.manual_seed(0)
     sac = SAC(obs_dim, act_dim, hidden)
     batches = make_batches(obs_dim, act_dim, 8, torch.Generator().manual_seed(1))
     for i in range(warmup):
-        sac.update(*batches[i % len(batches)])
+        sac.update(*batches[i % len(batches)], autocast=autocast)
     n, start = 0, time.perf_counter()
     while True:
-        sac.update(*batches[n % len(batches)])
+        sac.update(*batches[n % len(batches)], autocast=autocast)
         n += 1
         elapsed = time.perf_counter() - start
         if elapsed >= seconds:
@@ -144,12 +156,15 @@ def main():
     ap.add_argument("--warmup", type=int, default=10, help="untimed updates first")
     ap.add_argument("--config", action="append", choices=sorted(CONFIGS),
                     help="run only this config (repeatable); default: all")
+    ap.add_argument("--autocast", action="store_true",
+                    help="the losses under torch.autocast(cpu, bfloat16): bf16 products")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     for name in args.config or CONFIGS:
-        rate = bench(name, args.seconds, args.warmup)
+        rate = bench(name, args.seconds, args.warmup, args.autocast)
+        impl = "pytorch-bf16" if args.autocast else "pytorch"
         print(json.dumps({"bench": "sac_update", "config": name, "value": round(rate, 2),
-                          "unit": "updates/s", "impl": "pytorch"}), flush=True)
+                          "unit": "updates/s", "impl": impl}), flush=True)
 
 
 if __name__ == "__main__":

@@ -27,8 +27,8 @@ pub struct NnOptions {
     /// Run only the figures whose bench name contains this (e.g. `sac`, `forward`).
     #[cfg_attr(feature = "clap", arg(long))]
     pub only: Option<String>,
-    /// The SAC updates' products: f32, or bf16 (`learner.sac.precision`; the figures' config
-    /// names end in `-bf16`).
+    /// The products of the SAC updates and of the design objective's forward pass: f32, or bf16
+    /// (`learner.sac.precision`; the figures' config names end in `-bf16`).
     #[cfg_attr(feature = "clap", arg(long, value_parser = parse_precision, default_value = "f32"))]
     pub precision: Precision,
 }
@@ -139,7 +139,7 @@ fn forward(a: &NnOptions) -> Result<(), AppError> {
     let states = if a.large { vec![32, 256] } else { vec![32] };
     for n_states in states {
         let (obs, act, design) = (23, 6, 6);
-        let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 3)?;
+        let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], precision: a.precision, ..SacConfig::default() }, 3)?;
         let mut r = rng(4, 0);
         let start: Vec<f32> = (0..n_states * obs).map(|_| r.random_range(-1.0..1.0)).collect();
         let (q1, _) = sac.critic_params(0);
@@ -151,7 +151,7 @@ fn forward(a: &NnOptions) -> Result<(), AppError> {
         let mut ws = vec![ObjectiveWorkspace::default(); rayon::current_num_threads()];
         let passes = rate(a.seconds, || objective.evaluate(&designs, QMode::First, a.chunk_rows, &mut out, &mut ws));
         let rows = particles * n_states;
-        let config = format!("{rows}rows");
+        let config = if a.precision == Precision::Bf16 { format!("{rows}rows-bf16") } else { format!("{rows}rows") };
         emit("forward_actor_critic", &config, 1.0 / passes, "s/pass");
         emit("forward_actor_critic", &config, rows as f64 * passes, "rows/s");
         emit("forward_actor_critic", &config, (rows * objective.flops_per_row()) as f64 * passes / 1e9, "GFLOP/s");

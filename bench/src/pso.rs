@@ -6,6 +6,7 @@ use std::time::Instant;
 use coadapt_core::rng;
 use coadapt_design_optimizer::{CriticObjective, DesignObjective, PsoConfig, QMode, pso};
 use coadapt_learner::{Sac, SacConfig};
+use coadapt_nn::Precision;
 use rand::Rng;
 
 use crate::figure::emit;
@@ -24,11 +25,15 @@ pub struct PsoOptions {
     /// mean minus 2 standard deviations: two critic passes per row).
     #[cfg_attr(feature = "clap", arg(long, default_value = "q1", value_parser = ["q1", "pessimistic"]))]
     pub q: String,
+    /// The objective's products: f32, or bf16 (`learner.sac.precision`: the networks' precision,
+    /// which the objective inherits; the figure's config name ends in `-bf16`).
+    #[cfg_attr(feature = "clap", arg(long, value_parser = crate::nn::parse_precision, default_value = "f32"))]
+    pub precision: Precision,
 }
 
 pub fn run(a: &PsoOptions) -> Result<(), AppError> {
     let (obs, act, design) = (23, 6, 6);
-    let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], ..SacConfig::default() }, 3)?;
+    let sac = Sac::new(obs, act, SacConfig { hidden: vec![256; 3], precision: a.precision, ..SacConfig::default() }, 3)?;
     let bounds = coadapt_core::BoxSpace::uniform(design, 0.8, 2.0);
     for &n_states in &a.states {
         let mut r = rng(5, 0);
@@ -43,7 +48,8 @@ pub fn run(a: &PsoOptions) -> Result<(), AppError> {
         let result = pso::maximise(&mut objective, &bounds, &cfg, 1).map_err(AppError::library)?;
         let secs = t.elapsed().as_secs_f64();
         let suffix = if a.q == "pessimistic" { "-pessimistic" } else { "" };
-        let config = format!("{}x{}x{n_states}{suffix}", cfg.particles, cfg.iterations);
+        let precision = if a.precision == Precision::Bf16 { "-bf16" } else { "" };
+        let config = format!("{}x{}x{n_states}{suffix}{precision}", cfg.particles, cfg.iterations);
         emit("pso_over_q", &config, secs, "s");
         let rows = result.evaluations as f64 * n_states as f64;
         if suffix.is_empty() {
