@@ -41,6 +41,16 @@ impl Grid {
         self.oh * self.ow
     }
 
+    /// The kernel positions `ox` whose column `ox s + kx - pad` lies inside a line of width
+    /// `self.w`: a range, found once per `kx` so the inner loops need no bounds test.
+    fn inside(&self, kx: usize) -> std::ops::Range<usize> {
+        let (s, p) = (self.stride, self.pad);
+        let lo = if kx >= p { 0 } else { (p - kx).div_ceil(s) };
+        // x = ox s + kx - p <= w - 1  <=>  ox <= (w - 1 + p - kx) / s
+        let hi = if self.w + p > kx { ((self.w - 1 + p - kx) / s + 1).min(self.ow) } else { 0 };
+        lo.min(hi)..hi
+    }
+
     /// Columns `[c k k, oh ow]` of the large image `img` (`c x h x w`); zero outside it.
     fn im2col(&self, img: &[f32], cols: &mut [f32]) {
         let (k, s, p) = (self.k, self.stride, self.pad as isize);
@@ -50,17 +60,27 @@ impl Grid {
             for ky in 0..k {
                 for kx in 0..k {
                     let row = &mut cols[((ch * k + ky) * k + kx) * n..][..n];
+                    let inside = self.inside(kx);
+                    // the first column read: ox = inside.start, x = ox s + kx - p >= 0
+                    let x0 = (inside.start * s + kx) as isize - p;
                     for oy in 0..self.oh {
                         let y = (oy * s + ky) as isize - p;
                         let out = &mut row[oy * self.ow..(oy + 1) * self.ow];
-                        if y < 0 || y >= self.h as isize {
+                        if y < 0 || y >= self.h as isize || inside.is_empty() {
                             out.fill(0.0);
                             continue;
                         }
                         let line = &plane[y as usize * self.w..(y as usize + 1) * self.w];
-                        for (ox, o) in out.iter_mut().enumerate() {
-                            let x = (ox * s + kx) as isize - p;
-                            *o = if x < 0 || x >= self.w as isize { 0.0 } else { line[x as usize] };
+                        out[..inside.start].fill(0.0);
+                        out[inside.end..].fill(0.0);
+                        let out = &mut out[inside.clone()];
+                        let src = &line[x0 as usize..];
+                        if s == 1 {
+                            out.copy_from_slice(&src[..out.len()]);
+                        } else {
+                            for (o, v) in out.iter_mut().zip(src.iter().step_by(s)) {
+                                *o = *v;
+                            }
                         }
                     }
                 }
@@ -77,16 +97,26 @@ impl Grid {
             for ky in 0..k {
                 for kx in 0..k {
                     let row = &cols[((ch * k + ky) * k + kx) * n..][..n];
+                    let inside = self.inside(kx);
+                    if inside.is_empty() {
+                        continue;
+                    }
+                    let x0 = (inside.start * s + kx) as isize - p;
                     for oy in 0..self.oh {
                         let y = (oy * s + ky) as isize - p;
                         if y < 0 || y >= self.h as isize {
                             continue;
                         }
                         let line = &mut plane[y as usize * self.w..(y as usize + 1) * self.w];
-                        for (ox, v) in row[oy * self.ow..(oy + 1) * self.ow].iter().enumerate() {
-                            let x = (ox * s + kx) as isize - p;
-                            if x >= 0 && x < self.w as isize {
-                                line[x as usize] += v;
+                        let vals = &row[oy * self.ow..(oy + 1) * self.ow][inside.clone()];
+                        let dst = &mut line[x0 as usize..];
+                        if s == 1 {
+                            for (d, v) in dst.iter_mut().zip(vals) {
+                                *d += v;
+                            }
+                        } else {
+                            for (d, v) in dst.iter_mut().step_by(s).zip(vals) {
+                                *d += v;
                             }
                         }
                     }
@@ -357,5 +387,64 @@ impl ConvTranspose2d {
                 matmul(dm, Accum::Replace, w, MatRef::from_row_major_slice(c, rows, cols), 1.0f32, Par::Seq);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Grid;
+
+    /// The definition, one bounds test per value: what `im2col` and `col2im` must equal.
+    fn naive(g: &Grid, img: &[f32], cols: &mut [f32], back: &mut [f32]) {
+        let (k, s, p) = (g.k, g.stride, g.pad as isize);
+        let n = g.oh * g.ow;
+        for ch in 0..g.c {
+            for ky in 0..k {
+                for kx in 0..k {
+                    for oy in 0..g.oh {
+                        for ox in 0..g.ow {
+                            let (y, x) = ((oy * s + ky) as isize - p, (ox * s + kx) as isize - p);
+                            let i = ((ch * k + ky) * k + kx) * n + oy * g.ow + ox;
+                            let inside = y >= 0 && y < g.h as isize && x >= 0 && x < g.w as isize;
+                            let at = ch * g.h * g.w + (y.max(0) as usize) * g.w + x.max(0) as usize;
+                            cols[i] = if inside { img[at] } else { 0.0 };
+                            if inside {
+                                back[at] += (i % 7) as f32 - 3.0;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn im2col_and_col2im_equal_the_definition_for_every_geometry() {
+        let mut cases = 0;
+        for (h, w) in [(1, 1), (5, 7), (8, 8), (9, 4)] {
+            for k in 1..=5 {
+                for stride in 1..=3 {
+                    for pad in 0..=3 {
+                        if h + 2 * pad < k || w + 2 * pad < k {
+                            continue;
+                        }
+                        let (oh, ow) = ((h + 2 * pad - k) / stride + 1, (w + 2 * pad - k) / stride + 1);
+                        let g = Grid { c: 2, h, w, k, stride, pad, oh, ow };
+                        let img: Vec<f32> = (0..2 * h * w).map(|i| i as f32 + 1.0).collect();
+                        let len = g.rows() * g.cols();
+                        let (mut want, mut got) = (vec![f32::NAN; len], vec![f32::NAN; len]);
+                        let (mut want_back, mut got_back) = (vec![0.5; img.len()], vec![0.5; img.len()]);
+                        naive(&g, &img, &mut want, &mut want_back);
+                        g.im2col(&img, &mut got);
+                        assert_eq!(got, want, "im2col {g:?}");
+                        let grads: Vec<f32> = (0..len).map(|i| (i % 7) as f32 - 3.0).collect();
+                        g.col2im(&grads, &mut got_back);
+                        assert_eq!(got_back, want_back, "col2im {g:?}");
+                        cases += 1;
+                    }
+                }
+            }
+        }
+        assert!(cases > 150, "{cases} geometries");
     }
 }
