@@ -64,7 +64,10 @@ impl Eq for Mlp {}
 #[derive(Clone, Debug, Default)]
 pub struct Activations {
     outs: Vec<Vec<f32>>,
-    delta: [Vec<f32>; 2],
+    /// dL/d(output) of every layer from the last [`Mlp::backward_deltas`] (for a hidden layer,
+    /// through its ReLU), `deltas_rows` rows each.
+    deltas: Vec<Vec<f32>>,
+    deltas_rows: std::ops::Range<usize>,
     rows: usize,
     /// Packing buffers of the bf16 products.
     packed: bf16::Scratch,
@@ -199,10 +202,12 @@ impl Mlp {
                 o.resize(rows * l.n_out, 0.0);
             }
         }
-        let widest = self.sizes.iter().copied().max().unwrap_or(0);
-        for d in &mut a.delta {
-            if d.len() < rows * widest {
-                d.resize(rows * widest, 0.0);
+        if a.deltas.len() != self.layers.len() {
+            a.deltas = self.layers.iter().map(|_| Vec::new()).collect();
+        }
+        for (d, l) in a.deltas.iter_mut().zip(&self.layers) {
+            if d.len() < rows * l.n_out {
+                d.resize(rows * l.n_out, 0.0);
             }
         }
     }
@@ -235,7 +240,7 @@ impl Mlp {
     /// `dy` is dL/d(output) for those rows (`rows.len() x n_out`). Writes dL/d(params) into
     /// `grad` (replacing it) when given, and dL/dx (`rows.len() x n_in`) into `dx` when given;
     /// either may be skipped, so a critic differentiated only with respect to its input pays for
-    /// no weight gradient.
+    /// no weight gradient. The same as [`Mlp::backward_deltas`] then [`Mlp::weight_gradient`].
     #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &self,
@@ -244,54 +249,68 @@ impl Mlp {
         act: &mut Activations,
         rows: std::ops::Range<usize>,
         dy: &[f32],
-        mut grad: Option<&mut [f32]>,
+        grad: Option<&mut [f32]>,
         dx: Option<&mut [f32]>,
     ) {
+        self.backward_deltas(params, act, rows, dy, dx);
+        if let Some(g) = grad {
+            self.weight_gradient(x, act, g);
+        }
+    }
+
+    /// The first half of [`Mlp::backward`]: every layer's delta (dL/d(its output)) for the rows
+    /// `rows` of the last forward pass, kept in `act`, and dL/dx into `dx` when given (the
+    /// input itself is needed only by the weight gradient). The
+    /// weight gradient ([`Mlp::weight_gradient`]) can then run on another core beside other
+    /// work; the two halves compute exactly what `backward` does.
+    pub fn backward_deltas(&self, params: &[f32], act: &mut Activations, rows: std::ops::Range<usize>, dy: &[f32], dx: Option<&mut [f32]>) {
         assert!(rows.end <= act.rows, "backward rows beyond the forward pass");
         let (r0, n) = (rows.start, rows.len());
         assert_eq!(dy.len(), n * self.n_out(), "dy is not rows x n_out");
-        let [da, db] = &mut act.delta;
-        let (mut cur, mut next) = (da, db);
-        cur[..dy.len()].copy_from_slice(dy);
-        for i in (0..self.layers.len()).rev() {
+        let last = self.layers.len() - 1;
+        act.deltas[last][..dy.len()].copy_from_slice(dy);
+        for i in (1..self.layers.len()).rev() {
             let l = self.layers[i];
-            let input: &[f32] = if i == 0 { &x[r0 * l.n_in..(r0 + n) * l.n_in] } else { &act.outs[i - 1][r0 * l.n_in..(r0 + n) * l.n_in] };
-            let delta = &cur[..n * l.n_out];
-            if let Some(g) = grad.as_deref_mut() {
-                if self.precision == Precision::Bf16 && bf16::runs_in_bf16(l.n_out, n, l.n_in) {
-                    let (dv, iv) = (View::row_major(delta, n, l.n_out).t(), View::row_major(input, n, l.n_in));
-                    bf16::matmul(&mut g[l.w..l.b], false, dv, iv, &mut act.packed);
-                } else {
-                    let gw = MatMut::from_row_major_slice_mut(&mut g[l.w..l.b], l.n_out, l.n_in);
-                    let dm = MatRef::from_row_major_slice(delta, n, l.n_out).transpose();
-                    matmul(gw, Accum::Replace, dm, MatRef::from_row_major_slice(input, n, l.n_in), 1.0f32, Par::Seq);
-                }
-                let gb = &mut g[l.b..l.b + l.n_out];
-                gb.fill(0.0);
-                for r in delta.chunks_exact(l.n_out) {
-                    for (b, d) in gb.iter_mut().zip(r) {
-                        *b += d;
-                    }
-                }
-            }
-            if i == 0 {
-                if let Some(dx) = dx {
-                    input_grad(params, &l, delta, n, dx, self.precision, &mut act.packed);
-                }
-                break;
-            }
-            if grad.is_none() && dx.is_none() {
-                break;
-            }
-            let din = &mut next[..n * l.n_in];
-            input_grad(params, &l, delta, n, din, self.precision, &mut act.packed);
+            let input = &act.outs[i - 1][r0 * l.n_in..(r0 + n) * l.n_in];
+            let (below, here) = act.deltas.split_at_mut(i);
+            let din = &mut below[i - 1][..n * l.n_in];
+            input_grad(params, &l, &here[0][..n * l.n_out], n, din, self.precision, &mut act.packed);
             // ReLU: the gradient passes where the layer's output was positive.
             for (d, &h) in din.iter_mut().zip(input) {
                 if h <= 0.0 {
                     *d = 0.0;
                 }
             }
-            std::mem::swap(&mut cur, &mut next);
+        }
+        if let Some(dx) = dx {
+            let l = self.layers[0];
+            input_grad(params, &l, &act.deltas[0][..n * l.n_out], n, dx, self.precision, &mut act.packed);
+        }
+        act.deltas_rows = rows;
+    }
+
+    /// The second half of [`Mlp::backward`]: dL/d(params) into `grad` (replacing it) from the
+    /// deltas of the last [`Mlp::backward_deltas`] on `act` (with the same `x`).
+    pub fn weight_gradient(&self, x: &[f32], act: &mut Activations, grad: &mut [f32]) {
+        let (r0, n) = (act.deltas_rows.start, act.deltas_rows.len());
+        for (i, l) in self.layers.iter().enumerate() {
+            let input: &[f32] = if i == 0 { &x[r0 * l.n_in..(r0 + n) * l.n_in] } else { &act.outs[i - 1][r0 * l.n_in..(r0 + n) * l.n_in] };
+            let delta = &act.deltas[i][..n * l.n_out];
+            if self.precision == Precision::Bf16 && bf16::runs_in_bf16(l.n_out, n, l.n_in) {
+                let (dv, iv) = (View::row_major(delta, n, l.n_out).t(), View::row_major(input, n, l.n_in));
+                bf16::matmul(&mut grad[l.w..l.b], false, dv, iv, &mut act.packed);
+            } else {
+                let gw = MatMut::from_row_major_slice_mut(&mut grad[l.w..l.b], l.n_out, l.n_in);
+                let dm = MatRef::from_row_major_slice(delta, n, l.n_out).transpose();
+                matmul(gw, Accum::Replace, dm, MatRef::from_row_major_slice(input, n, l.n_in), 1.0f32, Par::Seq);
+            }
+            let gb = &mut grad[l.b..l.b + l.n_out];
+            gb.fill(0.0);
+            for r in delta.chunks_exact(l.n_out) {
+                for (b, d) in gb.iter_mut().zip(r) {
+                    *b += d;
+                }
+            }
         }
     }
 }
