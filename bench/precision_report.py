@@ -1,6 +1,7 @@
 """The table of issue 34's figures from bench/compare_precision.sh's JSON lines.
 
-Per figure and side: the median over the rounds and the range (min-max). Per pair of sides: the
+Sides: ours in f32 and bf16, PyTorch in f32 and under bf16 autocast, and where the run has them
+an older build's f32 figures ("coadapt-before"). Per figure and side: the median over the rounds and the range (min-max). Per pair of sides: the
 ratio taken round by round (ours over the peer for a rate, the peer over ours for a time, so >1
 always means ours is faster), its median and range over the rounds, n = the rounds.
 
@@ -17,11 +18,11 @@ FIGURES = [
     ("sac_update", "2x256-obs17", "updates/s", True),
     ("pso_over_q", "700x250x32", "s", False),
 ]
-SIDES = [("coadapt", ""), ("coadapt", "-bf16"), ("pytorch", ""), ("pytorch-bf16", "")]
-NAMES = {("coadapt", ""): "ours f32", ("coadapt", "-bf16"): "ours bf16",
+SIDES = [("coadapt-before", ""), ("coadapt", ""), ("coadapt", "-bf16"), ("pytorch", ""), ("pytorch-bf16", "")]
+NAMES = {("coadapt-before", ""): "ours f32 before", ("coadapt", ""): "ours f32", ("coadapt", "-bf16"): "ours bf16",
          ("pytorch", ""): "PyTorch f32", ("pytorch-bf16", ""): "PyTorch bf16"}
 # (faster side, slower side) pairs whose ratio the issue asks for
-RATIOS = [(("coadapt", "-bf16"), ("coadapt", "")), (("coadapt", "-bf16"), ("pytorch", "")),
+RATIOS = [(("coadapt", "-bf16"), ("coadapt-before", "")), (("coadapt", "-bf16"), ("coadapt", "")), (("coadapt", "-bf16"), ("pytorch", "")),
           (("coadapt", "-bf16"), ("pytorch-bf16", "")), (("coadapt", ""), ("pytorch", "")),
           (("pytorch-bf16", ""), ("pytorch", ""))]
 
@@ -44,16 +45,18 @@ def main(path):
                     value[(bench, config, impl, suffix, d.get("round", 1))] = d["value"]
     rounds = sorted({k[-1] for k in value})
     print(f"{path}: {len(rounds)} rounds; cells are the median (min-max) over the rounds\n")
-    print("| figure | " + " | ".join(NAMES[s] for s in SIDES) + " | "
-          + " | ".join(f"{NAMES[a]} / {NAMES[b]}" for a, b in RATIOS) + " |")
-    print("|---" * (1 + len(SIDES) + len(RATIOS)) + "|")
+    sides = [s for s in SIDES if any(k[2:4] == s for k in value)]
+    ratios = [(a, b) for a, b in RATIOS if a in sides and b in sides]
+    print("| figure | " + " | ".join(NAMES[s] for s in sides) + " | "
+          + " | ".join(f"{NAMES[a]} / {NAMES[b]}" for a, b in ratios) + " |")
+    print("|---" * (1 + len(sides) + len(ratios)) + "|")
     for bench, config, unit, higher in FIGURES:
-        vals = {s: [value[(bench, config, *s, r)] for r in rounds if (bench, config, *s, r) in value] for s in SIDES}
+        vals = {s: [value[(bench, config, *s, r)] for r in rounds if (bench, config, *s, r) in value] for s in sides}
         if not any(vals.values()):
             continue
         digits = 2 if unit == "s" else 1
-        cells = [cell(vals[s], digits) for s in SIDES]
-        for a, b in RATIOS:
+        cells = [cell(vals[s], digits) for s in sides]
+        for a, b in ratios:
             per_round = []
             for r in rounds:
                 x, y = value.get((bench, config, *a, r)), value.get((bench, config, *b, r))
