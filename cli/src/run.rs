@@ -86,6 +86,13 @@ pub struct RunArgs {
     /// the robot's own: half-cheetah 0.4, walker 0.9, hopper 1.0, daisy 0.8).
     #[arg(long, value_name = "F")]
     pub friction: Option<f32>,
+    /// The networks' matrix products (sets learner.sac.precision): f32, or bf16 (bfloat16
+    /// operands with f32 accumulation where the CPU has AVX-512 BF16 or AMX, f32 elsewhere;
+    /// parameters, optimiser states and the rest stay f32). Learns as f32 does (EXPERIMENTS 12)
+    /// and trains 1.6-1.9x faster on an AMD EPYC with AVX-512 BF16 (BENCHMARKS.md). The
+    /// embedded reference protocol uses bf16; `--precision f32` forces f32.
+    #[arg(long, value_parser = ["f32", "bf16"])]
+    pub precision: Option<String>,
 }
 
 /// `coadapt run`.
@@ -102,6 +109,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         insecure: args.insecure,
         init_population: args.init_population,
         friction: args.friction,
+        precision: args.precision,
     };
     let (cfg, name) = resolve(args.config.as_deref(), args.resume.as_deref(), &o)?;
     let shutdown = shutdown_on_ctrl_c();

@@ -99,6 +99,10 @@ pub struct TrainArgs {
     /// The latent perturbation's scale beta (sets latent-exploration.beta; default 0.5).
     #[arg(long, requires = "latent_exploration")]
     pub latent_beta: Option<f32>,
+    /// SAC's matrix products (sets sac.precision): f32 (the default), or bf16 (bfloat16
+    /// operands with f32 accumulation where the CPU has AVX-512 BF16 or AMX).
+    #[arg(long, value_parser = ["f32", "bf16"])]
+    pub precision: Option<String>,
     /// Run directory (default: runs/<env>-<algo>-seed<seed>-<unix time>).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -164,6 +168,9 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if let Some(l) = args.learning_starts {
         cfg.learning_starts = l;
+    }
+    if let Some(p) = &args.precision {
+        cfg.sac.precision = if p == "bf16" { coadapt_nn::Precision::Bf16 } else { coadapt_nn::Precision::F32 };
     }
     if let Some(u) = args.update_schedule {
         cfg.update_schedule = match u {
