@@ -203,7 +203,8 @@ podman pod rm -f -t 0 coadapt-learner-pod-0 >/dev/null || fail "could not delete
 say "learner pod deleted at episode $((before - 1))"
 play "$work/learner-again.yaml" coadapt-learner
 wait_probe
-podman logs coadapt-learner-pod-0-learner 2>&1 | grep -q "resuming" || fail "the new learner pod did not resume: $(podman logs --tail 5 coadapt-learner-pod-0-learner 2>&1)"
+# On failure the new learner's first lines say why (no snapshot found, an incompatible config).
+podman logs coadapt-learner-pod-0-learner 2>&1 | grep -q "resuming" || fail "the new learner pod did not resume: $(podman logs coadapt-learner-pod-0-learner 2>&1 | head -n 12)"
 say "the new learner pod resumed: $(podman logs coadapt-learner-pod-0-learner 2>&1 | grep -m1 resuming | cut -c1-160)"
 
 # --- the end ------------------------------------------------------------------------------------------
