@@ -203,8 +203,10 @@ podman pod rm -f -t 0 coadapt-learner-pod-0 >/dev/null || fail "could not delete
 say "learner pod deleted at episode $((before - 1))"
 play "$work/learner-again.yaml" coadapt-learner
 wait_probe
-# On failure the new learner's first lines say why (no snapshot found, an incompatible config).
-podman logs coadapt-learner-pod-0-learner 2>&1 | grep -q "resuming" || fail "the new learner pod did not resume: $(podman logs coadapt-learner-pod-0-learner 2>&1 | head -n 12)"
+# The log is read whole first: `podman logs | grep -q` under pipefail fails when grep stops at
+# its match and podman, still writing, gets SIGPIPE (it did, with "resuming" in the log).
+learner_log=$(podman logs coadapt-learner-pod-0-learner 2>&1)
+grep -q "resuming" <<< "$learner_log" || fail "the new learner pod did not resume: $(head -n 12 <<< "$learner_log")"
 say "the new learner pod resumed: $(podman logs coadapt-learner-pod-0-learner 2>&1 | grep -m1 resuming | cut -c1-160)"
 
 # --- the end ------------------------------------------------------------------------------------------
@@ -226,7 +228,8 @@ cp /var/lib/containers/storage/volumes/coadapt-runs/_data/run/{designs,episodes}
 python3 "$REPO_ROOT/deploy/compare_runs.py" "$work/run" "$work/undisturbed" "$designs" || fail "the rows differ from the undisturbed run's"
 for tok in "$work"/secrets/*.token; do
   for c in $(podman ps -a --format '{{.Names}}' | grep -v infra); do
-    if podman logs "$c" 2>&1 | grep -qF -- "$(<"$tok")"; then fail "a token ($tok) appears in the log of $c"; fi
+    log=$(podman logs "$c" 2>&1)
+    if grep -qF -- "$(<"$tok")" <<< "$log"; then fail "a token ($tok) appears in the log of $c"; fi
   done
 done
 passed=1
