@@ -20,7 +20,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use coadapt_latent::EmbeddingConfig;
-use coadapt_nn::{Conv2d, ConvScratch, ConvTranspose2d, NnError};
+use coadapt_nn::{Conv2d, ConvScratch, ConvTranspose2d, NnError, Precision};
 use rand::Rng;
 use serde_json::json;
 
@@ -51,6 +51,11 @@ pub struct ConvOptions {
     /// With --dump: write the file and time nothing.
     #[cfg_attr(feature = "clap", arg(long))]
     pub dump_only: bool,
+    /// The products' arithmetic: f32, or bf16 operands with f32 accumulation (on a CPU with
+    /// AVX-512 BF16 or AMX; f32 elsewhere). The figures' config names end in `-bf16`, and the
+    /// dump holds the bf16 outputs.
+    #[cfg_attr(feature = "clap", arg(long, value_parser = crate::nn::parse_precision, default_value = "f32"))]
+    pub precision: Precision,
 }
 
 /// One layer's shape, as PyTorch's constructor takes it.
@@ -85,6 +90,19 @@ impl Layer {
             Ok(Conv2d::new(c_in, c_out, k, stride, pad, h, w)?)
         };
         Ok(Self { spec, conv })
+    }
+
+    /// The same layer with its products in `precision`.
+    pub fn with_precision(self, precision: Precision) -> Self {
+        let conv = match self.conv {
+            Ok(c) => Ok(c.with_precision(precision)),
+            Err(t) => Err(t.with_precision(precision)),
+        };
+        Self { conv, ..self }
+    }
+
+    pub fn precision(&self) -> Precision {
+        self.conv.as_ref().map_or_else(|t| t.precision(), |c| c.precision())
     }
 
     pub fn n_params(&self) -> usize {
@@ -257,8 +275,12 @@ fn round(v: f64) -> f64 {
 /// One figure's JSON line: median ms, p10, p90, and the model GFLOP/s at the median
 /// (`2 * MACs / time`; forward + backward counts three times the forward's MACs: the output,
 /// the weights' gradient, the input's gradient).
-pub fn line(bench: &str, config: &str, batch: usize, ms: &[f64], flops: f64) -> serde_json::Value {
+pub fn line(bench: &str, config: &str, batch: usize, ms: &[f64], flops: f64, precision: Precision) -> serde_json::Value {
     let median = percentile(ms, 0.5);
+    let dtype = match precision {
+        Precision::F32 => "f32",
+        Precision::Bf16 => "bf16",
+    };
     json!({
         "bench": bench,
         "config": config,
@@ -271,7 +293,7 @@ pub fn line(bench: &str, config: &str, batch: usize, ms: &[f64], flops: f64) -> 
         "batch": batch,
         "repetitions": ms.len(),
         "threads": 1,
-        "dtype": "f32",
+        "dtype": dtype,
     })
 }
 
@@ -287,7 +309,11 @@ pub fn run(a: &ConvOptions) -> Result<(), AppError> {
     if a.repetitions == 0 {
         return Err(AppError::Config("--repetitions must be at least 1".into()));
     }
-    let layers = embedding_layers(&EmbeddingConfig::default())?;
+    let layers: Vec<Layer> = embedding_layers(&EmbeddingConfig::default())?.into_iter().map(|l| l.with_precision(a.precision)).collect();
+    if a.precision == Precision::Bf16 && !coadapt_nn::bf16::bf16_available() {
+        coadapt_log::logln!("bench conv: this CPU has neither AVX-512 BF16 nor AMX: the bf16 figures run f32 products");
+    }
+    let suffix = if a.precision == Precision::Bf16 { "-bf16" } else { "" };
     if let Some(path) = &a.dump {
         std::fs::write(path, dump(&layers, 2, a.seed).to_string()).map_err(AppError::io(format!("writing {}", path.display())))?;
         coadapt_log::logln!("bench conv: shapes, inputs and outputs written to {}", path.display());
@@ -301,20 +327,20 @@ pub fn run(a: &ConvOptions) -> Result<(), AppError> {
             if a.only.as_deref().is_some_and(|o| !name.contains(o)) {
                 continue;
             }
-            let config = format!("{name}-b{n}");
+            let config = format!("{name}-b{n}{suffix}");
             let mut s = Stack::new(&layers[range], n, &mut r);
             let flops = 2.0 * s.macs() as f64;
             let ms = time_ms(a.repetitions, a.warmup, || {
                 s.forward();
                 std::hint::black_box(&s.acts);
             });
-            coadapt_log::print_stdout_line(&line("conv_forward", &config, n, &ms, flops).to_string());
+            coadapt_log::print_stdout_line(&line("conv_forward", &config, n, &ms, flops, a.precision).to_string());
             let ms = time_ms(a.repetitions, a.warmup, || {
                 s.forward();
                 s.backward();
                 std::hint::black_box((&s.grads, &s.d));
             });
-            coadapt_log::print_stdout_line(&line("conv_forward_backward", &config, n, &ms, 3.0 * flops).to_string());
+            coadapt_log::print_stdout_line(&line("conv_forward_backward", &config, n, &ms, 3.0 * flops, a.precision).to_string());
         }
     }
     Ok(())
@@ -347,6 +373,7 @@ pub fn dump(layers: &[Layer], n: usize, seed: u64) -> serde_json::Value {
                 "out_shape": l.out_shape(),
                 "macs": l.macs(),
                 "n": n,
+                "precision": if l.precision() == Precision::Bf16 { "bf16" } else { "f32" },
                 "params": s.params[0],
                 "x": s.acts[0],
                 "dy": s.d[1],

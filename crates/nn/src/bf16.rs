@@ -145,22 +145,89 @@ fn pack_across(data: &[f32], k: usize, rs: usize, len: usize, out: &mut [u32], l
     for p in 0..k.div_ceil(2) {
         let lo = &data[2 * p * rs..2 * p * rs + len];
         let hi = (2 * p + 1 < k).then(|| &data[(2 * p + 1) * rs..(2 * p + 1) * rs + len]);
-        let dst = &mut out[p * ld..p * ld + len];
-        let mut done = 0;
-        #[cfg(target_arch = "x86_64")]
-        if simd {
-            #[allow(unsafe_code)] // see the module avx512
-            // SAFETY: the kernel's features are there; lo, hi and dst have len values each.
-            {
-                done = unsafe { avx512::pack_across(lo, hi, dst) };
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = simd;
-        for j in done..len {
-            dst[j] = pair(lo[j], hi.map_or(0.0, |h| h[j]));
+        pack_pair_row(lo, hi, &mut out[p * ld..p * ld + len], simd);
+    }
+}
+
+/// `dst[j] = (lo[j], hi[j])` as a pair (`hi` absent: zero).
+fn pack_pair_row(lo: &[f32], hi: Option<&[f32]>, dst: &mut [u32], simd: bool) {
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if simd {
+        #[allow(unsafe_code)] // see the module avx512
+        // SAFETY: the kernel's features are there; lo, hi and dst have len values each.
+        {
+            done = unsafe { avx512::pack_across(lo, hi, dst) };
         }
     }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = simd;
+    for j in done..dst.len() {
+        dst[j] = pair(lo[j], hi.map_or(0.0, |h| h[j]));
+    }
+}
+
+/// A `k x n` right-hand operand packed by its owner, pair row by pair row, in the layout the
+/// kernel reads (see the module doc): for a product whose `B` is built on the fly (a
+/// convolution's columns), so that each pair of rows goes from a small f32 buffer still in L1
+/// straight into bf16, instead of through a whole f32 matrix and a second pass.
+#[derive(Debug, Default, Clone)]
+pub struct PackedB {
+    k: usize,
+    n: usize,
+    n16: usize,
+    pairs: Vec<u32>,
+}
+
+impl PackedB {
+    /// Room for a `k x n` matrix; every pair row `0..ceil(k/2)` must be set before a product.
+    pub fn reset(&mut self, k: usize, n: usize) {
+        self.k = k;
+        self.n = n;
+        self.n16 = n.div_ceil(16) * 16;
+        grow(&mut self.pairs, k.div_ceil(2) * self.n16);
+    }
+
+    /// Sets pair row `p` from rows `2p` (`lo`) and `2p + 1` (`hi`; `None` for the last row of
+    /// an odd `k`), each `n` values, rounded to bf16.
+    ///
+    /// # Panics
+    /// On a row past `ceil(k/2)` or rows of the wrong length.
+    pub fn set_pair_row(&mut self, p: usize, lo: &[f32], hi: Option<&[f32]>) {
+        assert!(p < self.k.div_ceil(2), "pair row {p} of a {}-row matrix", self.k);
+        assert!(lo.len() == self.n && hi.is_none_or(|h| h.len() == self.n), "rows of {} values", self.n);
+        pack_pair_row(lo, hi, &mut self.pairs[p * self.n16..p * self.n16 + self.n], bf16_available());
+    }
+}
+
+/// [`matmul`] with `B` packed by the caller: `C = A B` (`accumulate`: `C += A B`), bf16
+/// operands, f32 accumulation, on the AVX-512 BF16 kernel (also where AMX exists: the tiles
+/// want another layout) or in scalar code.
+///
+/// # Panics
+/// On mismatched shapes.
+pub fn matmul_packed(c: &mut [f32], accumulate: bool, a: View<'_>, b: &PackedB, scratch: &mut Scratch) {
+    let (m, k, n) = (a.rows, a.cols, b.n);
+    assert_eq!(b.k, k, "inner dimensions");
+    assert_eq!(c.len(), m * n, "C is m x n");
+    check_view(&a, "A");
+    if m == 0 || n == 0 {
+        return;
+    }
+    let simd = bf16_available();
+    let (a_rs, a_ps) = pack_a(a, scratch, simd);
+    let kp = k.div_ceil(2);
+    #[cfg(target_arch = "x86_64")]
+    if simd {
+        #[allow(unsafe_code)] // the intrinsics' kernel: see the module avx512
+        // SAFETY: the CPU has avx512f and avx512bf16; the packed A has m x kp pairs at strides
+        // (a_rs, a_ps), B kp x n16 (reset sized it), and C is m x n (asserted).
+        unsafe {
+            avx512::product(c, accumulate, m, n, kp, b.n16, &scratch.a, a_rs, a_ps, &b.pairs)
+        };
+        return;
+    }
+    scalar_product(c, accumulate, m, n, kp, b.n16, &scratch.a, a_rs, a_ps, &b.pairs);
 }
 
 /// Makes `v` at least `len` long, keeping what it holds (the callers overwrite what they read).
@@ -246,25 +313,9 @@ fn matmul_on(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch:
     }
     let kp = k.div_ceil(2);
     let n16 = n.div_ceil(16) * 16;
-    // A as pairs, rows along m: [m][kp] (a_rs = kp, a_ps = 1) or [kp][m] (a_rs = 1, a_ps = m).
     // Every packed value the kernel reads is written below (B's padding columns are read but
     // land only in masked-off lanes), so the buffers only grow: no zeroing per call.
-    grow(&mut scratch.a, m * kp);
-    let (a_rs, a_ps) = if a.cs == 1 {
-        pack_contiguous(a.data, m, a.rs, k, &mut scratch.a, simd);
-        (kp, 1)
-    } else if a.rs == 1 {
-        pack_across(a.data, k, a.cs, m, &mut scratch.a, m, simd);
-        (1, m)
-    } else {
-        for i in 0..m {
-            for p in 0..kp {
-                let hi = if 2 * p + 1 < k { a.at(i, 2 * p + 1) } else { 0.0 };
-                scratch.a[i * kp + p] = pair(a.at(i, 2 * p), hi);
-            }
-        }
-        (kp, 1)
-    };
+    let (a_rs, a_ps) = pack_a(a, scratch, simd);
     // B as pairs, [kp][n16] with zero padding.
     grow(&mut scratch.b, kp * n16);
     if b.cs == 1 {
@@ -294,6 +345,30 @@ fn matmul_on(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, scratch:
         return;
     }
     scalar_product(c, accumulate, m, n, kp, n16, &scratch.a, a_rs, a_ps, &scratch.b);
+}
+
+/// Packs `A` into `scratch.a` as pairs, rows along m: `[m][kp]` (returns `(kp, 1)`, the
+/// strides of a row and of a pair) or `[kp][m]` (`(1, m)`).
+fn pack_a(a: View<'_>, scratch: &mut Scratch, simd: bool) -> (usize, usize) {
+    let (m, k) = (a.rows, a.cols);
+    let kp = k.div_ceil(2);
+    // A as pairs, rows along m: [m][kp] (a_rs = kp, a_ps = 1) or [kp][m] (a_rs = 1, a_ps = m).
+    grow(&mut scratch.a, m * kp);
+    if a.cs == 1 {
+        pack_contiguous(a.data, m, a.rs, k, &mut scratch.a, simd);
+        (kp, 1)
+    } else if a.rs == 1 {
+        pack_across(a.data, k, a.cs, m, &mut scratch.a, m, simd);
+        (1, m)
+    } else {
+        for i in 0..m {
+            for p in 0..kp {
+                let hi = if 2 * p + 1 < k { a.at(i, 2 * p + 1) } else { 0.0 };
+                scratch.a[i * kp + p] = pair(a.at(i, 2 * p), hi);
+            }
+        }
+        (kp, 1)
+    }
 }
 
 /// The product on AMX tiles: A packed as `m32 x kp16` pairs, B as `kp16 x n32`, zero-padded.
@@ -362,6 +437,72 @@ fn pack_contiguous_ld(data: &[f32], lines: usize, ls: usize, k: usize, out: &mut
     for l in 0..lines {
         pack_contiguous(&data[l * ls..l * ls + k], 1, k, k, &mut out[l * ld..l * ld + kp], true);
     }
+}
+
+fn has_avx512f() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Each of the `lines` lines of `w` values in `src` split into its even values (the first
+/// `pw = ceil(w / 2)` of its `2 pw` values in `dst`) and its odd values (the next `pw`, the
+/// last unused when `w` is odd): a stride-2 convolution's phases. AVX-512 shuffles where the
+/// CPU has them.
+pub(crate) fn deinterleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32]) {
+    let pw = w.div_ceil(2);
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512f() {
+        #[allow(unsafe_code)] // see the module avx512
+        // SAFETY: the CPU has avx512f; the function asserts the lengths it relies on.
+        unsafe {
+            avx512::deinterleave_lines(src, lines, w, dst)
+        };
+        return;
+    }
+    for (line, out) in src[..lines * w].chunks_exact(w).zip(dst.chunks_exact_mut(2 * pw)) {
+        for (x, v) in line.iter().enumerate() {
+            out[x % 2 * pw + x / 2] = *v;
+        }
+    }
+}
+
+/// The inverse of [`deinterleave_lines`].
+pub(crate) fn interleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32]) {
+    let pw = w.div_ceil(2);
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512f() {
+        #[allow(unsafe_code)] // see the module avx512
+        // SAFETY: the CPU has avx512f; the function asserts the lengths it relies on.
+        unsafe {
+            avx512::interleave_lines(src, lines, w, dst)
+        };
+        return;
+    }
+    for (line, ph) in dst[..lines * w].chunks_exact_mut(w).zip(src.chunks_exact(2 * pw)) {
+        for (x, v) in line.iter_mut().enumerate() {
+            *v = ph[x % 2 * pw + x / 2];
+        }
+    }
+}
+
+/// `dst.copy_from_slice(src)`, without a call into `memmove` for the short copies of im2col.
+pub(crate) fn copy_short(src: &[f32], dst: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512f() {
+        #[allow(unsafe_code)] // see the module avx512
+        // SAFETY: the CPU has avx512f; the function asserts equal lengths.
+        unsafe {
+            avx512::copy(src, dst)
+        };
+        return;
+    }
+    dst.copy_from_slice(src);
 }
 
 /// The packed product in scalar code: the same pairs, each pair's two products summed first
@@ -504,6 +645,103 @@ mod avx512 {
             }
         }
         src.len().div_ceil(2)
+    }
+
+    /// Mask of the first `n` lanes (n <= 16).
+    #[inline]
+    fn lanes(n: usize) -> __mmask16 {
+        if n >= 16 { 0xffff } else { ((1u32 << n) - 1) as __mmask16 }
+    }
+
+    /// Stores the first `n` lanes of `v` (n <= 16) at `p`. Whole vectors and halves without a
+    /// mask: AMD's Zen 4 runs masked stores at a fraction of a plain store's rate (measured:
+    /// the masked copies of im2col took 44 % of their function's time on one instruction).
+    ///
+    /// # Safety
+    /// `p .. p + n` is writable.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn store_first(p: *mut f32, v: __m512, n: usize) {
+        // SAFETY: each store writes exactly the first n values (the caller's range).
+        unsafe {
+            match n {
+                16.. => _mm512_storeu_ps(p, v),
+                8 => _mm256_storeu_ps(p, _mm512_castps512_ps256(v)),
+                0 => {}
+                _ => _mm512_mask_storeu_ps(p, lanes(n), v),
+            }
+        }
+    }
+
+    /// For each of the `lines` lines of `w` values in `src`: its even values into the first
+    /// `pw = ceil(w / 2)` of its `2 pw` values in `dst`, its odd values after them; the tails
+    /// through masked loads and stores.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn deinterleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32]) {
+        let pw = w.div_ceil(2);
+        assert!(src.len() >= lines * w && dst.len() >= lines * 2 * pw, "buffers shorter than the lines");
+        let ie = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+        let io = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+        for l in 0..lines {
+            let mut x = 0;
+            while x < w {
+                let rest = w - x;
+                // SAFETY: the loads read values x .. x + min(rest, 32) of line l (masked past
+                // it), the stores write pairs x / 2 .. (x + rest) / 2 of its two halves in dst
+                // (asserted lengths).
+                unsafe {
+                    let sp = src.as_ptr().add(l * w + x);
+                    let a = _mm512_maskz_loadu_ps(lanes(rest), sp);
+                    let b = if rest > 16 { _mm512_maskz_loadu_ps(lanes(rest - 16), sp.add(16)) } else { _mm512_setzero_ps() };
+                    let dp = dst.as_mut_ptr().add(l * 2 * pw + x / 2);
+                    store_first(dp, _mm512_permutex2var_ps(a, ie, b), rest.div_ceil(2).min(16));
+                    store_first(dp.add(pw), _mm512_permutex2var_ps(a, io, b), (rest / 2).min(16));
+                }
+                x += 32;
+            }
+        }
+    }
+
+    /// The inverse of [`deinterleave_lines`].
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn interleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32]) {
+        let pw = w.div_ceil(2);
+        assert!(dst.len() >= lines * w && src.len() >= lines * 2 * pw, "buffers shorter than the lines");
+        let lo = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
+        let hi = _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
+        for l in 0..lines {
+            let mut x = 0;
+            while x < w {
+                let rest = w - x;
+                // SAFETY: the mirror of deinterleave_lines: reads pairs x / 2 .. of both halves
+                // (masked), writes values x .. x + min(rest, 32) of line l (masked).
+                unsafe {
+                    let sp = src.as_ptr().add(l * 2 * pw + x / 2);
+                    let e = _mm512_maskz_loadu_ps(lanes(rest.div_ceil(2)), sp);
+                    let o = _mm512_maskz_loadu_ps(lanes(rest / 2), sp.add(pw));
+                    let dp = dst.as_mut_ptr().add(l * w + x);
+                    store_first(dp, _mm512_permutex2var_ps(e, lo, o), rest.min(16));
+                    if rest > 16 {
+                        store_first(dp.add(16), _mm512_permutex2var_ps(e, hi, o), (rest - 16).min(16));
+                    }
+                }
+                x += 32;
+            }
+        }
+    }
+
+    /// `dst.copy_from_slice(src)` for short slices, 16 values at a time, the tail masked: no
+    /// call into `memmove` (whose set-up cost dominated copies of 8-32 values).
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn copy(src: &[f32], dst: &mut [f32]) {
+        assert_eq!(src.len(), dst.len(), "copy between slices of one length");
+        let mut x = 0;
+        while x < src.len() {
+            let n = (src.len() - x).min(16);
+            // SAFETY: the lanes loaded and stored stay inside both slices (equal lengths).
+            unsafe { store_first(dst.as_mut_ptr().add(x), _mm512_maskz_loadu_ps(lanes(n), src.as_ptr().add(x)), n) };
+            x += 16;
+        }
     }
 
     /// Pairs (lo[j], hi[j]) for every j; returns how many were written (all of them).
@@ -846,5 +1084,55 @@ mod tests {
         assert!(rms < typical, "rms error {rms} against sqrt(k) 2^-9 = {typical}");
         assert!(rms > typical / 100.0, "rms error {rms}: the operands were not rounded to bf16?");
         assert!(worst < k as f64 * 2f64.powi(-8), "worst error {worst}");
+    }
+
+    #[test]
+    fn a_product_with_b_packed_by_rows_is_the_same_product() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        for (m, k, n) in [(32, 27, 1024), (5, 7, 3), (19, 48, 33)] {
+            let a = random(m * k, &mut rng);
+            let b = random(k * n, &mut rng);
+            let mut scratch = Scratch::default();
+            let mut want = random(m * n, &mut rng);
+            let mut got = want.clone();
+            matmul(&mut want, true, View::row_major(&a, m, k), View::row_major(&b, k, n), &mut scratch);
+            let mut packed = PackedB::default();
+            packed.reset(k, n);
+            for p in 0..k.div_ceil(2) {
+                let hi = (2 * p + 1 < k).then(|| &b[(2 * p + 1) * n..(2 * p + 2) * n]);
+                packed.set_pair_row(p, &b[2 * p * n..(2 * p + 1) * n], hi);
+            }
+            matmul_packed(&mut got, true, View::row_major(&a, m, k), &packed, &mut scratch);
+            // Where AMX runs `matmul`, its sums come in another order.
+            #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+            let amx = amx::available();
+            #[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
+            let amx = false;
+            for (x, y) in got.iter().zip(&want) {
+                assert!(if amx { (x - y).abs() <= 1e-4 * (1.0 + y.abs()) } else { x == y }, "{m}x{k}x{n}: {x} vs {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn stride_two_phases_split_and_rejoin_every_line_width() {
+        for w in 1..=70usize {
+            let lines = 3;
+            let pw = w.div_ceil(2);
+            let src: Vec<f32> = (0..lines * w).map(|i| i as f32 + 0.5).collect();
+            let mut ph = vec![f32::NAN; lines * 2 * pw];
+            deinterleave_lines(&src, lines, w, &mut ph);
+            for l in 0..lines {
+                for x in 0..w {
+                    assert_eq!(ph[l * 2 * pw + x % 2 * pw + x / 2], src[l * w + x], "w {w} line {l} x {x}");
+                }
+            }
+            let mut back = vec![f32::NAN; lines * w];
+            interleave_lines(&ph, lines, w, &mut back);
+            assert_eq!(back, src, "w {w}");
+            let mut copied = vec![0.0; w];
+            copy_short(&src[1..=w], &mut copied);
+            assert_eq!(copied[..], src[1..=w], "w {w}");
+        }
     }
 }

@@ -16,6 +16,7 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 
 use crate::NnError;
+use crate::bf16::{self, Precision, View};
 
 /// The geometry shared by a convolution and its transpose (see the module doc).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -51,49 +52,137 @@ impl Grid {
         lo.min(hi)..hi
     }
 
-    /// Columns `[c k k, oh ow]` of the large image `img` (`c x h x w`); zero outside it.
-    fn im2col(&self, img: &[f32], cols: &mut [f32]) {
-        let (k, s, p) = (self.k, self.stride, self.pad as isize);
-        let n = self.cols();
-        for ch in 0..self.c {
-            let plane = &img[ch * self.h * self.w..(ch + 1) * self.h * self.w];
-            for ky in 0..k {
-                for kx in 0..k {
-                    let row = &mut cols[((ch * k + ky) * k + kx) * n..][..n];
-                    let inside = self.inside(kx);
-                    // the first column read: ox = inside.start, x = ox s + kx - p >= 0
-                    let x0 = (inside.start * s + kx) as isize - p;
-                    for oy in 0..self.oh {
-                        let y = (oy * s + ky) as isize - p;
-                        let out = &mut row[oy * self.ow..(oy + 1) * self.ow];
-                        if y < 0 || y >= self.h as isize || inside.is_empty() {
-                            out.fill(0.0);
-                            continue;
-                        }
-                        let line = &plane[y as usize * self.w..(y as usize + 1) * self.w];
-                        out[..inside.start].fill(0.0);
-                        out[inside.end..].fill(0.0);
-                        let out = &mut out[inside.clone()];
-                        let src = &line[x0 as usize..];
-                        if s == 1 {
-                            out.copy_from_slice(&src[..out.len()]);
-                        } else {
-                            for (o, v) in out.iter_mut().zip(src.iter().step_by(s)) {
-                                *o = *v;
-                            }
-                        }
-                    }
+    /// Values per line of a stride phase: `ceil(w / stride)`.
+    fn phase_len(&self) -> usize {
+        self.w.div_ceil(self.stride)
+    }
+
+    /// Splits every line of `img` (`c x h x w`) into its `stride` phases, the values at `x`
+    /// with `x mod stride = r` (phase `r`, in order), so that a kernel column's strided reads
+    /// become one contiguous copy: `ph[((ch h + y) stride + r) phase_len + q] = img[ch][y][q
+    /// stride + r]`. Each value is read once here instead of `k^2 / stride^2` times strided.
+    fn phases(&self, img: &[f32], ph: &mut Vec<f32>) {
+        let (s, w, pw) = (self.stride, self.w, self.phase_len());
+        grow(ph, self.c * self.h * s * pw);
+        if s == 2 {
+            bf16::deinterleave_lines(img, self.c * self.h, w, ph);
+            return;
+        }
+        for (line, out) in img[..self.c * self.h * w].chunks_exact(w).zip(ph.chunks_exact_mut(s * pw)) {
+            for (r, phase) in out.chunks_exact_mut(pw).enumerate() {
+                for (d, v) in phase.iter_mut().zip(line[r.min(w)..].iter().step_by(s)) {
+                    *d = *v;
                 }
             }
         }
     }
 
+    /// Writes the phases back into the lines of `img`: the inverse of [`Grid::phases`].
+    fn unphases(&self, ph: &[f32], img: &mut [f32]) {
+        let (s, w, pw) = (self.stride, self.w, self.phase_len());
+        if s == 2 {
+            bf16::interleave_lines(ph, self.c * self.h, w, img);
+            return;
+        }
+        for (line, src) in img[..self.c * self.h * w].chunks_exact_mut(w).zip(ph.chunks_exact(s * pw)) {
+            for (r, phase) in src.chunks_exact(pw).enumerate() {
+                for (d, v) in line[r.min(w)..].iter_mut().step_by(s).zip(phase) {
+                    *d = *v;
+                }
+            }
+        }
+    }
+
+    /// Where kernel column `kx` of channel `ch` reads, from its first inside kernel position
+    /// `first` on: `(offset, line stride)`, line `y`'s values at `offset + y stride` of `img`
+    /// (stride 1) or of its phases. Found once per row: the divisions stay out of the loops.
+    fn source(&self, ch: usize, kx: usize, first: usize) -> (usize, usize) {
+        let x0 = first * self.stride + kx - self.pad;
+        if self.stride == 1 {
+            (ch * self.h * self.w + x0, self.w)
+        } else {
+            let (r, q0, ls) = (x0 % self.stride, x0 / self.stride, self.stride * self.phase_len());
+            (ch * self.h * ls + r * self.phase_len() + q0, ls)
+        }
+    }
+
+    /// Where [`Grid::im2col_row`] reads `img` from: the image itself at stride 1, else its
+    /// phases, written into `ph`.
+    fn source_of<'a>(&self, img: &'a [f32], ph: &'a mut Vec<f32>) -> &'a [f32] {
+        if self.stride == 1 {
+            img
+        } else {
+            self.phases(img, ph);
+            ph
+        }
+    }
+
+    /// Row `r` (`(ch k + ky) k + kx`) of the columns, `oh ow` values, from `src` (see
+    /// [`Grid::source_of`]); zero outside the image.
+    fn im2col_row(&self, src: &[f32], r: usize, row: &mut [f32]) {
+        let (k, s, p) = (self.k, self.stride, self.pad as isize);
+        let (ch, ky, kx) = (r / (k * k), r / k % k, r % k);
+        let inside = self.inside(kx);
+        if inside.is_empty() {
+            row.fill(0.0);
+            return;
+        }
+        let (base, ls) = self.source(ch, kx, inside.start);
+        for oy in 0..self.oh {
+            let y = (oy * s + ky) as isize - p;
+            let out = &mut row[oy * self.ow..(oy + 1) * self.ow];
+            if y < 0 || y >= self.h as isize {
+                out.fill(0.0);
+                continue;
+            }
+            out[..inside.start].fill(0.0);
+            out[inside.end..].fill(0.0);
+            let at = base + y as usize * ls;
+            bf16::copy_short(&src[at..at + inside.len()], &mut out[inside.clone()]);
+        }
+    }
+
+    /// Columns `[c k k, oh ow]` of the large image `img` (`c x h x w`); zero outside it.
+    /// `ph` is scratch for the stride phases (unused at stride 1).
+    fn im2col(&self, img: &[f32], cols: &mut [f32], ph: &mut Vec<f32>) {
+        let n = self.cols();
+        let src = self.source_of(img, ph);
+        for (r, row) in cols[..self.rows() * n].chunks_exact_mut(n).enumerate() {
+            self.im2col_row(src, r, row);
+        }
+    }
+
+    /// The columns of `img` straight into bf16 pairs (`b`, `[c k k] x [oh ow]`): each pair of
+    /// rows goes through `two` (2 rows of f32, in L1) and is rounded at once.
+    fn im2col_packed(&self, img: &[f32], ph: &mut Vec<f32>, two: &mut Vec<f32>, b: &mut bf16::PackedB) {
+        let (rows, n) = (self.rows(), self.cols());
+        grow(two, 2 * n);
+        b.reset(rows, n);
+        let src = self.source_of(img, ph);
+        let (lo, hi) = two[..2 * n].split_at_mut(n);
+        for p in 0..rows.div_ceil(2) {
+            self.im2col_row(src, 2 * p, lo);
+            if 2 * p + 1 < rows {
+                self.im2col_row(src, 2 * p + 1, hi);
+                b.set_pair_row(p, lo, Some(hi));
+            } else {
+                b.set_pair_row(p, lo, None);
+            }
+        }
+    }
+
     /// Adds the columns `cols` (`[c k k, oh ow]`) into the large image `img` (`c x h x w`).
-    fn col2im(&self, cols: &[f32], img: &mut [f32]) {
+    /// At stride > 1 the sums run in the image's phases (`ph`, scratch), which start as the
+    /// image's values and take the columns in the same order as a direct scatter would, so
+    /// every pixel's sum is the same, bit for bit.
+    fn col2im(&self, cols: &[f32], img: &mut [f32], ph: &mut Vec<f32>) {
         let (k, s, p) = (self.k, self.stride, self.pad as isize);
         let n = self.cols();
+        if s > 1 {
+            self.phases(img, ph);
+        }
+        let dst: &mut [f32] = if s == 1 { img } else { ph };
         for ch in 0..self.c {
-            let plane = &mut img[ch * self.h * self.w..(ch + 1) * self.h * self.w];
             for ky in 0..k {
                 for kx in 0..k {
                     let row = &cols[((ch * k + ky) * k + kx) * n..][..n];
@@ -101,43 +190,79 @@ impl Grid {
                     if inside.is_empty() {
                         continue;
                     }
-                    let x0 = (inside.start * s + kx) as isize - p;
+                    let (base, ls) = self.source(ch, kx, inside.start);
                     for oy in 0..self.oh {
                         let y = (oy * s + ky) as isize - p;
                         if y < 0 || y >= self.h as isize {
                             continue;
                         }
-                        let line = &mut plane[y as usize * self.w..(y as usize + 1) * self.w];
                         let vals = &row[oy * self.ow..(oy + 1) * self.ow][inside.clone()];
-                        let dst = &mut line[x0 as usize..];
-                        if s == 1 {
-                            for (d, v) in dst.iter_mut().zip(vals) {
-                                *d += v;
-                            }
-                        } else {
-                            for (d, v) in dst.iter_mut().step_by(s).zip(vals) {
-                                *d += v;
-                            }
+                        let at = base + y as usize * ls;
+                        for (d, v) in dst[at..at + vals.len()].iter_mut().zip(vals) {
+                            *d += v;
                         }
                     }
                 }
             }
         }
+        if s > 1 {
+            self.unphases(ph, img);
+        }
     }
 }
 
-/// Scratch of the convolutions' passes: one image's columns. Reused across calls.
+fn grow(v: &mut Vec<f32>, len: usize) {
+    if v.len() < len {
+        v.resize(len, 0.0);
+    }
+}
+
+/// Scratch of the convolutions' passes: one image's columns and the bf16 products' packing.
+/// Reused across calls.
 #[derive(Clone, Debug, Default)]
 pub struct ConvScratch {
     cols: Vec<f32>,
+    /// The stride phases of one image (see `Grid::phases`).
+    phased: Vec<f32>,
+    packed: bf16::Scratch,
+    /// Two rows of columns and the columns as bf16 pairs (the bf16 forward pass).
+    two: Vec<f32>,
+    packed_cols: bf16::PackedB,
 }
 
 impl ConvScratch {
-    fn cols(&mut self, len: usize) -> &mut [f32] {
-        if self.cols.len() < len {
-            self.cols.resize(len, 0.0);
-        }
-        &mut self.cols[..len]
+    /// The columns (`len` values), the phases' scratch and the packing buffers, at once.
+    fn split(&mut self, len: usize) -> (&mut [f32], &mut Vec<f32>, &mut bf16::Scratch) {
+        grow(&mut self.cols, len);
+        (&mut self.cols[..len], &mut self.phased, &mut self.packed)
+    }
+}
+
+/// A row-major `rows x cols` matrix.
+fn rm(data: &[f32], rows: usize, cols: usize) -> View<'_> {
+    View::row_major(&data[..rows * cols], rows, cols)
+}
+
+/// `c = a b` (`accumulate`: `c += a b`), `c` row-major `a.rows x b.cols`: bf16 operands with
+/// f32 accumulation where `precision` asks for them and [`bf16::runs_in_bf16`] admits the
+/// shape, else faer's f32 product (the same calls, so the same bits, as before precision
+/// existed). `a` and `b` are row-major or the transpose of a row-major matrix.
+fn product(c: &mut [f32], accumulate: bool, a: View<'_>, b: View<'_>, precision: Precision, packed: &mut bf16::Scratch) {
+    if precision == Precision::Bf16 && bf16::runs_in_bf16(a.rows, a.cols, b.cols) {
+        bf16::matmul(c, accumulate, a, b, packed);
+        return;
+    }
+    let cm = MatMut::from_row_major_slice_mut(c, a.rows, b.cols);
+    let accum = if accumulate { Accum::Add } else { Accum::Replace };
+    matmul(cm, accum, mat(a), mat(b), 1.0f32, Par::Seq);
+}
+
+fn mat(v: View<'_>) -> MatRef<'_, f32> {
+    if v.cs == 1 {
+        MatRef::from_row_major_slice(v.data, v.rows, v.cols)
+    } else {
+        debug_assert_eq!(v.rs, 1, "a transposed row-major view");
+        MatRef::from_row_major_slice(v.data, v.cols, v.rows).transpose()
     }
 }
 
@@ -155,6 +280,7 @@ pub struct Conv2d {
     pub c_in: usize,
     pub c_out: usize,
     grid: Grid,
+    precision: Precision,
 }
 
 impl Conv2d {
@@ -164,7 +290,19 @@ impl Conv2d {
             return Err(NnError::Shape { sizes: vec![h, w, k, pad], why: "the kernel is larger than the padded image" });
         }
         let (oh, ow) = ((h + 2 * pad - k) / stride + 1, (w + 2 * pad - k) / stride + 1);
-        Ok(Self { c_in, c_out, grid: Grid { c: c_in, h, w, k, stride, pad, oh, ow } })
+        Ok(Self { c_in, c_out, grid: Grid { c: c_in, h, w, k, stride, pad, oh, ow }, precision: Precision::F32 })
+    }
+
+    /// The products' arithmetic (f32 by default): under [`Precision::Bf16`] every product of
+    /// the forward and backward passes whose shape [`bf16::runs_in_bf16`] admits takes bf16
+    /// operands with f32 accumulation; im2col, biases and sums stay f32.
+    pub fn with_precision(mut self, precision: Precision) -> Self {
+        self.precision = precision;
+        self
+    }
+
+    pub fn precision(&self) -> Precision {
+        self.precision
     }
 
     /// The output's `(channels, height, width)`.
@@ -195,16 +333,28 @@ impl Conv2d {
         assert_eq!(params.len(), self.n_params(), "parameter buffer length");
         assert!(x.len() >= n * self.in_len() && out.len() >= n * self.out_len(), "buffers shorter than n images");
         let (wt, bias) = params.split_at(self.c_out * rows);
-        let w = MatRef::from_row_major_slice(wt, self.c_out, rows);
+        let w = rm(wt, self.c_out, rows);
+        if self.precision == Precision::Bf16 && bf16::runs_in_bf16(self.c_out, rows, cols) {
+            // The columns go straight into bf16 pairs: no f32 matrix of columns.
+            for i in 0..n {
+                let ConvScratch { phased, packed, two, packed_cols, .. } = &mut *s;
+                g.im2col_packed(&x[i * self.in_len()..(i + 1) * self.in_len()], phased, two, packed_cols);
+                let o = &mut out[i * self.out_len()..(i + 1) * self.out_len()];
+                for (plane, b) in o.chunks_exact_mut(cols).zip(bias) {
+                    plane.fill(*b);
+                }
+                bf16::matmul_packed(o, true, w, packed_cols, packed);
+            }
+            return;
+        }
         for i in 0..n {
-            let c = s.cols(rows * cols);
-            g.im2col(&x[i * self.in_len()..(i + 1) * self.in_len()], c);
+            let (c, ph, packed) = s.split(rows * cols);
+            g.im2col(&x[i * self.in_len()..(i + 1) * self.in_len()], c, ph);
             let o = &mut out[i * self.out_len()..(i + 1) * self.out_len()];
             for (plane, b) in o.chunks_exact_mut(cols).zip(bias) {
                 plane.fill(*b);
             }
-            let om = MatMut::from_row_major_slice_mut(o, self.c_out, cols);
-            matmul(om, Accum::Add, w, MatRef::from_row_major_slice(c, rows, cols), 1.0f32, Par::Seq);
+            product(o, true, w, rm(c, rows, cols), self.precision, packed);
         }
     }
 
@@ -224,23 +374,15 @@ impl Conv2d {
     ) {
         let (g, rows, cols) = (&self.grid, self.grid.rows(), self.grid.cols());
         assert!(dy.len() >= n * self.out_len(), "dy shorter than n images");
-        let w = MatRef::from_row_major_slice(&params[..self.c_out * rows], self.c_out, rows);
+        let w = rm(params, self.c_out, rows);
         if let Some(grad) = grad {
             let (gw, gb) = grad.split_at_mut(self.c_out * rows);
             for i in 0..n {
                 let d = &dy[i * self.out_len()..(i + 1) * self.out_len()];
-                let c = s.cols(rows * cols);
-                g.im2col(&x[i * self.in_len()..(i + 1) * self.in_len()], c);
+                let (c, ph, packed) = s.split(rows * cols);
+                g.im2col(&x[i * self.in_len()..(i + 1) * self.in_len()], c, ph);
                 // dW += dy . cols'
-                let gm = MatMut::from_row_major_slice_mut(gw, self.c_out, rows);
-                matmul(
-                    gm,
-                    Accum::Add,
-                    MatRef::from_row_major_slice(d, self.c_out, cols),
-                    MatRef::from_row_major_slice(c, rows, cols).transpose(),
-                    1.0f32,
-                    Par::Seq,
-                );
+                product(gw, true, rm(d, self.c_out, cols), rm(c, rows, cols).t(), self.precision, packed);
                 for (b, plane) in gb.iter_mut().zip(d.chunks_exact(cols)) {
                     *b += plane.iter().sum::<f32>();
                 }
@@ -249,13 +391,12 @@ impl Conv2d {
         if let Some(dx) = dx {
             for i in 0..n {
                 let d = &dy[i * self.out_len()..(i + 1) * self.out_len()];
-                let c = s.cols(rows * cols);
+                let (c, ph, packed) = s.split(rows * cols);
                 // dcols = W' . dy, then back into the image.
-                let cm = MatMut::from_row_major_slice_mut(c, rows, cols);
-                matmul(cm, Accum::Replace, w.transpose(), MatRef::from_row_major_slice(d, self.c_out, cols), 1.0f32, Par::Seq);
+                product(c, false, w.t(), rm(d, self.c_out, cols), self.precision, packed);
                 let di = &mut dx[i * self.in_len()..(i + 1) * self.in_len()];
                 di.fill(0.0);
-                g.col2im(c, di);
+                g.col2im(c, di, ph);
             }
         }
     }
@@ -268,6 +409,7 @@ pub struct ConvTranspose2d {
     pub c_in: usize,
     pub c_out: usize,
     grid: Grid,
+    precision: Precision,
 }
 
 impl ConvTranspose2d {
@@ -289,7 +431,17 @@ impl ConvTranspose2d {
         let (Some(bh), Some(bw)) = (big(h), big(w)) else {
             return Err(NnError::Shape { sizes: vec![h, w, k, stride, pad], why: "the padding removes the whole output" });
         };
-        Ok(Self { c_in, c_out, grid: Grid { c: c_out, h: bh, w: bw, k, stride, pad, oh: h, ow: w } })
+        Ok(Self { c_in, c_out, grid: Grid { c: c_out, h: bh, w: bw, k, stride, pad, oh: h, ow: w }, precision: Precision::F32 })
+    }
+
+    /// The products' arithmetic, as [`Conv2d::with_precision`].
+    pub fn with_precision(mut self, precision: Precision) -> Self {
+        self.precision = precision;
+        self
+    }
+
+    pub fn precision(&self) -> Precision {
+        self.precision
     }
 
     /// The output's `(channels, height, width)`.
@@ -319,26 +471,19 @@ impl ConvTranspose2d {
         let (g, rows, cols) = (&self.grid, self.grid.rows(), self.grid.cols());
         assert_eq!(params.len(), self.n_params(), "parameter buffer length");
         assert!(x.len() >= n * self.in_len() && out.len() >= n * self.out_len(), "buffers shorter than n images");
-        let (wt, bias) = params.split_at(self.c_in * rows);
-        let w = MatRef::from_row_major_slice(wt, self.c_in, rows);
+        let w = rm(params, self.c_in, rows);
+        let bias = &params[self.c_in * rows..];
         let plane = g.h * g.w;
         for i in 0..n {
-            let c = s.cols(rows * cols);
+            let (c, ph, packed) = s.split(rows * cols);
             // cols = W' . x: every input pixel spread over its kernel's reach.
-            let cm = MatMut::from_row_major_slice_mut(c, rows, cols);
-            matmul(
-                cm,
-                Accum::Replace,
-                w.transpose(),
-                MatRef::from_row_major_slice(&x[i * self.in_len()..(i + 1) * self.in_len()], self.c_in, cols),
-                1.0f32,
-                Par::Seq,
-            );
+            let xi = rm(&x[i * self.in_len()..], self.c_in, cols);
+            product(c, false, w.t(), xi, self.precision, packed);
             let o = &mut out[i * self.out_len()..(i + 1) * self.out_len()];
             for (p, b) in o.chunks_exact_mut(plane).zip(bias) {
                 p.fill(*b);
             }
-            g.col2im(c, o);
+            g.col2im(c, o, ph);
         }
     }
 
@@ -356,35 +501,27 @@ impl ConvTranspose2d {
     ) {
         let (g, rows, cols) = (&self.grid, self.grid.rows(), self.grid.cols());
         assert!(dy.len() >= n * self.out_len(), "dy shorter than n images");
-        let w = MatRef::from_row_major_slice(&params[..self.c_in * rows], self.c_in, rows);
+        let w = rm(params, self.c_in, rows);
         let plane = g.h * g.w;
         let mut grad = grad;
         let mut dx = dx;
         for i in 0..n {
             let d = &dy[i * self.out_len()..(i + 1) * self.out_len()];
-            let c = s.cols(rows * cols);
-            g.im2col(d, c);
-            let xi = &x[i * self.in_len()..(i + 1) * self.in_len()];
+            let (c, ph, packed) = s.split(rows * cols);
+            g.im2col(d, c, ph);
+            let xi = rm(&x[i * self.in_len()..], self.c_in, cols);
             if let Some(grad) = grad.as_deref_mut() {
                 let (gw, gb) = grad.split_at_mut(self.c_in * rows);
                 // dW += x . im2col(dy)'
-                let gm = MatMut::from_row_major_slice_mut(gw, self.c_in, rows);
-                matmul(
-                    gm,
-                    Accum::Add,
-                    MatRef::from_row_major_slice(xi, self.c_in, cols),
-                    MatRef::from_row_major_slice(c, rows, cols).transpose(),
-                    1.0f32,
-                    Par::Seq,
-                );
+                product(gw, true, xi, rm(c, rows, cols).t(), self.precision, packed);
                 for (b, p) in gb.iter_mut().zip(d.chunks_exact(plane)) {
                     *b += p.iter().sum::<f32>();
                 }
             }
             if let Some(dx) = dx.as_deref_mut() {
                 // dx = W . im2col(dy)
-                let dm = MatMut::from_row_major_slice_mut(&mut dx[i * self.in_len()..(i + 1) * self.in_len()], self.c_in, cols);
-                matmul(dm, Accum::Replace, w, MatRef::from_row_major_slice(c, rows, cols), 1.0f32, Par::Seq);
+                let di = &mut dx[i * self.in_len()..(i + 1) * self.in_len()];
+                product(di, false, w, rm(c, rows, cols), self.precision, packed);
             }
         }
     }
@@ -435,10 +572,11 @@ mod tests {
                         let (mut want, mut got) = (vec![f32::NAN; len], vec![f32::NAN; len]);
                         let (mut want_back, mut got_back) = (vec![0.5; img.len()], vec![0.5; img.len()]);
                         naive(&g, &img, &mut want, &mut want_back);
-                        g.im2col(&img, &mut got);
+                        let mut ph = vec![f32::NAN; 3];
+                        g.im2col(&img, &mut got, &mut ph);
                         assert_eq!(got, want, "im2col {g:?}");
                         let grads: Vec<f32> = (0..len).map(|i| (i % 7) as f32 - 3.0).collect();
-                        g.col2im(&grads, &mut got_back);
+                        g.col2im(&grads, &mut got_back, &mut ph);
                         assert_eq!(got_back, want_back, "col2im {g:?}");
                         cases += 1;
                     }
