@@ -44,7 +44,9 @@ def transport_pairs(figures):
 
 # `coadapt bench conv` (bench/src/conv.rs) is paired with bench/peers/conv_bench.py by config:
 # ours against the same config (PyTorch with one thread, the matched figure) and, for context,
-# against `<config>-threadsN` (PyTorch's default threads) when the file has it. ms: lower is better.
+# against `<config>-threadsN` (PyTorch's default threads) when the file has it; ours in bf16
+# (`<config>-bf16`) against PyTorch under bf16 autocast (the same config) and PyTorch in f32
+# (`<config>`). ms: lower is better.
 CONV_BENCHES = ("conv_forward", "conv_forward_backward")
 
 
@@ -53,6 +55,8 @@ def conv_pairs(figures):
     for impl, bench, cfg, unit in figures:
         if impl == "coadapt" and bench in CONV_BENCHES:
             pairs.append((bench, cfg, cfg, unit, False))
+            if cfg.endswith("-bf16"):  # ours in bf16 against PyTorch in f32 too (issue 34's bar)
+                pairs.append((bench, cfg, cfg[: -len("-bf16")], unit, False))
             pairs += [(bench, cfg, pc, unit, False) for pi, pb, pc, pu in figures
                       if pi == "pytorch" and pb == bench and pu == unit and pc.startswith(cfg + "-threads")]
     return pairs

@@ -16,11 +16,20 @@ the garbage collector is off while timing. `--threads 1` (torch.set_num_threads(
 matched figure (ours is single-threaded); `--threads 0` keeps PyTorch's default and labels the
 config `-threadsN`.
 
+With --autocast every figure runs under `torch.autocast("cpu", dtype=torch.bfloat16)`
+(PyTorch's own mixed precision: the convolutions' products in bf16), labelled `-bf16` and
+"dtype": "bf16", the peer of `coadapt bench conv --precision bf16`.
+
   usage: conv_bench.py --shapes DUMP [--repetitions 100] [--warmup 10] [--batch 32,1]
-                       [--threads 1] [--only NAME]
+                       [--threads 1] [--only NAME] [--autocast]
          conv_bench.py --check DUMP   recompute every dumped layer (forward, weight, bias and
                                       input gradients) in float64 and in float32 and compare
-                                      to ours; exits 1 beyond 1e-4 relative
+                                      to ours; exits 1 beyond 1e-4 relative. A dump of bf16
+                                      products ("precision": "bf16", from `coadapt bench conv
+                                      --precision bf16 --dump`) is compared to float64 and to
+                                      PyTorch under bf16 autocast instead, and must be no
+                                      further from float64 than twice autocast's error (and
+                                      within 2^-6 relative)
 prints one JSON line per figure: {"bench": "conv_forward" | "conv_forward_backward",
 "config": ..., "value": median ms, "unit": "ms", "impl": "pytorch", "p10", "p90", "gflop_s", ...}
 """
@@ -63,26 +72,36 @@ def rel(ours, ref):
     return float(np.max(np.abs(ours - ref)) / max(np.max(np.abs(ref)), 1e-30))
 
 
+def grads(spec, dtype, autocast=False):
+    """Output, parameter gradient (weight then bias) and input gradient of one dumped layer."""
+    n = spec["n"]
+    c_out, oh, ow = spec["out_shape"]
+    f = layer_fn(spec)
+    w, b = split_params(spec, spec["params"], dtype)
+    x = torch.tensor(np.asarray(spec["x"], dtype=np.float32), dtype=dtype).reshape(n, spec["c_in"], spec["h"], spec["w"])
+    dy = torch.tensor(np.asarray(spec["dy"], dtype=np.float32), dtype=dtype).reshape(n, c_out, oh, ow)
+    for t in (x, w, b):
+        t.requires_grad_(True)
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=autocast):
+        out = f(x, w, b)
+    gx, gw, gb = torch.autograd.grad(out, (x, w, b), dy.to(out.dtype))
+    grad = torch.cat([gw.reshape(-1), gb.reshape(-1)])
+    return {"out": out.detach().float().numpy() if autocast else out.detach().numpy(),
+            "grad": grad.float().numpy() if autocast else grad.numpy(),
+            "dx": gx.float().numpy() if autocast else gx.numpy()}
+
+
 def check(path):
     d = json.load(open(path))
+    if any(spec.get("precision") == "bf16" for spec in d["layers"]):
+        return check_bf16(d)
     worst64, worst32 = 0.0, 0.0
     rows = []
     for spec in d["layers"]:
-        n = spec["n"]
-        c_out, oh, ow = spec["out_shape"]
-        f = layer_fn(spec)
         per = {}
         for dtype in (torch.float64, torch.float32):
-            w, b = split_params(spec, spec["params"], dtype)
-            x = torch.tensor(np.asarray(spec["x"], dtype=np.float32), dtype=dtype).reshape(n, spec["c_in"], spec["h"], spec["w"])
-            dy = torch.tensor(np.asarray(spec["dy"], dtype=np.float32), dtype=dtype).reshape(n, c_out, oh, ow)
-            for t in (x, w, b):
-                t.requires_grad_(True)
-            out = f(x, w, b)
-            gx, gw, gb = torch.autograd.grad(out, (x, w, b), dy)
-            grad = torch.cat([gw.reshape(-1), gb.reshape(-1)])
-            per[dtype] = {"out": rel(spec["out"], out.detach().numpy()), "grad": rel(spec["grad"], grad.numpy()),
-                          "dx": rel(spec["dx"], gx.numpy())}
+            ref = grads(spec, dtype)
+            per[dtype] = {k: rel(spec[k], ref[k]) for k in ("out", "grad", "dx")}
         worst64 = max(worst64, *per[torch.float64].values())
         worst32 = max(worst32, *per[torch.float32].values())
         rows.append({"layer": spec["config"], "vs_float64": per[torch.float64], "vs_float32": per[torch.float32]})
@@ -91,6 +110,27 @@ def check(path):
     ok = worst64 <= 1e-4 and worst32 <= 1e-4
     print(json.dumps({"check": "conv", "layers": len(rows), "max_rel_vs_torch_float64": worst64,
                       "max_rel_vs_torch_float32": worst32, "tolerance": 1e-4, "ok": ok}))
+    return 0 if ok else 1
+
+
+def check_bf16(d):
+    """Ours with bf16 products against float64, beside PyTorch's bf16 autocast against float64
+    (max-abs relative errors, as rel()): ours must be within twice autocast's error, and 2^-6."""
+    rows, ok, worst, worst_torch = [], True, 0.0, 0.0
+    for spec in d["layers"]:
+        ref = grads(spec, torch.float64)
+        auto = grads(spec, torch.float32, autocast=True)
+        ours = {k: rel(spec[k], ref[k]) for k in ("out", "grad", "dx")}
+        theirs = {k: rel(auto[k], ref[k]) for k in ("out", "grad", "dx")}
+        for k in ours:
+            ok = ok and ours[k] <= max(2 * theirs[k], 1e-3) and ours[k] <= 2 ** -6
+        worst, worst_torch = max(worst, *ours.values()), max(worst_torch, *theirs.values())
+        rows.append({"layer": spec["config"], "ours_bf16_vs_float64": ours, "torch_autocast_vs_float64": theirs})
+    for r in rows:
+        print(json.dumps(r), file=sys.stderr)
+    print(json.dumps({"check": "conv-bf16", "layers": len(rows), "max_rel_ours_vs_torch_float64": worst,
+                      "max_rel_torch_autocast_vs_float64": worst_torch,
+                      "tolerance": "ours <= max(2 x autocast's, 1e-3) and <= 2^-6, per layer and quantity", "ok": ok}))
     return 0 if ok else 1
 
 
@@ -113,12 +153,12 @@ def time_ms(reps, warmup, f):
     return sorted(ms)
 
 
-def line(bench, config, batch, ms, flops, threads):
+def line(bench, config, batch, ms, flops, threads, dtype="f32"):
     med = percentile(ms, 0.5)
     return json.dumps({"bench": bench, "config": config, "value": round(med, 4), "unit": "ms", "impl": "pytorch",
                        "p10": round(percentile(ms, 0.1), 4), "p90": round(percentile(ms, 0.9), 4),
                        "gflop_s": round(flops / (med * 1e-3) / 1e9, 4), "batch": batch, "repetitions": len(ms),
-                       "threads": threads, "dtype": "f32", "torch": torch.__version__,
+                       "threads": threads, "dtype": dtype, "torch": torch.__version__,
                        "mkldnn": torch.backends.mkldnn.is_available()})
 
 
@@ -132,6 +172,8 @@ def main():
     ap.add_argument("--threads", type=int, default=1, help="torch.set_num_threads; 0: PyTorch's default")
     ap.add_argument("--only")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--autocast", action="store_true",
+                    help="every figure under torch.autocast(cpu, bfloat16): bf16 products; configs end in -bf16")
     a = ap.parse_args()
     if a.check:
         sys.exit(check(a.check))
@@ -140,7 +182,8 @@ def main():
     if a.threads > 0:
         torch.set_num_threads(a.threads)
     threads = torch.get_num_threads()
-    suffix = "" if a.threads == 1 else f"-threads{threads}"
+    suffix = ("" if a.threads == 1 else f"-threads{threads}") + ("-bf16" if a.autocast else "")
+    dtype = "bf16" if a.autocast else "f32"
     d = json.load(open(a.shapes))
     layers = d["layers"]
     g = torch.Generator().manual_seed(a.seed)
@@ -173,15 +216,17 @@ def main():
                 return h
 
             def fwd():
-                with torch.no_grad():
+                with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=a.autocast):
                     forward()
 
             def fwd_bwd():
-                torch.autograd.grad(forward(), leaves, dy)
+                with torch.autocast("cpu", dtype=torch.bfloat16, enabled=a.autocast):
+                    out = forward()
+                torch.autograd.grad(out, leaves, dy.to(out.dtype))
 
             config = f"{name}-b{n}{suffix}"
-            print(line("conv_forward", config, n, time_ms(a.repetitions, a.warmup, fwd), 2.0 * macs, threads), flush=True)
-            print(line("conv_forward_backward", config, n, time_ms(a.repetitions, a.warmup, fwd_bwd), 6.0 * macs, threads),
+            print(line("conv_forward", config, n, time_ms(a.repetitions, a.warmup, fwd), 2.0 * macs, threads, dtype), flush=True)
+            print(line("conv_forward_backward", config, n, time_ms(a.repetitions, a.warmup, fwd_bwd), 6.0 * macs, threads, dtype),
                   flush=True)
 
 

@@ -42,72 +42,91 @@ impl Grid {
         self.oh * self.ow
     }
 
-    /// The kernel positions `ox` whose column `ox s + kx - pad` lies inside a line of width
-    /// `self.w`: a range, found once per `kx` so the inner loops need no bounds test.
-    fn inside(&self, kx: usize) -> std::ops::Range<usize> {
+    /// The kernel positions `o` (`0..n_out`) whose coordinate `o s + kk - pad` lies inside
+    /// `0..n` (a line of width `w` for `kx`, a column of height `h` for `ky`): a range, found
+    /// once per kernel offset so the inner loops need no bounds test.
+    fn inside(&self, kk: usize, n: usize, n_out: usize) -> std::ops::Range<usize> {
         let (s, p) = (self.stride, self.pad);
-        let lo = if kx >= p { 0 } else { (p - kx).div_ceil(s) };
-        // x = ox s + kx - p <= w - 1  <=>  ox <= (w - 1 + p - kx) / s
-        let hi = if self.w + p > kx { ((self.w - 1 + p - kx) / s + 1).min(self.ow) } else { 0 };
+        let lo = if kk >= p { 0 } else { (p - kk).div_ceil(s) };
+        // x = o s + kk - p <= n - 1  <=>  o <= (n - 1 + p - kk) / s
+        let hi = if n + p > kk { ((n - 1 + p - kk) / s + 1).min(n_out) } else { 0 };
         lo.min(hi)..hi
     }
 
-    /// Values per line of a stride phase: `ceil(w / stride)`.
-    fn phase_len(&self) -> usize {
-        self.w.div_ceil(self.stride)
+    /// Sides of a phase plane: `(ceil(h / stride), ceil(w / stride))`.
+    fn phase_sides(&self) -> (usize, usize) {
+        (self.h.div_ceil(self.stride), self.w.div_ceil(self.stride))
     }
 
-    /// Splits every line of `img` (`c x h x w`) into its `stride` phases, the values at `x`
-    /// with `x mod stride = r` (phase `r`, in order), so that a kernel column's strided reads
-    /// become one contiguous copy: `ph[((ch h + y) stride + r) phase_len + q] = img[ch][y][q
-    /// stride + r]`. Each value is read once here instead of `k^2 / stride^2` times strided.
+    /// Splits each channel of `img` (`c x h x w`) into its `stride^2` phase planes, plane
+    /// `(ry, rx)` holding the pixels at `(y, x)` with `y mod s = ry`, `x mod s = rx`:
+    /// `ph[(((ch s + ry) s + rx) ph_h + y / s) ph_w + x / s] = img[ch][y][x]`. A kernel offset
+    /// then reads one plane with unit steps (most rows of the columns are a single copy of a
+    /// plane), and each pixel is read once here instead of `k^2 / s^2` times strided.
     fn phases(&self, img: &[f32], ph: &mut Vec<f32>) {
-        let (s, w, pw) = (self.stride, self.w, self.phase_len());
-        grow(ph, self.c * self.h * s * pw);
+        let (s, w) = (self.stride, self.w);
+        let (ph_h, pw) = self.phase_sides();
+        grow(ph, self.c * s * s * ph_h * pw);
+        let plane = ph_h * pw;
+        // line l = ch h + y: its phase rx starts at plane (ch, y mod s, rx), row y / s.
+        let start = |l: usize, rx: usize| {
+            let (ch, y) = (l / self.h, l % self.h);
+            ((ch * s + y % s) * s + rx) * plane + y / s * pw
+        };
         if s == 2 {
-            bf16::deinterleave_lines(img, self.c * self.h, w, ph);
+            bf16::deinterleave_lines(img, self.c * self.h, w, ph, |l| (start(l, 0), start(l, 1)));
             return;
         }
-        for (line, out) in img[..self.c * self.h * w].chunks_exact(w).zip(ph.chunks_exact_mut(s * pw)) {
-            for (r, phase) in out.chunks_exact_mut(pw).enumerate() {
-                for (d, v) in phase.iter_mut().zip(line[r.min(w)..].iter().step_by(s)) {
-                    *d = *v;
-                }
+        for (l, line) in img[..self.c * self.h * w].chunks_exact(w).enumerate() {
+            for (x, v) in line.iter().enumerate() {
+                ph[start(l, x % s) + x / s] = *v;
             }
         }
     }
 
-    /// Writes the phases back into the lines of `img`: the inverse of [`Grid::phases`].
+    /// Writes the phase planes back into `img`: the inverse of [`Grid::phases`].
     fn unphases(&self, ph: &[f32], img: &mut [f32]) {
-        let (s, w, pw) = (self.stride, self.w, self.phase_len());
+        let (s, w) = (self.stride, self.w);
+        let (ph_h, pw) = self.phase_sides();
+        let plane = ph_h * pw;
+        let start = |l: usize, rx: usize| {
+            let (ch, y) = (l / self.h, l % self.h);
+            ((ch * s + y % s) * s + rx) * plane + y / s * pw
+        };
         if s == 2 {
-            bf16::interleave_lines(ph, self.c * self.h, w, img);
+            bf16::interleave_lines(ph, self.c * self.h, w, img, |l| (start(l, 0), start(l, 1)));
             return;
         }
-        for (line, src) in img[..self.c * self.h * w].chunks_exact_mut(w).zip(ph.chunks_exact(s * pw)) {
-            for (r, phase) in src.chunks_exact(pw).enumerate() {
-                for (d, v) in line[r.min(w)..].iter_mut().step_by(s).zip(phase) {
-                    *d = *v;
-                }
+        for (l, line) in img[..self.c * self.h * w].chunks_exact_mut(w).enumerate() {
+            for (x, v) in line.iter_mut().enumerate() {
+                *v = ph[start(l, x % s) + x / s];
             }
         }
     }
 
-    /// Where kernel column `kx` of channel `ch` reads, from its first inside kernel position
-    /// `first` on: `(offset, line stride)`, line `y`'s values at `offset + y stride` of `img`
-    /// (stride 1) or of its phases. Found once per row: the divisions stay out of the loops.
-    fn source(&self, ch: usize, kx: usize, first: usize) -> (usize, usize) {
-        let x0 = first * self.stride + kx - self.pad;
-        if self.stride == 1 {
-            (ch * self.h * self.w + x0, self.w)
-        } else {
-            let (r, q0, ls) = (x0 % self.stride, x0 / self.stride, self.stride * self.phase_len());
-            (ch * self.h * ls + r * self.phase_len() + q0, ls)
+    /// What kernel offset `(ch, ky, kx)` reads: the kernel positions inside the image (rows
+    /// `ys`, columns `xs`) and where the first of them is in `img` (stride 1) or its phase
+    /// planes; position `(oy, ox)` of the ranges is at `base + (oy - ys.start) ls + (ox -
+    /// xs.start)`. `None` when no position is inside. Found once per row of the columns: the
+    /// divisions stay out of the loops.
+    fn reach(&self, ch: usize, ky: usize, kx: usize) -> Option<Reach> {
+        let (s, p) = (self.stride, self.pad);
+        let (ys, xs) = (self.inside(ky, self.h, self.oh), self.inside(kx, self.w, self.ow));
+        if ys.is_empty() || xs.is_empty() {
+            return None;
         }
+        let (y0, x0) = (ys.start * s + ky - p, xs.start * s + kx - p);
+        let (base, ls) = if s == 1 {
+            ((ch * self.h + y0) * self.w + x0, self.w)
+        } else {
+            let (ph_h, pw) = self.phase_sides();
+            ((((ch * s + y0 % s) * s + x0 % s) * ph_h + y0 / s) * pw + x0 / s, pw)
+        };
+        Some(Reach { ys, xs, base, ls })
     }
 
     /// Where [`Grid::im2col_row`] reads `img` from: the image itself at stride 1, else its
-    /// phases, written into `ph`.
+    /// phase planes, written into `ph`.
     fn source_of<'a>(&self, img: &'a [f32], ph: &'a mut Vec<f32>) -> &'a [f32] {
         if self.stride == 1 {
             img
@@ -120,25 +139,33 @@ impl Grid {
     /// Row `r` (`(ch k + ky) k + kx`) of the columns, `oh ow` values, from `src` (see
     /// [`Grid::source_of`]); zero outside the image.
     fn im2col_row(&self, src: &[f32], r: usize, row: &mut [f32]) {
-        let (k, s, p) = (self.k, self.stride, self.pad as isize);
-        let (ch, ky, kx) = (r / (k * k), r / k % k, r % k);
-        let inside = self.inside(kx);
-        if inside.is_empty() {
+        let (k, ow) = (self.k, self.ow);
+        let Some(Reach { ys, xs, base, ls }) = self.reach(r / (k * k), r / k % k, r % k) else {
             row.fill(0.0);
             return;
-        }
-        let (base, ls) = self.source(ch, kx, inside.start);
-        for oy in 0..self.oh {
-            let y = (oy * s + ky) as isize - p;
-            let out = &mut row[oy * self.ow..(oy + 1) * self.ow];
-            if y < 0 || y >= self.h as isize {
-                out.fill(0.0);
-                continue;
+        };
+        let (first, last) = (ys.start * ow + xs.start, (ys.end - 1) * ow + xs.end);
+        row[..first].fill(0.0);
+        row[last..].fill(0.0);
+        if ls == ow {
+            // The plane's lines are as long as the rows: one copy, then zeros where a line's
+            // ends fell outside the image.
+            row[first..last].copy_from_slice(&src[base..base + last - first]);
+            if xs.len() < ow {
+                for oy in ys {
+                    let line = &mut row[oy * ow..(oy + 1) * ow];
+                    line[..xs.start].fill(0.0);
+                    line[xs.end..].fill(0.0);
+                }
             }
-            out[..inside.start].fill(0.0);
-            out[inside.end..].fill(0.0);
-            let at = base + y as usize * ls;
-            bf16::copy_short(&src[at..at + inside.len()], &mut out[inside.clone()]);
+            return;
+        }
+        for (i, oy) in ys.enumerate() {
+            let line = &mut row[oy * ow..(oy + 1) * ow];
+            line[..xs.start].fill(0.0);
+            line[xs.end..].fill(0.0);
+            let at = base + i * ls;
+            bf16::copy_short(&src[at..at + xs.len()], &mut line[xs.clone()]);
         }
     }
 
@@ -172,43 +199,40 @@ impl Grid {
     }
 
     /// Adds the columns `cols` (`[c k k, oh ow]`) into the large image `img` (`c x h x w`).
-    /// At stride > 1 the sums run in the image's phases (`ph`, scratch), which start as the
-    /// image's values and take the columns in the same order as a direct scatter would, so
-    /// every pixel's sum is the same, bit for bit.
+    /// At stride > 1 the sums run in the image's phase planes (`ph`, scratch), which start as
+    /// the image's values and take the columns in the same order as a direct scatter would,
+    /// so every pixel's sum is the same, bit for bit.
     fn col2im(&self, cols: &[f32], img: &mut [f32], ph: &mut Vec<f32>) {
-        let (k, s, p) = (self.k, self.stride, self.pad as isize);
-        let n = self.cols();
-        if s > 1 {
+        let (k, n, ow) = (self.k, self.cols(), self.ow);
+        if self.stride > 1 {
             self.phases(img, ph);
         }
-        let dst: &mut [f32] = if s == 1 { img } else { ph };
-        for ch in 0..self.c {
-            for ky in 0..k {
-                for kx in 0..k {
-                    let row = &cols[((ch * k + ky) * k + kx) * n..][..n];
-                    let inside = self.inside(kx);
-                    if inside.is_empty() {
-                        continue;
-                    }
-                    let (base, ls) = self.source(ch, kx, inside.start);
-                    for oy in 0..self.oh {
-                        let y = (oy * s + ky) as isize - p;
-                        if y < 0 || y >= self.h as isize {
-                            continue;
-                        }
-                        let vals = &row[oy * self.ow..(oy + 1) * self.ow][inside.clone()];
-                        let at = base + y as usize * ls;
-                        for (d, v) in dst[at..at + vals.len()].iter_mut().zip(vals) {
-                            *d += v;
-                        }
-                    }
+        let dst: &mut [f32] = if self.stride == 1 { img } else { ph };
+        for (r, row) in cols[..self.rows() * n].chunks_exact(n).enumerate() {
+            let Some(Reach { ys, xs, base, ls }) = self.reach(r / (k * k), r / k % k, r % k) else {
+                continue;
+            };
+            for (i, oy) in ys.enumerate() {
+                let vals = &row[oy * ow + xs.start..oy * ow + xs.end];
+                let at = base + i * ls;
+                for (d, v) in dst[at..at + vals.len()].iter_mut().zip(vals) {
+                    *d += v;
                 }
             }
         }
-        if s > 1 {
+        if self.stride > 1 {
             self.unphases(ph, img);
         }
     }
+}
+
+/// The kernel positions a kernel offset reaches inside the image, and where they are read
+/// (see [`Grid::reach`]).
+struct Reach {
+    ys: std::ops::Range<usize>,
+    xs: std::ops::Range<usize>,
+    base: usize,
+    ls: usize,
 }
 
 fn grow(v: &mut Vec<f32>, len: usize) {
