@@ -450,42 +450,43 @@ fn has_avx512f() -> bool {
     }
 }
 
-/// Each of the `lines` lines of `w` values in `src` split into its even values (written to
-/// `dst` from `place(l).0` on) and its odd values (from `place(l).1` on): a stride-2
+/// Line `l` of `lines` (`w` values from `src[l ss]`) split into its even values (written
+/// to `dst` from `e0 + l ds` on) and its odd values (from `o0 + l ds` on): a stride-2
 /// convolution's phases. AVX-512 shuffles where the CPU has them.
-pub(crate) fn deinterleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32], place: impl Fn(usize) -> (usize, usize)) {
+pub(crate) fn deinterleave_lines(src: &[f32], ss: usize, lines: usize, w: usize, dst: &mut [f32], place: (usize, usize, usize)) {
     #[cfg(target_arch = "x86_64")]
     if has_avx512f() {
         #[allow(unsafe_code)] // see the module avx512
         // SAFETY: the CPU has avx512f; the function asserts the lengths it relies on.
         unsafe {
-            avx512::deinterleave_lines(src, lines, w, dst, place)
+            avx512::deinterleave_lines(src, ss, lines, w, dst, place)
         };
         return;
     }
-    for (l, line) in src[..lines * w].chunks_exact(w).enumerate() {
-        let (e, o) = place(l);
-        for (x, v) in line.iter().enumerate() {
-            dst[if x % 2 == 0 { e } else { o } + x / 2] = *v;
+    let (e0, o0, ds) = place;
+    for l in 0..lines {
+        for (x, v) in src[l * ss..l * ss + w].iter().enumerate() {
+            dst[if x % 2 == 0 { e0 } else { o0 } + l * ds + x / 2] = *v;
         }
     }
 }
 
-/// The inverse of [`deinterleave_lines`].
-pub(crate) fn interleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32], place: impl Fn(usize) -> (usize, usize)) {
+/// The inverse of [`deinterleave_lines`]: line `l` (`w` values at `dst[l ds]`) from the even
+/// values at `src[e0 + l ss]` and the odd at `src[o0 + l ss]`.
+pub(crate) fn interleave_lines(src: &[f32], place: (usize, usize, usize), lines: usize, w: usize, dst: &mut [f32], ds: usize) {
     #[cfg(target_arch = "x86_64")]
     if has_avx512f() {
         #[allow(unsafe_code)] // see the module avx512
         // SAFETY: the CPU has avx512f; the function asserts the lengths it relies on.
         unsafe {
-            avx512::interleave_lines(src, lines, w, dst, place)
+            avx512::interleave_lines(src, place, lines, w, dst, ds)
         };
         return;
     }
-    for (l, line) in dst[..lines * w].chunks_exact_mut(w).enumerate() {
-        let (e, o) = place(l);
-        for (x, v) in line.iter_mut().enumerate() {
-            *v = src[if x % 2 == 0 { e } else { o } + x / 2];
+    let (e0, o0, ss) = place;
+    for l in 0..lines {
+        for (x, v) in dst[l * ds..l * ds + w].iter_mut().enumerate() {
+            *v = src[if x % 2 == 0 { e0 } else { o0 } + l * ss + x / 2];
         }
     }
 }
@@ -672,26 +673,35 @@ mod avx512 {
         }
     }
 
-    /// For each of the `lines` lines of `w` values in `src`: its even values to `dst` from
-    /// `place(l).0` on, its odd values from `place(l).1` on; the tails through masked loads.
+    /// Line `l` of `lines` (`w` values from `src[l ss]`): its even values to `dst` from
+    /// `e0 + l ds` on, its odd values from `o0 + l ds` on; the tails through masked loads.
     #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn deinterleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32], place: impl Fn(usize) -> (usize, usize)) {
-        assert!(src.len() >= lines * w, "the source is shorter than its lines");
+    pub(super) unsafe fn deinterleave_lines(
+        src: &[f32],
+        ss: usize,
+        lines: usize,
+        w: usize,
+        dst: &mut [f32],
+        (e0, o0, ds): (usize, usize, usize),
+    ) {
+        if lines == 0 || w == 0 {
+            return;
+        }
+        assert!((lines - 1) * ss + w <= src.len(), "the source is shorter than its lines");
+        assert!(e0.max(o0) + (lines - 1) * ds + w.div_ceil(2) <= dst.len(), "the lines are placed past the end");
         let ie = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
         let io = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
         for l in 0..lines {
-            let (e0, o0) = place(l);
-            assert!(e0 + w.div_ceil(2) <= dst.len() && o0 + w / 2 <= dst.len(), "line {l} placed past the end");
             let mut x = 0;
             while x < w {
                 let rest = w - x;
                 // SAFETY: the loads read values x .. x + min(rest, 32) of line l (masked past
                 // it); the stores write values x / 2 .. of the two halves, inside dst (asserted).
                 unsafe {
-                    let sp = src.as_ptr().add(l * w + x);
+                    let sp = src.as_ptr().add(l * ss + x);
                     let a = _mm512_maskz_loadu_ps(lanes(rest), sp);
                     let b = if rest > 16 { _mm512_maskz_loadu_ps(lanes(rest - 16), sp.add(16)) } else { _mm512_setzero_ps() };
-                    let (ep, op) = (dst.as_mut_ptr().add(e0 + x / 2), dst.as_mut_ptr().add(o0 + x / 2));
+                    let (ep, op) = (dst.as_mut_ptr().add(e0 + l * ds + x / 2), dst.as_mut_ptr().add(o0 + l * ds + x / 2));
                     store_first(ep, _mm512_permutex2var_ps(a, ie, b), rest.div_ceil(2).min(16));
                     store_first(op, _mm512_permutex2var_ps(a, io, b), (rest / 2).min(16));
                 }
@@ -700,24 +710,34 @@ mod avx512 {
         }
     }
 
-    /// The inverse of [`deinterleave_lines`].
+    /// The inverse of [`deinterleave_lines`]: line `l` (`w` values at `dst[l ds]`) from the
+    /// even values at `src[e0 + l ss]` and the odd at `src[o0 + l ss]`.
     #[target_feature(enable = "avx512f")]
-    pub(super) unsafe fn interleave_lines(src: &[f32], lines: usize, w: usize, dst: &mut [f32], place: impl Fn(usize) -> (usize, usize)) {
-        assert!(dst.len() >= lines * w, "the destination is shorter than its lines");
+    pub(super) unsafe fn interleave_lines(
+        src: &[f32],
+        (e0, o0, ss): (usize, usize, usize),
+        lines: usize,
+        w: usize,
+        dst: &mut [f32],
+        ds: usize,
+    ) {
+        if lines == 0 || w == 0 {
+            return;
+        }
+        assert!((lines - 1) * ds + w <= dst.len(), "the destination is shorter than its lines");
+        assert!(e0.max(o0) + (lines - 1) * ss + w.div_ceil(2) <= src.len(), "the lines are placed past the end");
         let lo = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
         let hi = _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
         for l in 0..lines {
-            let (e0, o0) = place(l);
-            assert!(e0 + w.div_ceil(2) <= src.len() && o0 + w / 2 <= src.len(), "line {l} placed past the end");
             let mut x = 0;
             while x < w {
                 let rest = w - x;
                 // SAFETY: the mirror of deinterleave_lines: masked reads inside the two halves
                 // (asserted), writes of values x .. x + min(rest, 32) of line l.
                 unsafe {
-                    let e = _mm512_maskz_loadu_ps(lanes(rest.div_ceil(2)), src.as_ptr().add(e0 + x / 2));
-                    let o = _mm512_maskz_loadu_ps(lanes(rest / 2), src.as_ptr().add(o0 + x / 2));
-                    let dp = dst.as_mut_ptr().add(l * w + x);
+                    let e = _mm512_maskz_loadu_ps(lanes(rest.div_ceil(2)), src.as_ptr().add(e0 + l * ss + x / 2));
+                    let o = _mm512_maskz_loadu_ps(lanes(rest / 2), src.as_ptr().add(o0 + l * ss + x / 2));
+                    let dp = dst.as_mut_ptr().add(l * ds + x);
                     store_first(dp, _mm512_permutex2var_ps(e, lo, o), rest.min(16));
                     if rest > 16 {
                         store_first(dp.add(16), _mm512_permutex2var_ps(e, hi, o), (rest - 16).min(16));
@@ -1119,15 +1139,15 @@ mod tests {
             let pw = w.div_ceil(2);
             let src: Vec<f32> = (0..lines * w).map(|i| i as f32 + 0.5).collect();
             let mut ph = vec![f32::NAN; lines * 2 * pw];
-            let place = |l: usize| (l * 2 * pw, l * 2 * pw + pw);
-            deinterleave_lines(&src, lines, w, &mut ph, place);
+            let place = (0, pw, 2 * pw);
+            deinterleave_lines(&src, w, lines, w, &mut ph, place);
             for l in 0..lines {
                 for x in 0..w {
                     assert_eq!(ph[l * 2 * pw + x % 2 * pw + x / 2], src[l * w + x], "w {w} line {l} x {x}");
                 }
             }
             let mut back = vec![f32::NAN; lines * w];
-            interleave_lines(&ph, lines, w, &mut back, place);
+            interleave_lines(&ph, place, lines, w, &mut back, w);
             assert_eq!(back, src, "w {w}");
             let mut copied = vec![0.0; w];
             copy_short(&src[1..=w], &mut copied);

@@ -58,58 +58,75 @@ impl Grid {
         (self.h.div_ceil(self.stride), self.w.div_ceil(self.stride))
     }
 
+    /// Values between one channel's data and the next's: in the image (stride 1) or its
+    /// phase planes.
+    fn channel_len(&self) -> usize {
+        if self.stride == 1 {
+            self.h * self.w
+        } else {
+            let (ph_h, pw) = self.phase_sides();
+            self.stride * self.stride * ph_h * pw
+        }
+    }
+
     /// Splits each channel of `img` (`c x h x w`) into its `stride^2` phase planes, plane
     /// `(ry, rx)` holding the pixels at `(y, x)` with `y mod s = ry`, `x mod s = rx`:
     /// `ph[(((ch s + ry) s + rx) ph_h + y / s) ph_w + x / s] = img[ch][y][x]`. A kernel offset
     /// then reads one plane with unit steps (most rows of the columns are a single copy of a
     /// plane), and each pixel is read once here instead of `k^2 / s^2` times strided.
     fn phases(&self, img: &[f32], ph: &mut Vec<f32>) {
-        let (s, w) = (self.stride, self.w);
+        let (s, h, w) = (self.stride, self.h, self.w);
         let (ph_h, pw) = self.phase_sides();
-        grow(ph, self.c * s * s * ph_h * pw);
         let plane = ph_h * pw;
-        // line l = ch h + y: its phase rx starts at plane (ch, y mod s, rx), row y / s.
-        let start = |l: usize, rx: usize| {
-            let (ch, y) = (l / self.h, l % self.h);
-            ((ch * s + y % s) * s + rx) * plane + y / s * pw
-        };
+        grow(ph, self.c * s * s * plane);
         if s == 2 {
-            bf16::deinterleave_lines(img, self.c * self.h, w, ph, |l| (start(l, 0), start(l, 1)));
+            // Per channel and row parity: every other line of the image, the rows of a plane.
+            for ch in 0..self.c {
+                for ry in 0..2.min(h) {
+                    let lines = (h - ry).div_ceil(2);
+                    let (e0, o0) = (((ch * 2 + ry) * 2) * plane, ((ch * 2 + ry) * 2 + 1) * plane);
+                    bf16::deinterleave_lines(&img[(ch * h + ry) * w..], 2 * w, lines, w, ph, (e0, o0, pw));
+                }
+            }
             return;
         }
-        for (l, line) in img[..self.c * self.h * w].chunks_exact(w).enumerate() {
+        for (l, line) in img[..self.c * h * w].chunks_exact(w).enumerate() {
+            let (ch, y) = (l / h, l % h);
             for (x, v) in line.iter().enumerate() {
-                ph[start(l, x % s) + x / s] = *v;
+                ph[(((ch * s + y % s) * s + x % s) * ph_h + y / s) * pw + x / s] = *v;
             }
         }
     }
 
     /// Writes the phase planes back into `img`: the inverse of [`Grid::phases`].
     fn unphases(&self, ph: &[f32], img: &mut [f32]) {
-        let (s, w) = (self.stride, self.w);
+        let (s, h, w) = (self.stride, self.h, self.w);
         let (ph_h, pw) = self.phase_sides();
         let plane = ph_h * pw;
-        let start = |l: usize, rx: usize| {
-            let (ch, y) = (l / self.h, l % self.h);
-            ((ch * s + y % s) * s + rx) * plane + y / s * pw
-        };
         if s == 2 {
-            bf16::interleave_lines(ph, self.c * self.h, w, img, |l| (start(l, 0), start(l, 1)));
+            for ch in 0..self.c {
+                for ry in 0..2.min(h) {
+                    let lines = (h - ry).div_ceil(2);
+                    let (e0, o0) = (((ch * 2 + ry) * 2) * plane, ((ch * 2 + ry) * 2 + 1) * plane);
+                    bf16::interleave_lines(ph, (e0, o0, pw), lines, w, &mut img[(ch * h + ry) * w..], 2 * w);
+                }
+            }
             return;
         }
-        for (l, line) in img[..self.c * self.h * w].chunks_exact_mut(w).enumerate() {
+        for (l, line) in img[..self.c * h * w].chunks_exact_mut(w).enumerate() {
+            let (ch, y) = (l / h, l % h);
             for (x, v) in line.iter_mut().enumerate() {
-                *v = ph[start(l, x % s) + x / s];
+                *v = ph[(((ch * s + y % s) * s + x % s) * ph_h + y / s) * pw + x / s];
             }
         }
     }
 
-    /// What kernel offset `(ch, ky, kx)` reads: the kernel positions inside the image (rows
-    /// `ys`, columns `xs`) and where the first of them is in `img` (stride 1) or its phase
-    /// planes; position `(oy, ox)` of the ranges is at `base + (oy - ys.start) ls + (ox -
-    /// xs.start)`. `None` when no position is inside. Found once per row of the columns: the
-    /// divisions stay out of the loops.
-    fn reach(&self, ch: usize, ky: usize, kx: usize) -> Option<Reach> {
+    /// What kernel offset `(ky, kx)` of channel 0 reads: the kernel positions inside the
+    /// image (rows `ys`, columns `xs`) and where the first of them is in `img` (stride 1) or
+    /// its phase planes; position `(oy, ox)` of the ranges is at `base + (oy - ys.start) ls +
+    /// (ox - xs.start)`, plus `ch` [`Grid::channel_len`] for channel `ch`. `None` when no
+    /// position is inside.
+    fn reach(&self, ky: usize, kx: usize) -> Option<Reach> {
         let (s, p) = (self.stride, self.pad);
         let (ys, xs) = (self.inside(ky, self.h, self.oh), self.inside(kx, self.w, self.ow));
         if ys.is_empty() || xs.is_empty() {
@@ -117,42 +134,46 @@ impl Grid {
         }
         let (y0, x0) = (ys.start * s + ky - p, xs.start * s + kx - p);
         let (base, ls) = if s == 1 {
-            ((ch * self.h + y0) * self.w + x0, self.w)
+            (y0 * self.w + x0, self.w)
         } else {
             let (ph_h, pw) = self.phase_sides();
-            ((((ch * s + y0 % s) * s + x0 % s) * ph_h + y0 / s) * pw + x0 / s, pw)
+            ((((y0 % s) * s + x0 % s) * ph_h + y0 / s) * pw + x0 / s, pw)
         };
         Some(Reach { ys, xs, base, ls })
     }
 
-    /// Where [`Grid::im2col_row`] reads `img` from: the image itself at stride 1, else its
-    /// phase planes, written into `ph`.
-    fn source_of<'a>(&self, img: &'a [f32], ph: &'a mut Vec<f32>) -> &'a [f32] {
-        if self.stride == 1 {
-            img
-        } else {
-            self.phases(img, ph);
-            ph
+    /// Prepares `g` for one image: the reach of every kernel offset (the divisions, once),
+    /// and at stride > 1 the image's phase planes.
+    fn prepare(&self, img: &[f32], g: &mut GridScratch) {
+        g.reach.clear();
+        for ky in 0..self.k {
+            for kx in 0..self.k {
+                g.reach.push(self.reach(ky, kx));
+            }
+        }
+        if self.stride > 1 {
+            self.phases(img, &mut g.planes);
         }
     }
 
-    /// Row `r` (`(ch k + ky) k + kx`) of the columns, `oh ow` values, from `src` (see
-    /// [`Grid::source_of`]); zero outside the image.
-    fn im2col_row(&self, src: &[f32], r: usize, row: &mut [f32]) {
-        let (k, ow) = (self.k, self.ow);
-        let Some(Reach { ys, xs, base, ls }) = self.reach(r / (k * k), r / k % k, r % k) else {
+    /// Row `(ch, kk)` (kernel offset `kk = ky k + kx`) of the columns, `oh ow` values, from
+    /// `src` (the image at stride 1, else its phase planes); zero outside the image.
+    fn im2col_row(&self, src: &[f32], reach: &Option<Reach>, ch: usize, row: &mut [f32]) {
+        let ow = self.ow;
+        let Some(Reach { ys, xs, base, ls }) = reach else {
             row.fill(0.0);
             return;
         };
+        let base = base + ch * self.channel_len();
         let (first, last) = (ys.start * ow + xs.start, (ys.end - 1) * ow + xs.end);
         row[..first].fill(0.0);
         row[last..].fill(0.0);
-        if ls == ow {
+        if *ls == ow {
             // The plane's lines are as long as the rows: one copy, then zeros where a line's
             // ends fell outside the image.
             row[first..last].copy_from_slice(&src[base..base + last - first]);
             if xs.len() < ow {
-                for oy in ys {
+                for oy in ys.clone() {
                     let line = &mut row[oy * ow..(oy + 1) * ow];
                     line[..xs.start].fill(0.0);
                     line[xs.end..].fill(0.0);
@@ -160,7 +181,7 @@ impl Grid {
             }
             return;
         }
-        for (i, oy) in ys.enumerate() {
+        for (i, oy) in ys.clone().enumerate() {
             let line = &mut row[oy * ow..(oy + 1) * ow];
             line[..xs.start].fill(0.0);
             line[xs.end..].fill(0.0);
@@ -170,27 +191,29 @@ impl Grid {
     }
 
     /// Columns `[c k k, oh ow]` of the large image `img` (`c x h x w`); zero outside it.
-    /// `ph` is scratch for the stride phases (unused at stride 1).
-    fn im2col(&self, img: &[f32], cols: &mut [f32], ph: &mut Vec<f32>) {
-        let n = self.cols();
-        let src = self.source_of(img, ph);
+    fn im2col(&self, img: &[f32], cols: &mut [f32], g: &mut GridScratch) {
+        let (n, kk) = (self.cols(), self.k * self.k);
+        self.prepare(img, g);
+        let src = if self.stride == 1 { img } else { &g.planes };
         for (r, row) in cols[..self.rows() * n].chunks_exact_mut(n).enumerate() {
-            self.im2col_row(src, r, row);
+            self.im2col_row(src, &g.reach[r % kk], r / kk, row);
         }
     }
 
     /// The columns of `img` straight into bf16 pairs (`b`, `[c k k] x [oh ow]`): each pair of
     /// rows goes through `two` (2 rows of f32, in L1) and is rounded at once.
-    fn im2col_packed(&self, img: &[f32], ph: &mut Vec<f32>, two: &mut Vec<f32>, b: &mut bf16::PackedB) {
-        let (rows, n) = (self.rows(), self.cols());
+    fn im2col_packed(&self, img: &[f32], g: &mut GridScratch, two: &mut Vec<f32>, b: &mut bf16::PackedB) {
+        let (rows, n, kk) = (self.rows(), self.cols(), self.k * self.k);
         grow(two, 2 * n);
         b.reset(rows, n);
-        let src = self.source_of(img, ph);
+        self.prepare(img, g);
+        let src = if self.stride == 1 { img } else { &g.planes };
         let (lo, hi) = two[..2 * n].split_at_mut(n);
         for p in 0..rows.div_ceil(2) {
-            self.im2col_row(src, 2 * p, lo);
-            if 2 * p + 1 < rows {
-                self.im2col_row(src, 2 * p + 1, hi);
+            let (r0, r1) = (2 * p, 2 * p + 1);
+            self.im2col_row(src, &g.reach[r0 % kk], r0 / kk, lo);
+            if r1 < rows {
+                self.im2col_row(src, &g.reach[r1 % kk], r1 / kk, hi);
                 b.set_pair_row(p, lo, Some(hi));
             } else {
                 b.set_pair_row(p, lo, None);
@@ -199,20 +222,20 @@ impl Grid {
     }
 
     /// Adds the columns `cols` (`[c k k, oh ow]`) into the large image `img` (`c x h x w`).
-    /// At stride > 1 the sums run in the image's phase planes (`ph`, scratch), which start as
-    /// the image's values and take the columns in the same order as a direct scatter would,
-    /// so every pixel's sum is the same, bit for bit.
-    fn col2im(&self, cols: &[f32], img: &mut [f32], ph: &mut Vec<f32>) {
-        let (k, n, ow) = (self.k, self.cols(), self.ow);
-        if self.stride > 1 {
-            self.phases(img, ph);
-        }
-        let dst: &mut [f32] = if self.stride == 1 { img } else { ph };
+    /// At stride > 1 the sums run in the image's phase planes, which start as the image's
+    /// values and take the columns in the same order as a direct scatter would, so every
+    /// pixel's sum is the same, bit for bit.
+    fn col2im(&self, cols: &[f32], img: &mut [f32], g: &mut GridScratch) {
+        let (n, ow, kk) = (self.cols(), self.ow, self.k * self.k);
+        self.prepare(img, g);
+        let GridScratch { planes, reach } = g;
+        let dst: &mut [f32] = if self.stride == 1 { img } else { planes };
         for (r, row) in cols[..self.rows() * n].chunks_exact(n).enumerate() {
-            let Some(Reach { ys, xs, base, ls }) = self.reach(r / (k * k), r / k % k, r % k) else {
+            let Some(Reach { ys, xs, base, ls }) = &reach[r % kk] else {
                 continue;
             };
-            for (i, oy) in ys.enumerate() {
+            let base = base + r / kk * self.channel_len();
+            for (i, oy) in ys.clone().enumerate() {
                 let vals = &row[oy * ow + xs.start..oy * ow + xs.end];
                 let at = base + i * ls;
                 for (d, v) in dst[at..at + vals.len()].iter_mut().zip(vals) {
@@ -221,18 +244,26 @@ impl Grid {
             }
         }
         if self.stride > 1 {
-            self.unphases(ph, img);
+            self.unphases(planes, img);
         }
     }
 }
 
 /// The kernel positions a kernel offset reaches inside the image, and where they are read
 /// (see [`Grid::reach`]).
+#[derive(Clone, Debug)]
 struct Reach {
     ys: std::ops::Range<usize>,
     xs: std::ops::Range<usize>,
     base: usize,
     ls: usize,
+}
+
+/// A [`Grid`]'s scratch for one image: its phase planes and the reach of each kernel offset.
+#[derive(Clone, Debug, Default)]
+struct GridScratch {
+    planes: Vec<f32>,
+    reach: Vec<Option<Reach>>,
 }
 
 fn grow(v: &mut Vec<f32>, len: usize) {
@@ -246,8 +277,8 @@ fn grow(v: &mut Vec<f32>, len: usize) {
 #[derive(Clone, Debug, Default)]
 pub struct ConvScratch {
     cols: Vec<f32>,
-    /// The stride phases of one image (see `Grid::phases`).
-    phased: Vec<f32>,
+    /// The stride phases of one image and the kernel offsets' reach.
+    grid: GridScratch,
     packed: bf16::Scratch,
     /// Two rows of columns and the columns as bf16 pairs (the bf16 forward pass).
     two: Vec<f32>,
@@ -256,9 +287,9 @@ pub struct ConvScratch {
 
 impl ConvScratch {
     /// The columns (`len` values), the phases' scratch and the packing buffers, at once.
-    fn split(&mut self, len: usize) -> (&mut [f32], &mut Vec<f32>, &mut bf16::Scratch) {
+    fn split(&mut self, len: usize) -> (&mut [f32], &mut GridScratch, &mut bf16::Scratch) {
         grow(&mut self.cols, len);
-        (&mut self.cols[..len], &mut self.phased, &mut self.packed)
+        (&mut self.cols[..len], &mut self.grid, &mut self.packed)
     }
 }
 
@@ -361,8 +392,8 @@ impl Conv2d {
         if self.precision == Precision::Bf16 && bf16::runs_in_bf16(self.c_out, rows, cols) {
             // The columns go straight into bf16 pairs: no f32 matrix of columns.
             for i in 0..n {
-                let ConvScratch { phased, packed, two, packed_cols, .. } = &mut *s;
-                g.im2col_packed(&x[i * self.in_len()..(i + 1) * self.in_len()], phased, two, packed_cols);
+                let ConvScratch { grid, packed, two, packed_cols, .. } = &mut *s;
+                g.im2col_packed(&x[i * self.in_len()..(i + 1) * self.in_len()], grid, two, packed_cols);
                 let o = &mut out[i * self.out_len()..(i + 1) * self.out_len()];
                 for (plane, b) in o.chunks_exact_mut(cols).zip(bias) {
                     plane.fill(*b);
@@ -596,7 +627,7 @@ mod tests {
                         let (mut want, mut got) = (vec![f32::NAN; len], vec![f32::NAN; len]);
                         let (mut want_back, mut got_back) = (vec![0.5; img.len()], vec![0.5; img.len()]);
                         naive(&g, &img, &mut want, &mut want_back);
-                        let mut ph = vec![f32::NAN; 3];
+                        let mut ph = super::GridScratch { planes: vec![f32::NAN; 3], reach: Vec::new() };
                         g.im2col(&img, &mut got, &mut ph);
                         assert_eq!(got, want, "im2col {g:?}");
                         let grads: Vec<f32> = (0..len).map(|i| (i % 7) as f32 - 3.0).collect();
