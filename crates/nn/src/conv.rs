@@ -143,15 +143,15 @@ impl Grid {
     }
 
     /// Prepares `g` for one image: the reach of every kernel offset (the divisions, once),
-    /// and at stride > 1 the image's phase planes.
-    fn prepare(&self, img: &[f32], g: &mut GridScratch) {
+    /// and at stride > 1 the phase planes of `img` when given.
+    fn prepare(&self, img: Option<&[f32]>, g: &mut GridScratch) {
         g.reach.clear();
         for ky in 0..self.k {
             for kx in 0..self.k {
                 g.reach.push(self.reach(ky, kx));
             }
         }
-        if self.stride > 1 {
+        if let (true, Some(img)) = (self.stride > 1, img) {
             self.phases(img, &mut g.planes);
         }
     }
@@ -193,7 +193,7 @@ impl Grid {
     /// Columns `[c k k, oh ow]` of the large image `img` (`c x h x w`); zero outside it.
     fn im2col(&self, img: &[f32], cols: &mut [f32], g: &mut GridScratch) {
         let (n, kk) = (self.cols(), self.k * self.k);
-        self.prepare(img, g);
+        self.prepare(Some(img), g);
         let src = if self.stride == 1 { img } else { &g.planes };
         for (r, row) in cols[..self.rows() * n].chunks_exact_mut(n).enumerate() {
             self.im2col_row(src, &g.reach[r % kk], r / kk, row);
@@ -206,7 +206,7 @@ impl Grid {
         let (rows, n, kk) = (self.rows(), self.cols(), self.k * self.k);
         grow(two, 2 * n);
         b.reset(rows, n);
-        self.prepare(img, g);
+        self.prepare(Some(img), g);
         let src = if self.stride == 1 { img } else { &g.planes };
         let (lo, hi) = two[..2 * n].split_at_mut(n);
         for p in 0..rows.div_ceil(2) {
@@ -225,9 +225,20 @@ impl Grid {
     /// At stride > 1 the sums run in the image's phase planes, which start as the image's
     /// values and take the columns in the same order as a direct scatter would, so every
     /// pixel's sum is the same, bit for bit.
-    fn col2im(&self, cols: &[f32], img: &mut [f32], g: &mut GridScratch) {
+    /// `fresh`: the image's values are ignored and it is written as the sum of the columns
+    /// alone (the same bits as zeroing it first, without reading it).
+    fn col2im(&self, cols: &[f32], img: &mut [f32], g: &mut GridScratch, fresh: bool) {
         let (n, ow, kk) = (self.cols(), self.ow, self.k * self.k);
-        self.prepare(img, g);
+        if fresh {
+            if self.stride == 1 {
+                img[..self.c * self.h * self.w].fill(0.0);
+            } else {
+                let (ph_h, pw) = self.phase_sides();
+                grow(&mut g.planes, self.c * self.stride * self.stride * ph_h * pw);
+                g.planes.fill(0.0);
+            }
+        }
+        self.prepare(if fresh { None } else { Some(img) }, g);
         let GridScratch { planes, reach } = g;
         let dst: &mut [f32] = if self.stride == 1 { img } else { planes };
         for (r, row) in cols[..self.rows() * n].chunks_exact(n).enumerate() {
@@ -283,6 +294,8 @@ pub struct ConvScratch {
     /// Two rows of columns and the columns as bf16 pairs (the bf16 forward pass).
     two: Vec<f32>,
     packed_cols: bf16::PackedB,
+    /// A weight gradient's transpose, accumulated over a batch (see `WeightGrad`).
+    gt: Vec<f32>,
 }
 
 impl ConvScratch {
@@ -432,16 +445,18 @@ impl Conv2d {
         let w = rm(params, self.c_out, rows);
         if let Some(grad) = grad {
             let (gw, gb) = grad.split_at_mut(self.c_out * rows);
+            let mut gt = WeightGrad::start(self.precision, self.c_out, rows, cols, &mut s.gt);
             for i in 0..n {
                 let d = &dy[i * self.out_len()..(i + 1) * self.out_len()];
                 let (c, ph, packed) = s.split(rows * cols);
                 g.im2col(&x[i * self.in_len()..(i + 1) * self.in_len()], c, ph);
                 // dW += dy . cols'
-                product(gw, true, rm(d, self.c_out, cols), rm(c, rows, cols).t(), self.precision, packed);
+                gt.add(gw, rm(d, self.c_out, cols), rm(c, rows, cols), self.precision, packed);
                 for (b, plane) in gb.iter_mut().zip(d.chunks_exact(cols)) {
                     *b += plane.iter().sum::<f32>();
                 }
             }
+            gt.finish(gw, &mut s.gt);
         }
         if let Some(dx) = dx {
             for i in 0..n {
@@ -450,8 +465,7 @@ impl Conv2d {
                 // dcols = W' . dy, then back into the image.
                 product(c, false, w.t(), rm(d, self.c_out, cols), self.precision, packed);
                 let di = &mut dx[i * self.in_len()..(i + 1) * self.in_len()];
-                di.fill(0.0);
-                g.col2im(c, di, ph);
+                g.col2im(c, di, ph, true);
             }
         }
     }
@@ -538,7 +552,7 @@ impl ConvTranspose2d {
             for (p, b) in o.chunks_exact_mut(plane).zip(bias) {
                 p.fill(*b);
             }
-            g.col2im(c, o, ph);
+            g.col2im(c, o, ph, false);
         }
     }
 
@@ -560,6 +574,7 @@ impl ConvTranspose2d {
         let plane = g.h * g.w;
         let mut grad = grad;
         let mut dx = dx;
+        let mut gt = WeightGrad::start(self.precision, self.c_in, rows, cols, &mut s.gt);
         for i in 0..n {
             let d = &dy[i * self.out_len()..(i + 1) * self.out_len()];
             let (c, ph, packed) = s.split(rows * cols);
@@ -568,7 +583,7 @@ impl ConvTranspose2d {
             if let Some(grad) = grad.as_deref_mut() {
                 let (gw, gb) = grad.split_at_mut(self.c_in * rows);
                 // dW += x . im2col(dy)'
-                product(gw, true, xi, rm(c, rows, cols).t(), self.precision, packed);
+                gt.add(gw, xi, rm(c, rows, cols), self.precision, packed);
                 for (b, p) in gb.iter_mut().zip(d.chunks_exact(plane)) {
                     *b += p.iter().sum::<f32>();
                 }
@@ -579,6 +594,52 @@ impl ConvTranspose2d {
                 product(di, false, w, rm(c, rows, cols), self.precision, packed);
             }
         }
+        if let Some(grad) = grad {
+            gt.finish(&mut grad[..self.c_in * rows], &mut s.gt);
+        }
+    }
+}
+
+/// A weight gradient `gw` (`m x rows`) accumulated as `gw += a . c'` image by image (`a`:
+/// `m x cols`, `c`: the image's columns, `rows x cols`). In f32, faer's product straight into
+/// `gw` (the bits of every archived run). In bf16 the transposed product `c . a'` accumulates
+/// into a `rows x m` buffer that is added into `gw` once per batch: packing `c'` for the
+/// kernel would transpose the whole columns matrix pair by pair for every image, packing `c`
+/// reads it as it lies.
+struct WeightGrad {
+    transposed: Option<(usize, usize)>,
+    buf: Vec<f32>,
+}
+
+impl WeightGrad {
+    /// Takes the buffer out of `keep` (given back by [`WeightGrad::finish`]).
+    fn start(precision: Precision, m: usize, rows: usize, cols: usize, keep: &mut Vec<f32>) -> Self {
+        let mut buf = std::mem::take(keep);
+        let transposed = (precision == Precision::Bf16 && bf16::runs_in_bf16(rows, cols, m)).then_some((m, rows));
+        if transposed.is_some() {
+            buf.clear();
+            buf.resize(rows * m, 0.0);
+        }
+        Self { transposed, buf }
+    }
+
+    fn add(&mut self, gw: &mut [f32], a: View<'_>, c: View<'_>, precision: Precision, packed: &mut bf16::Scratch) {
+        match self.transposed {
+            Some(_) => bf16::matmul(&mut self.buf, true, c, a.t(), packed),
+            None => product(gw, true, a, c.t(), precision, packed),
+        }
+    }
+
+    /// Adds what was accumulated into `gw` and gives the buffer back to `keep`.
+    fn finish(self, gw: &mut [f32], keep: &mut Vec<f32>) {
+        if let Some((m, rows)) = self.transposed {
+            for (r, line) in self.buf.chunks_exact(m).enumerate() {
+                for (i, v) in line.iter().enumerate() {
+                    gw[i * rows + r] += v;
+                }
+            }
+        }
+        *keep = self.buf;
     }
 }
 
@@ -631,7 +692,12 @@ mod tests {
                         g.im2col(&img, &mut got, &mut ph);
                         assert_eq!(got, want, "im2col {g:?}");
                         let grads: Vec<f32> = (0..len).map(|i| (i % 7) as f32 - 3.0).collect();
-                        g.col2im(&grads, &mut got_back, &mut ph);
+                        g.col2im(&grads, &mut got_back, &mut ph, false);
+                        let mut fresh = vec![f32::NAN; img.len()];
+                        g.col2im(&grads, &mut fresh, &mut ph, true);
+                        let from_zero: Vec<f32> = want_back.iter().map(|v| v - 0.5).collect();
+                        // the sums started at 0.5 above; from zero they are exact small integers
+                        assert_eq!(fresh, from_zero, "col2im into a fresh image {g:?}");
                         assert_eq!(got_back, want_back, "col2im {g:?}");
                         cases += 1;
                     }
