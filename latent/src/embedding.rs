@@ -17,7 +17,7 @@
 //! Parameters: the encoder's in one flat buffer (conv1, conv2, conv3, linear; each in PyTorch's
 //! layout), the decoder's in another (linear, deconv1, deconv2, deconv3).
 
-use coadapt_nn::{Activations, Conv2d, ConvScratch, ConvTranspose2d, Mlp, NnError};
+use coadapt_nn::{Activations, Conv2d, ConvScratch, ConvTranspose2d, Mlp, NnError, Precision};
 
 /// The embedding's shape and loss settings.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -145,6 +145,18 @@ impl Embedding {
             dec_at[i + 2] = dec_at[i + 1] + d.n_params();
         }
         Ok(Self { cfg, conv, fc, dfc, deconv, enc_at, dec_at })
+    }
+
+    /// The same networks with every product in `precision` (f32 by default; bf16: bf16
+    /// operands with f32 accumulation on CPUs with AVX-512 BF16 or AMX, f32 elsewhere).
+    /// Parameters and their layout do not change: an embedding trained in one precision loads
+    /// in the other.
+    pub fn with_precision(mut self, precision: Precision) -> Self {
+        self.conv = self.conv.map(|c| c.with_precision(precision));
+        self.deconv = self.deconv.map(|d| d.with_precision(precision));
+        self.fc = self.fc.with_precision(precision);
+        self.dfc = self.dfc.with_precision(precision);
+        self
     }
 
     pub fn encoder_params(&self) -> usize {

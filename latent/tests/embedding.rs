@@ -86,3 +86,25 @@ fn codes_are_unit_length_and_the_thesis_shape_builds() {
     }
     assert_eq!(e.decode(&dec, &z, 2, &mut w).len(), 2 * 3 * 64 * 64);
 }
+
+/// The thesis-shaped embedding with bf16 products (issue 34): the codes of the same frames stay
+/// within bf16's precision of the f32 codes (unit vectors: an absolute bound), and differ from
+/// them where the CPU runs bf16 products at all.
+#[test]
+fn bf16_products_encode_the_same_frames_to_nearly_the_same_codes() {
+    use coadapt_nn::Precision;
+    let e = Embedding::new(EmbeddingConfig::default()).unwrap();
+    let (mut enc, mut dec) = (vec![0.0; e.encoder_params()], vec![0.0; e.decoder_params()]);
+    e.init(&mut enc, &mut dec, &mut rand::rng());
+    let x: Vec<f32> = (0..4 * e.image_len()).map(|i| ((i % 97) as f32) / 97.0).collect();
+    let mut w = EmbeddingWork::default();
+    let z32 = e.encode(&enc, &x, 4, &mut w).to_vec();
+    let e16 = e.clone().with_precision(Precision::Bf16);
+    let z16 = e16.encode(&enc, &x, 4, &mut EmbeddingWork::default()).to_vec();
+    let worst = z32.iter().zip(&z16).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    eprintln!("bf16 codes against f32: largest difference {worst:.2e}");
+    assert!(worst < 2e-2, "codes differ by {worst}");
+    if coadapt_nn::bf16::bf16_available() {
+        assert!(worst > 0.0, "the bf16 products did not run");
+    }
+}

@@ -26,7 +26,7 @@ pub(crate) struct Fleet {
 
 /// One actor: its networks, sized from the config alone.
 fn latent_actor(cfg: &LatentConfig, act: usize, id: u64) -> Result<LatentActor, AppError> {
-    let emb = Embedding::new(cfg.embedding.shape).with_context(|| "embedding.shape")?;
+    let emb = Embedding::new(cfg.embedding.shape).with_context(|| "embedding.shape")?.with_precision(cfg.embedding.precision);
     LatentActor::new(cfg.agent.clone(), emb, cfg.camera.frames, act, cfg.seed.wrapping_mul(1_000_003).wrapping_add(id))
         .with_context(|| "building the actor's networks")
 }

@@ -16,6 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use coadapt_core::{Env, Pixels, ReplayBuffer, Transition};
 use coadapt_learner::config::DdpgConfig;
 use coadapt_learner::ddpg::Ddpg;
+use coadapt_nn::Precision;
 use serde::{Deserialize, Serialize};
 
 use crate::{Embedding, EmbeddingConfig, EmbeddingTrainer, FrameSet};
@@ -42,6 +43,10 @@ pub struct EmbeddingSettings {
     /// The networks' shapes and the contrastive margin (the thesis leaves them open: 3
     /// convolutions of 32 channels, 20-D codes, margin 1 on the unit sphere).
     pub shape: EmbeddingConfig,
+    /// The products of the embedding's training and of the actors' encoding: `f32`, or
+    /// `bf16` (bf16 operands, f32 accumulation; on CPUs with AVX-512 BF16 or AMX, f32
+    /// elsewhere; BENCHMARKS.md "Convolutions"). The parameters are f32 either way.
+    pub precision: Precision,
 }
 
 impl Default for EmbeddingSettings {
@@ -55,6 +60,7 @@ impl Default for EmbeddingSettings {
             lr: 1e-3,
             seed: 0,
             shape: EmbeddingConfig::default(),
+            precision: Precision::F32,
         }
     }
 }
@@ -178,7 +184,7 @@ pub fn build(
             t0.elapsed().as_secs_f64()
         );
     }
-    let emb = Embedding::new(settings.shape)?;
+    let emb = Embedding::new(settings.shape)?.with_precision(settings.precision);
     if emb.image_len() != px_len {
         return Err(AppError::Config(format!(
             "embedding.shape: {}x{} images of {} channels, but the camera gives {px_len} values",
@@ -229,7 +235,7 @@ pub fn load_or_build(
     if path.exists() {
         let (emb, enc, _) = crate::load_embedding(path)?;
         coadapt_log::logln!("embedding: loaded {}", path.display());
-        return Ok((emb, enc));
+        return Ok((emb.with_precision(settings.precision), enc));
     }
     coadapt_log::logln!(
         "embedding: {} does not exist; building it ({} collection episodes, {} training steps)",
