@@ -104,11 +104,7 @@ fn relu(v: &mut [f32]) {
 
 /// dL/d(pre-activation) from dL/d(post-ReLU output), where the output was `out`.
 fn relu_back(d: &mut [f32], out: &[f32]) {
-    for (g, &o) in d.iter_mut().zip(out) {
-        if o <= 0.0 {
-            *g = 0.0;
-        }
-    }
+    coadapt_nn::bf16::relu_backward(d, out);
 }
 
 impl Embedding {

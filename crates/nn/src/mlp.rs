@@ -276,11 +276,7 @@ impl Mlp {
             let din = &mut below[i - 1][..n * l.n_in];
             input_grad(params, &l, &here[0][..n * l.n_out], n, din, self.precision, &mut act.packed);
             // ReLU: the gradient passes where the layer's output was positive.
-            for (d, &h) in din.iter_mut().zip(input) {
-                if h <= 0.0 {
-                    *d = 0.0;
-                }
-            }
+            bf16::relu_backward(din, input);
         }
         if let Some(dx) = dx {
             let l = self.layers[0];
