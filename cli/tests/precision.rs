@@ -2,7 +2,7 @@
 //! learner.sac.precision and records it in config.toml; the embedded reference protocol asks
 //! for bf16; a bad value is refused by name. On a CPU with the
 //! bf16 kernel the two precisions give different episodes (the products really changed); on
-//! one without it bf16 means f32 products, bit for bit.
+//! one without it bf16 means f32 products, bit for bit. The summary names the kernel.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
@@ -40,6 +40,13 @@ fn precision_is_chosen_by_flag_and_recorded() {
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         assert_eq!(precision_of(&out), p);
+        // The summary (stdout's JSON line) names the kernel the bf16 products ran on (absent
+        // in f32).
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        let line = stdout.lines().rev().find(|l| l.starts_with('{')).expect("the summary line on stdout");
+        let summary: serde_json::Value = serde_json::from_str(line).unwrap();
+        let want = (p == "bf16").then(coadapt_nn::bf16::bf16_kernel);
+        assert_eq!(summary.get("products").and_then(|v| v.as_str()), want, "{summary}");
         let text = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
         // Every column but the wall time (the 8th).
         episodes.push(

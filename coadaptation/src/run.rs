@@ -232,6 +232,10 @@ pub fn finish(cfg: &RunConfig, dir: &Path, outcome: &mut coadapt::RunOutcome, sh
     if !cfg.init_population.is_off() {
         summary["init_population"] = serde_json::json!(cfg.init_population);
     }
+    // Which kernel the bf16 products ran on here (timings and bits depend on it).
+    if cfg.learner.sac.precision == coadapt_nn::Precision::Bf16 {
+        summary["products"] = serde_json::json!(coadapt_nn::bf16::bf16_kernel());
+    }
     print_stdout_line(&summary.to_string());
     Ok(())
 }

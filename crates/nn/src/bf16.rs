@@ -38,6 +38,20 @@ pub fn bf16_available() -> bool {
     }
 }
 
+/// What [`Precision::Bf16`] products run on, on this CPU: `"amx+avx512-bf16"` (AMX tiles for
+/// the products that fill them, AVX-512 BF16 for the rest), `"avx512-bf16"`, or `"f32"`
+/// (neither: f32 products, the same bits as [`Precision::F32`]). Run summaries record it.
+pub fn bf16_kernel() -> &'static str {
+    if !bf16_available() {
+        return "f32";
+    }
+    #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+    if amx::available() {
+        return "amx+avx512-bf16";
+    }
+    "avx512-bf16"
+}
+
 /// Whether an `m x k` by `k x n` product runs in bf16 under [`Precision::Bf16`]: on AMX tiles
 /// when the CPU has them and the product fills at least one (16 x 32 x 16); with AVX-512 BF16
 /// alone, always (its `vdpbf16ps` doubles the f32 rate on the AMD cores issue 34 measured; on
