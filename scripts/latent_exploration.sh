@@ -3,7 +3,7 @@
 # 6.2) make SAC more sample-efficient on bodies the action space never saw?
 #
 #   usage: [BIN=coadapt] scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA]
-#                                                      [-u UPDATES] SRC_RUN NAME
+#                                                      [-u UPDATES] [-p f32|bf16] SRC_RUN NAME
 #
 # SRC_RUN: a finished co-adaptation (the action space learns from its population replay, e.g.
 # runs/campaign/as-hc-50-seed1). Steps, each skipped when its output is already there, so the
@@ -14,17 +14,20 @@
 # 3. per design and seed (1..SEEDS, 3): `coadapt train --algo sac` on that body for STEPS steps
 #    (30000) twice, exploring through the action space (`--latent-exploration`, beta BETA, 0.5)
 #    and with SAC's own Gaussian, into runs/latent-exploration/NAME/{latent,sac}-d<k>-seed<s>;
+#    both arms with the products of -p (bf16 by default: about 1.6-1.9x the f32 update rate
+#    on a CPU with AVX-512 BF16, f32 products elsewhere; BENCHMARKS.md "Mixed precision");
 # 4. each finished pair's small files (summary.json, config.toml, episodes.csv) copied to
 #    docs/campaign/results/latent-exploration/NAME/ to be committed, with designs.json.
 # Then `python3 scripts/latent_exploration_report.py docs/campaign/results/latent-exploration/NAME`
 # prints episodes to a return, paired by design and seed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-designs=3 seeds=3 steps=30000 beta=0.5 updates=20000
-while getopts "n:s:t:b:u:" o; do
+designs=3 seeds=3 steps=30000 beta=0.5 updates=20000 precision=bf16
+while getopts "n:s:t:b:u:p:" o; do
   case $o in
     n) designs=$OPTARG ;; s) seeds=$OPTARG ;; t) steps=$OPTARG ;; b) beta=$OPTARG ;; u) updates=$OPTARG ;;
-    *) echo "usage: scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA] [-u UPDATES] SRC_RUN NAME" >&2; exit 2 ;;
+    p) precision=$OPTARG ;;
+    *) echo "usage: scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA] [-u UPDATES] [-p f32|bf16] SRC_RUN NAME" >&2; exit 2 ;;
   esac
 done
 shift $((OPTIND - 1))
@@ -71,7 +74,7 @@ for k in $(seq 1 "$designs"); do
       rm -rf "$dir"
       echo "latent_exploration: $arm, design $k ($design), seed $s ($(date -u +%H:%M:%S))" >&2
       RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1} "$bin" train --env "$env" --algo sac --design "$design" --steps "$steps" \
-        --seed "$s" --quiet --out "$dir" "${flags[@]}" > "$dir.summary" 2>> "$out/log.txt"
+        --seed "$s" --precision "$precision" --quiet --out "$dir" "${flags[@]}" > "$dir.summary" 2>> "$out/log.txt"
       mkdir -p "$archive/$arm-d$k-seed$s"
       mv "$dir.summary" "$dir/summary.json"
       cp "$dir"/{summary.json,config.toml,episodes.csv} "$archive/$arm-d$k-seed$s/"
