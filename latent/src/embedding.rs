@@ -104,7 +104,7 @@ fn relu(v: &mut [f32]) {
 
 /// dL/d(pre-activation) from dL/d(post-ReLU output), where the output was `out`.
 fn relu_back(d: &mut [f32], out: &[f32]) {
-    coadapt_nn::bf16::relu_backward(d, out);
+    coadapt_nn::simd::relu_backward(d, out);
 }
 
 impl Embedding {

@@ -1,16 +1,19 @@
 //! Multilayer perceptrons on faer for the coadapt learner and design optimiser.
 //!
 //! # Layout
-//! - [`bf16`]: products with bfloat16 operands and f32 accumulation (AVX-512 BF16, detected at run
-//!   time), the kernel of the mixed-precision path.
+//! - [`bf16`]: products with bfloat16 operands and f32 accumulation (AVX-512 BF16 or AMX,
+//!   detected at run time), the kernel of the mixed-precision path.
+//! - [`simd`]: hand-written SIMD for the convolutions' stride phases and copies and ReLU's
+//!   backward pass (where the compiler's code used masked stores, slow on AMD's Zen 4).
 //! - [`mlp`]: the network shape ([`Mlp`]), allocation-free forward and backward passes over
 //!   row-major batches into preallocated [`Activations`].
 //! - [`optim`]: [`Adam`] (and [`MomentsMismatch`], restoring it from another size), element-wise
 //!   gradient clamping and Polyak averaging on flat buffers.
 //! - [`squashed`]: the tanh-squashed Gaussian of the SAC policy (sample, log-probability, backward).
 //! - [`io`]: save and load networks as safetensors, in PyTorch's `nn.Sequential` naming.
-//! - [`conv`]: [`Conv2d`] and [`ConvTranspose2d`] over NCHW batches (im2col and faer GEMM, in
-//!   PyTorch's parameter layouts), for encoders and decoders of images.
+//! - [`conv`]: [`Conv2d`] and [`ConvTranspose2d`] over NCHW batches (im2col through stride
+//!   phases, then faer's f32 or our bf16 products; PyTorch's parameter layouts), for encoders
+//!   and decoders of images.
 //!
 //! Every network's parameters live in one contiguous `f32` buffer laid out exactly as PyTorch's
 //! `parameters_to_vector(nn.Sequential(Linear, ReLU, ..., Linear))`: per layer the weight
@@ -22,6 +25,7 @@ pub mod conv;
 pub mod io;
 pub mod mlp;
 pub mod optim;
+pub mod simd;
 pub mod squashed;
 
 pub use bf16::Precision;

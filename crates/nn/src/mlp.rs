@@ -11,6 +11,7 @@ use rand::Rng;
 
 use crate::NnError;
 use crate::bf16::{self, Precision, View};
+use crate::simd;
 
 /// rlkit's `b_init_value`: every hidden bias starts at this constant.
 pub const RLKIT_HIDDEN_BIAS: f32 = 0.1;
@@ -276,7 +277,7 @@ impl Mlp {
             let din = &mut below[i - 1][..n * l.n_in];
             input_grad(params, &l, &here[0][..n * l.n_out], n, din, self.precision, &mut act.packed);
             // ReLU: the gradient passes where the layer's output was positive.
-            bf16::relu_backward(din, input);
+            simd::relu_backward(din, input);
         }
         if let Some(dx) = dx {
             let l = self.layers[0];
