@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Runs a queue of co-adaptation experiments (issue 10's campaign), N at a time, each
-# single-threaded (RAYON_NUM_THREADS=1), in-process (the same results as a fleet of processes,
-# tested byte for byte; fewer processes competing for two cores).
+# single-threaded (RAYON_NUM_THREADS=1; THREADS=2 for a lone lane on two cores, such as the
+# reference protocol: the same rows, tested by learner/tests/two_cores.rs), in-process (the same
+# results as a fleet of processes, tested byte for byte; fewer processes competing for two cores).
 #
-#   usage: [BIN=coadapt-binary] scripts/campaign.sh [-j N] QUEUE_FILE
+#   usage: [BIN=coadapt-binary] [THREADS=1] scripts/campaign.sh [-j N] QUEUE_FILE
 #
 # QUEUE_FILE: one experiment per line, `NAME CONFIG SEED [coadapt run flags...]`; `#` starts a
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
@@ -30,6 +31,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=2
+threads=${THREADS:-1}
 if [ "${1:-}" = "-j" ]; then jobs=$2; shift 2; fi
 queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE}
 [ -f "$queue" ] || { echo "campaign: no queue file $queue" >&2; exit 2; }
@@ -87,7 +89,7 @@ retrain_one() {
   for k in 1 2; do
     if [ -s "$dir/train-seed$k/summary.json" ]; then continue; fi
     rm -rf "$dir/train-seed$k"
-    if RAYON_NUM_THREADS=1 "$bin" train --env "$env" --algo sac --design "$design" "${steps[@]}" --seed "$k" --quiet \
+    if RAYON_NUM_THREADS=$threads "$bin" train --env "$env" --algo sac --design "$design" "${steps[@]}" --seed "$k" --quiet \
         --out "$dir/train-seed$k" "$@" > "$dir/train-seed$k.summary" 2>> "$dir.log"; then
       mv "$dir/train-seed$k.summary" "$dir/train-seed$k/summary.json"
     else
@@ -161,7 +163,7 @@ run_one() {
   if [ -n "$resume" ]; then
     echo "campaign: resume $dir ($(date -u +%H:%M:%S))"
     local t0=$SECONDS
-    if RAYON_NUM_THREADS=1 "$bin" run --resume "$dir" --transport in-process > "$dir.summary.tmp" 2>> "$dir.log"; then
+    if RAYON_NUM_THREADS=$threads "$bin" run --resume "$dir" --transport in-process > "$dir.summary.tmp" 2>> "$dir.log"; then
       archive_run "$dir" "$archive" "$t0"
     else
       echo "campaign: FAILED $dir after $((SECONDS - t0)) s (see $dir.log)" >&2
@@ -181,7 +183,7 @@ run_one() {
   fi
   echo "campaign: start $dir ($(date -u +%H:%M:%S))"
   local t0=$SECONDS
-  if RAYON_NUM_THREADS=1 "$bin" run --config "$config" --seed "$seed" --out "$dir" --transport in-process "$@" \
+  if RAYON_NUM_THREADS=$threads "$bin" run --config "$config" --seed "$seed" --out "$dir" --transport in-process "$@" \
       > "$dir.summary.tmp" 2> "$dir.log"; then
     archive_run "$dir" "$archive" "$t0"
   else
