@@ -357,6 +357,31 @@ fn a_run_stopped_with_ctrl_c_mid_design_resumes_to_the_rows_of_a_run_never_stopp
     assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
 }
 
+/// Ctrl-C while the learner trains (long updates, short episodes: the actor sits idle): the
+/// in-process actor used to leave on the signal and close its channel under the learner's next
+/// request, so the run failed with "the other side of the channel has closed" instead of
+/// stopping. Now the roles stop when the learner is done: the run stops cleanly, interrupted.
+#[test]
+fn ctrl_c_while_the_learner_trains_stops_the_run_cleanly() {
+    let dir = tmpdir("ctrl-c-training");
+    let mut c = config();
+    c.learner.individual_updates = 4000;
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let stderr = dir.join("stderr.txt");
+    let run = coadapt(&["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"], &stderr);
+    wait_until("the first episode row", &stderr, || rows(&out.join("episodes.csv")) >= 1);
+    // The next episode takes milliseconds; its 4,000 updates far longer.
+    std::thread::sleep(Duration::from_millis(150));
+    assert!(Command::new("kill").args(["-INT", &run.id().to_string()]).status().unwrap().success());
+    let o = run.wait_with_output().unwrap();
+    let log = std::fs::read_to_string(&stderr).unwrap_or_default();
+    assert!(o.status.success(), "{log}");
+    assert!(!log.contains("channel has closed"), "{log}");
+    let summary: serde_json::Value = serde_json::from_str(String::from_utf8_lossy(&o.stdout).lines().last().unwrap()).unwrap();
+    assert_eq!(summary["interrupted"], true, "{summary}");
+}
+
 /// Over shared memory there is no run id: instead no actor or optimiser outlives the learner
 /// start it served (their channels close when it dies), so nothing of a dead start (an
 /// assignment id, an acknowledgement) can reach the next one. A learner killed with SIGKILL

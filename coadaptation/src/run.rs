@@ -27,6 +27,12 @@ pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bo
     let spec = cfg.make_env()?.spec().clone();
     check(cfg, &spec)?;
     let (mut learner_links, actor_links, mut optimizer_links) = in_process::fleet(cfg.actors);
+    // The actors and the optimiser stop when the learner is done, not on Ctrl-C themselves: an
+    // actor that left on the signal while the learner was still training closed its channel
+    // under the learner's next request ("the other side of the channel has closed") instead of
+    // the learner stopping at its next step with a snapshot.
+    let roles_stop = AtomicBool::new(false);
+    let roles_stop = &roles_stop;
     std::thread::scope(|s| -> crate::Result<coadapt::RunOutcome> {
         let spec = &spec;
         // A role that fails stops the run: in one process nothing would restart it.
@@ -39,12 +45,13 @@ pub fn run_config(cfg: &RunConfig, dir: &Path, shutdown: &AtomicBool, resume: bo
         let actors: Vec<_> = actor_links
             .into_iter()
             .enumerate()
-            .map(|(i, mut links)| s.spawn(move || stop_on_error(roles::actor(cfg, spec, i as u64, &mut links, shutdown))))
+            .map(|(i, mut links)| s.spawn(move || stop_on_error(roles::actor(cfg, spec, i as u64, &mut links, roles_stop))))
             .collect();
         let state = crate::resume::optimizer_state_dir(dir);
-        let opt = s.spawn(move || stop_on_error(roles::optimizer(cfg, spec, &mut optimizer_links, shutdown, Some(&state))));
+        let opt = s.spawn(move || stop_on_error(roles::optimizer(cfg, spec, &mut optimizer_links, roles_stop, Some(&state))));
         let result = roles::learner(cfg, spec, dir, &mut learner_links, shutdown, resume);
         // Closing the learner's channels lets the other roles finish.
+        roles_stop.store(true, Ordering::Relaxed);
         drop(learner_links);
         // The first role failure keeps its kind: a bad setting read by the optimiser exits 78.
         let mut first = None;
