@@ -93,6 +93,9 @@ cleanup() {
     podman kube down "$work/others.yaml" >/dev/null 2>&1 || true
     podman kube down "$work/learner.yaml" >/dev/null 2>&1 || true
   fi
+  # A pod whose creation failed half-way (seen: coadapt-actor-pod-3, "Created", no containers)
+  # is not taken down by `kube down`; remove every pod the manifests name.
+  podman pod ls --format '{{.Name}}' 2>/dev/null | grep '^coadapt-' | xargs -r podman pod rm -f -t 0 >/dev/null 2>&1 || true
   for v in coadapt-runs coadapt-config coadapt-tls coadapt-tokens coadapt-actor-token coadapt-optimizer-token tmp state tls token config runs; do
     podman volume rm -f "$v" >/dev/null 2>&1 || true
   done
@@ -108,6 +111,12 @@ trap 'say "interrupted"; exit 130' INT TERM
 if podman pod exists coadapt-learner-pod-0 2>/dev/null || podman volume exists coadapt-runs 2>/dev/null; then
   fail "podman already has a coadapt-learner pod or a coadapt-runs volume (podman kube down, podman volume rm coadapt-runs)"
 fi
+# Without a learner, other coadapt pods are the debris of a run that died before its cleanup
+# (a half-created pod keeps its name and makes `kube play` fail with "pod already exists").
+for p in $(podman pod ls --format '{{.Name}}' 2>/dev/null | grep '^coadapt-' || true); do
+  say "removing the stale pod $p (no learner pod: left by an earlier run)"
+  podman pod rm -f -t 0 "$p" >/dev/null 2>&1 || fail "could not remove the stale pod $p"
+done
 
 # --- the image, without a registry -----------------------------------------------------------------
 if ! podman image exists localhost/coadapt-base:bookworm; then
