@@ -54,7 +54,7 @@ pub struct ConvOptions {
     /// The products' arithmetic: f32, or bf16 operands with f32 accumulation (on a CPU with
     /// AVX-512 BF16 or AMX; f32 elsewhere). The figures' config names end in `-bf16`, and the
     /// dump holds the bf16 outputs.
-    #[cfg_attr(feature = "clap", arg(long, value_parser = crate::nn::parse_precision, default_value = "f32"))]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "f32"))]
     pub precision: Precision,
 }
 
@@ -277,10 +277,6 @@ fn round(v: f64) -> f64 {
 /// the weights' gradient, the input's gradient).
 pub fn line(bench: &str, config: &str, batch: usize, ms: &[f64], flops: f64, precision: Precision) -> serde_json::Value {
     let median = percentile(ms, 0.5);
-    let dtype = match precision {
-        Precision::F32 => "f32",
-        Precision::Bf16 => "bf16",
-    };
     json!({
         "bench": bench,
         "config": config,
@@ -293,7 +289,7 @@ pub fn line(bench: &str, config: &str, batch: usize, ms: &[f64], flops: f64, pre
         "batch": batch,
         "repetitions": ms.len(),
         "threads": 1,
-        "dtype": dtype,
+        "dtype": precision.name(),
     })
 }
 
@@ -373,7 +369,7 @@ pub fn dump(layers: &[Layer], n: usize, seed: u64) -> serde_json::Value {
                 "out_shape": l.out_shape(),
                 "macs": l.macs(),
                 "n": n,
-                "precision": if l.precision() == Precision::Bf16 { "bf16" } else { "f32" },
+                "precision": l.precision().name(),
                 "params": s.params[0],
                 "x": s.acts[0],
                 "dy": s.d[1],

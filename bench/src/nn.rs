@@ -29,17 +29,8 @@ pub struct NnOptions {
     pub only: Option<String>,
     /// The products of the SAC updates and of the design objective's forward pass: f32, or bf16
     /// (`learner.sac.precision`; the figures' config names end in `-bf16`).
-    #[cfg_attr(feature = "clap", arg(long, value_parser = parse_precision, default_value = "f32"))]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "f32"))]
     pub precision: Precision,
-}
-
-/// `f32` or `bf16`.
-pub fn parse_precision(s: &str) -> Result<Precision, String> {
-    match s {
-        "f32" => Ok(Precision::F32),
-        "bf16" => Ok(Precision::Bf16),
-        _ => Err(format!("`{s}`: the precision is f32 or bf16")),
-    }
 }
 
 pub fn run(a: &NnOptions) -> Result<(), AppError> {

@@ -27,7 +27,7 @@ pub struct PsoOptions {
     pub q: String,
     /// The objective's products: f32, or bf16 (`learner.sac.precision`: the networks' precision,
     /// which the objective inherits; the figure's config name ends in `-bf16`).
-    #[cfg_attr(feature = "clap", arg(long, value_parser = crate::nn::parse_precision, default_value = "f32"))]
+    #[cfg_attr(feature = "clap", arg(long, default_value = "f32"))]
     pub precision: Precision,
 }
 

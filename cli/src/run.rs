@@ -91,8 +91,8 @@ pub struct RunArgs {
     /// parameters, optimiser states and the rest stay f32). Learns as f32 does (EXPERIMENTS 12)
     /// and trains 1.6-1.9x faster on an AMD EPYC with AVX-512 BF16 (BENCHMARKS.md). The
     /// embedded reference protocol uses bf16; `--precision f32` forces f32.
-    #[arg(long, value_parser = ["f32", "bf16"])]
-    pub precision: Option<String>,
+    #[arg(long, value_name = "f32|bf16")]
+    pub precision: Option<coadapt_nn::Precision>,
 }
 
 /// `coadapt run`.

@@ -101,8 +101,8 @@ pub struct TrainArgs {
     pub latent_beta: Option<f32>,
     /// SAC's matrix products (sets sac.precision): f32 (the default), or bf16 (bfloat16
     /// operands with f32 accumulation where the CPU has AVX-512 BF16 or AMX).
-    #[arg(long, value_parser = ["f32", "bf16"])]
-    pub precision: Option<String>,
+    #[arg(long, value_name = "f32|bf16")]
+    pub precision: Option<coadapt_nn::Precision>,
     /// Run directory (default: runs/<env>-<algo>-seed<seed>-<unix time>).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -169,8 +169,8 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     if let Some(l) = args.learning_starts {
         cfg.learning_starts = l;
     }
-    if let Some(p) = &args.precision {
-        cfg.sac.precision = if p == "bf16" { coadapt_nn::Precision::Bf16 } else { coadapt_nn::Precision::F32 };
+    if let Some(p) = args.precision {
+        cfg.sac.precision = p;
     }
     if let Some(u) = args.update_schedule {
         cfg.update_schedule = match u {

@@ -127,8 +127,8 @@ pub struct Overrides {
     pub init_population: Option<PathBuf>,
     /// `world.friction`.
     pub friction: Option<f32>,
-    /// `learner.sac.precision`, by its config name (`f32` or `bf16`).
-    pub precision: Option<String>,
+    /// `learner.sac.precision`.
+    pub precision: Option<coadapt_nn::Precision>,
 }
 
 /// Reads the config: `resume`'s config.toml when resuming without `config`, else `config`, else
@@ -181,8 +181,8 @@ pub fn resolve(config: Option<&Path>, resume: Option<&Path>, o: &Overrides) -> c
     if let Some(f) = o.friction {
         cfg.world.friction = Some(f);
     }
-    if let Some(p) = &o.precision {
-        cfg.learner.sac.precision = parse_enum::<coadapt_nn::Precision>("precision", p)?;
+    if let Some(p) = o.precision {
+        cfg.learner.sac.precision = p;
     }
     cfg.world.check().map_err(|e| crate::AppError::Config(e.to_string()))?;
     Ok((cfg, name))

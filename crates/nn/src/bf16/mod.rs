@@ -24,6 +24,29 @@ pub enum Precision {
     Bf16,
 }
 
+impl Precision {
+    /// The config name: `f32` or `bf16`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::Bf16 => "bf16",
+        }
+    }
+}
+
+/// By config name (what command-line flags parse).
+impl std::str::FromStr for Precision {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "f32" => Ok(Precision::F32),
+            "bf16" => Ok(Precision::Bf16),
+            _ => Err(format!("`{s}`: the precision is f32 or bf16")),
+        }
+    }
+}
+
 /// Whether this CPU runs the bf16 kernel (AVX-512F, BW and BF16), detected at run time.
 pub fn bf16_available() -> bool {
     #[cfg(target_arch = "x86_64")]
