@@ -2,7 +2,7 @@
 random one?
 
 usage: python3 scripts/design_bench_report.py [RUNS_ROOT, default docs/campaign/results]
-           [--robots hc,walker-bench,...] [--tables methods,random,within,bodies,calibration]
+           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration]
 
 Runs are RUNS_ROOT/PREFIX-METHOD-seedN (docs/campaign/design-bench.queue and
 design-choice.queue): PREFIX names the robot (hc = HalfCheetah, walker-bench, hopper-bench,
@@ -19,11 +19,16 @@ count. Per robot:
    sign-flip (permutation) test of the mean difference;
 3. within: pooled over seeds, each exploitation design minus the exploration (random) design
    trained right after it in the same run: mean ± sd, wins, exact sign-flip test;
-4. bodies: the run's best exploitation design and its best random design, each trained from
+4. trend: the within table's pairs with the time trend removed. The random design of a pair
+   trains one design later than the chosen one, from population networks that have seen one
+   more body; the random-designs run of the same seed (forked at the same design) gives that
+   advantage at the same slots (its later minus its earlier random design), which is added back
+   to each pair: mean ± sd of the trend and of the adjusted difference, wins, exact sign-flip;
+5. bodies: the run's best exploitation design and its best random design, each trained from
    scratch with plain SAC (2 training seeds): the mean return of the last 10 episodes, and
    the difference paired by run seed and training seed, with the exact sign-flip test;
-5. calibration: scripts/calibration_report.py over the robot's methods;
-6. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
+6. calibration: scripts/calibration_report.py over the robot's methods;
+7. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
    the simulation baselines ordered by the simulation they spend on choosing designs: design
    rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
    episodes: an upper bound where an episode can end early), against the quality of the chosen
@@ -96,7 +101,8 @@ def runs_of(root, prefix):
         summary = dict(summary, wall_seconds=float(last["seconds"]) if last and last.get("seconds") else float("nan"))
         env, rows = cr.read_run(path)
         n_init = sum(r["kind"] == "initial" for r in rows)
-        out.setdefault(method, {})[int(seed)] = (cr.facts(env, rows, summary, n_init, None), summary)
+        f = dict(cr.facts(env, rows, summary, n_init, None), by_index={r["index"]: r for r in rows})
+        out.setdefault(method, {})[int(seed)] = (f, summary)
     return out
 
 
@@ -127,6 +133,21 @@ def rollout_steps(run):
         steps = opt.get("screen", {}).get("steps", 250)
         return steps if steps > 0 else 1000
     return 1000
+
+
+def slot_pairs(f):
+    """(i, exploit best - next explore best) for each exploitation design i of a run followed by
+    an exploration design (the pairs of the within table)."""
+    by = f["by_index"]
+    return [(i, r["best"] - by[i + 1]["best"]) for i, r in sorted(by.items())
+            if r["kind"] == "exploit" and i + 1 in by and by[i + 1]["kind"] == "explore"]
+
+
+def trend(random_run, i):
+    """The random-designs run's later minus earlier design at slots i + 1 and i: what training
+    one design later is worth when both bodies are random (None if the run lacks the slots)."""
+    by = random_run["by_index"]
+    return by[i + 1]["best"] - by[i]["best"] if i in by and i + 1 in by else None
 
 
 def ordered(methods):
@@ -171,6 +192,32 @@ def report(root, title, prefix, tables):
             if d:
                 print(f"| {m} | {len(runs[m])} | {len(d)} | {cr.signed_sd(d)} | {sum(x > 0 for x in d)}/{len(d)} | {sign_flip_p(d)} |")
         print()
+    if "trend" in tables and "random" in runs:
+        # The within table sets each chosen design against the random design trained *after*
+        # it, with one more design's experience in the population networks it starts from. The
+        # random-designs run (forked from the same run at the same design) measures that
+        # advantage at the same slots, where both bodies are random; adding it back to each
+        # within-run difference, paired by seed and slot, removes it.
+        print("| method: within-run difference with the time trend removed, pooled over seeds | seeds | pairs | "
+              "trend: random run's later minus earlier design at the same slots | exploit minus next random + trend | exploit wins | p |")
+        print("|---|---|---|---|---|---|---|")
+        for m in methods:
+            if m == "random":
+                continue
+            t, adj, seeds = [], [], set()
+            for seed, (f, _) in sorted(runs[m].items()):
+                if seed not in runs["random"]:
+                    continue
+                for i, d in slot_pairs(f):
+                    x = trend(runs["random"][seed][0], i)
+                    if x is not None:
+                        t.append(x)
+                        adj.append(d + x)
+                        seeds.add(seed)
+            if adj:
+                print(f"| {m} | {len(seeds)} | {len(adj)} | {cr.signed_sd(t)} | {cr.signed_sd(adj)} | "
+                      f"{sum(x > 0 for x in adj)}/{len(adj)} | {sign_flip_p(adj)} |")
+        print()
     if "bodies" in tables and bodies:
         print("| body, trained from scratch with plain SAC | run seeds | training runs | last-10-episode return |")
         print("|---|---|---|---|")
@@ -213,7 +260,7 @@ def main():
     args = [a for i, a in enumerate(sys.argv[1:], 1) if not a.startswith("--") and sys.argv[i - 1] not in {"--robots", "--tables"}]
     root = args[0] if args else "docs/campaign/results"
     keep = option("--robots", None)
-    tables = option("--tables", "methods,random,within,bodies,calibration").split(",")
+    tables = option("--tables", "methods,random,within,trend,bodies,calibration").split(",")
     robots = [r for r in ROBOTS if keep is None or r[1] in keep.split(",")]
     if not any([report(root, title, prefix, tables) for title, prefix in robots]):
         sys.exit(f"design_bench_report: no finished benchmark run under {root}")

@@ -61,3 +61,51 @@ fn a_changed_digit_in_a_generated_table_is_caught() {
     assert!(!o.status.success(), "a changed digit passed the check:\n{text}");
     assert!(text.contains("disagree with the archive"), "unexpected output:\n{text}");
 }
+
+/// Writes a finished benchmark run (designs.csv with the given best evaluation returns after two
+/// initial designs, summary.json, one episode row) under `root/name`.
+fn synthetic_run(root: &Path, name: &str, kinds: &[&str], best: &[f64]) {
+    let dir = root.join(name);
+    std::fs::create_dir_all(&dir).expect("run dir");
+    let mut csv =
+        String::from("index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts,method,prototype\n");
+    for (i, (k, b)) in kinds.iter().zip(best).enumerate() {
+        csv += &format!("{i},{k},1;1;1;1;1;1,16,{b},{b},,0,x,\n");
+    }
+    std::fs::write(dir.join("designs.csv"), csv).expect("designs.csv");
+    std::fs::write(dir.join("summary.json"), "{}").expect("summary.json");
+    std::fs::write(dir.join("episodes.csv"), "design,episode,seconds\n0,0,10.0\n").expect("episodes.csv");
+}
+
+/// The benchmark's `trend` table adds back, pair by pair, what training one body later is worth
+/// in the random-designs run of the same seed at the same slots (issue 28: the within-run pairs'
+/// time trend). Two initial designs, then FEAR's exploit/explore pairs at slots (2, 3) and (4, 5):
+/// FEAR's pairs are 100 - 130 = -30 and 90 - 150 = -60; the random run's later minus earlier
+/// bodies at those slots are 140 - 100 = +40 and 160 - 110 = +50, so the adjusted differences
+/// are +10 and -10 (mean 0.0, sd 14.1), the trend +45.0 ± 7.1, one win in two.
+#[test]
+fn the_trend_table_removes_the_random_runs_time_trend_pair_by_pair() {
+    let dir = std::env::temp_dir().join(format!("coadapt-trend-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let k = ["initial", "initial", "exploit", "explore", "exploit", "explore"];
+    synthetic_run(&dir, "hc-fear-seed1", &k, &[50.0, 60.0, 100.0, 130.0, 90.0, 150.0]);
+    synthetic_run(
+        &dir,
+        "hc-random-seed1",
+        &["initial", "initial", "exploit", "exploit", "exploit", "exploit"],
+        &[50.0, 60.0, 100.0, 140.0, 110.0, 160.0],
+    );
+    let o = Command::new("python3")
+        .arg(root().join("scripts/design_bench_report.py"))
+        .arg(&dir)
+        .args(["--robots", "hc", "--tables", "within,trend"])
+        .current_dir(root())
+        .output()
+        .expect("running python3 scripts/design_bench_report.py");
+    let _ = std::fs::remove_dir_all(&dir);
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "design_bench_report failed:\n{text}");
+    // The plain within-run row, then the adjusted one.
+    assert!(text.contains("| fear | 1 | 2 | -45.0 ± 21.2 | 0/2 |"), "within row:\n{text}");
+    assert!(text.contains("| fear | 1 | 2 | +45.0 ± 7.1 | +0.0 ± 14.1 | 1/2 |"), "trend row:\n{text}");
+}
