@@ -21,9 +21,11 @@ count. Per robot:
    trained right after it in the same run: mean ± sd, wins, exact sign-flip test;
 4. trend: the within table's pairs with the time trend removed. The random design of a pair
    trains one design later than the chosen one, from population networks that have seen one
-   more body; the random-designs run of the same seed (forked at the same design) gives that
+   more body. (a) The random-designs run of the same seed (forked at the same design) gives that
    advantage at the same slots (its later minus its earlier random design), which is added back
    to each pair: mean ± sd of the trend and of the adjusted difference, wins, exact sign-flip;
+   (b) each chosen design against the mean of the random designs just before and after it, in
+   which a trend linear in time cancels: mean ± sd, wins, exact sign-flip;
 5. bodies: the run's best exploitation design and its best random design, each trained from
    scratch with plain SAC (2 training seeds): the mean return of the last 10 episodes, and
    the difference paired by run seed and training seed, with the exact sign-flip test;
@@ -192,31 +194,38 @@ def report(root, title, prefix, tables):
             if d:
                 print(f"| {m} | {len(runs[m])} | {len(d)} | {cr.signed_sd(d)} | {sum(x > 0 for x in d)}/{len(d)} | {sign_flip_p(d)} |")
         print()
-    if "trend" in tables and "random" in runs:
+    if "trend" in tables and runs:
         # The within table sets each chosen design against the random design trained *after*
-        # it, with one more design's experience in the population networks it starts from. The
-        # random-designs run (forked from the same run at the same design) measures that
-        # advantage at the same slots, where both bodies are random; adding it back to each
-        # within-run difference, paired by seed and slot, removes it.
-        print("| method: within-run difference with the time trend removed, pooled over seeds | seeds | pairs | "
-              "trend: random run's later minus earlier design at the same slots | exploit minus next random + trend | exploit wins | p |")
-        print("|---|---|---|---|---|---|---|")
+        # it, with one more design's experience in the population networks it starts from. Two
+        # ways to take that out: (a) the random-designs run (forked from the same run at the same
+        # design) measures the advantage at the same slots, where both bodies are random; adding
+        # it back to each within-run difference, paired by seed and slot, removes it; (b) the
+        # chosen design against the mean of the random designs just before and just after it,
+        # in which a trend linear in time cancels (no other run needed; the first chosen design,
+        # after the initial ones, has no random design before it and drops out).
+        print("| method: within-run differences with the time trend removed, pooled over seeds | seeds | "
+              "trend: random run's later minus earlier design at the same slots (pairs) | exploit minus next random + trend | wins | p | "
+              "exploit minus the mean of the random designs before and after it (designs) | wins | p |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for m in methods:
             if m == "random":
                 continue
-            t, adj, seeds = [], [], set()
+            t, adj = [], []
             for seed, (f, _) in sorted(runs[m].items()):
-                if seed not in runs["random"]:
+                if seed not in runs.get("random", {}):
                     continue
                 for i, d in slot_pairs(f):
                     x = trend(runs["random"][seed][0], i)
                     if x is not None:
                         t.append(x)
                         adj.append(d + x)
-                        seeds.add(seed)
-            if adj:
-                print(f"| {m} | {len(seeds)} | {len(adj)} | {cr.signed_sd(t)} | {cr.signed_sd(adj)} | "
-                      f"{sum(x > 0 for x in adj)}/{len(adj)} | {sign_flip_p(adj)} |")
+            both = [x for f, _ in runs[m].values() for x in f["both"]]
+            if not adj and not both:
+                continue
+            a = (f"{cr.signed_sd(t)} ({len(t)}) | {cr.signed_sd(adj)} | {sum(x > 0 for x in adj)}/{len(adj)} | {sign_flip_p(adj)}"
+                 if adj else "- | - | - | -")
+            b = f"{cr.signed_sd(both)} ({len(both)}) | {sum(x > 0 for x in both)}/{len(both)} | {sign_flip_p(both)}" if both else "- | - | -"
+            print(f"| {m} | {len(runs[m])} | {a} | {b} |")
         print()
     if "bodies" in tables and bodies:
         print("| body, trained from scratch with plain SAC | run seeds | training runs | last-10-episode return |")

@@ -82,7 +82,7 @@ fn synthetic_run(root: &Path, name: &str, kinds: &[&str], best: &[f64]) {
 /// time trend). Two initial designs, then FEAR's exploit/explore pairs at slots (2, 3) and (4, 5):
 /// FEAR's pairs are 100 - 130 = -30 and 90 - 150 = -60; the random run's later minus earlier
 /// bodies at those slots are 140 - 100 = +40 and 160 - 110 = +50, so the adjusted differences
-/// are +10 and -10 (mean 0.0, sd 14.1), the trend +45.0 ± 7.1, one win in two.
+/// are +10 and -10 (mean 0.0, sd 14.1), the trend +45.0 ± 7.1, one win in two (exact p 1.00).
 #[test]
 fn the_trend_table_removes_the_random_runs_time_trend_pair_by_pair() {
     let dir = std::env::temp_dir().join(format!("coadapt-trend-{}", std::process::id()));
@@ -107,5 +107,7 @@ fn the_trend_table_removes_the_random_runs_time_trend_pair_by_pair() {
     assert!(o.status.success(), "design_bench_report failed:\n{text}");
     // The plain within-run row, then the adjusted one.
     assert!(text.contains("| fear | 1 | 2 | -45.0 ± 21.2 | 0/2 |"), "within row:\n{text}");
-    assert!(text.contains("| fear | 1 | 2 | +45.0 ± 7.1 | +0.0 ± 14.1 | 1/2 |"), "trend row:\n{text}");
+    // The trend row; then the chosen design at slot 4 against the mean of its random
+    // neighbours, 90 - (130 + 150) / 2 = -50 (the one at slot 2 has an initial design before it).
+    assert!(text.contains("| fear | 1 | +45.0 ± 7.1 (2) | +0.0 ± 14.1 | 1/2 | 1.00 | -50.0 (1) | 0/1 | 1.00 |"), "trend row:\n{text}");
 }
