@@ -23,6 +23,8 @@ fn config() -> RunConfig {
     c.schedule.designs = 6;
     c.schedule.design_request_resend_secs = 1.5;
     c.snapshot.every_episodes = 2;
+    // Every 2 episodes, however short they are (no bound on the snapshots' share of the time).
+    c.snapshot.max_share = 1.0;
     c.flow.assignment_lease_secs = 2.0;
     c.optimizer.pso.particles = 20_000;
     c.optimizer.pso.iterations = 40;
@@ -574,4 +576,50 @@ fn a_shared_memory_run_killed_whole_resumes_to_the_rows_of_a_run_never_stopped()
     let got = tables(&out);
     assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped (killed after {at} rows); {log}");
     assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped (killed after {at} rows); {log}");
+}
+
+/// The number of snapshots a finished run's learner reports taking (`learner: N snapshot(s)`).
+fn snapshots_taken(stderr: &str) -> usize {
+    let at = stderr.find(" snapshot(s) in ").unwrap_or_else(|| panic!("no snapshot count in: {stderr}"));
+    let head = &stderr[..at];
+    head[head.rfind(' ').map_or(0, |i| i + 1)..].parse().unwrap_or_else(|e| panic!("{e}: {stderr}"))
+}
+
+/// `snapshot.max-share` holds periodic snapshots back while the last one's write time would be
+/// more than that share of the time since it: with a share of a millionth, a snapshot after
+/// every episode (`every-episodes = 1`) becomes the first one and one at each design's end;
+/// with a share of 1, one after every episode. The rows are the same either way.
+#[test]
+fn snapshots_wait_while_their_write_time_would_exceed_the_share() {
+    let dir = tmpdir("share");
+    let mut c = config();
+    c.schedule.designs = 3;
+    c.optimizer.pso.particles = 50;
+    c.optimizer.pso.iterations = 5;
+    c.snapshot.every_episodes = 1;
+    let mut taken = vec![];
+    let mut tables_of = vec![];
+    for share in [1.0, 1e-6] {
+        c.snapshot.max_share = share;
+        let sub = dir.join(format!("share-{share}"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let config = write_config(&sub, &c);
+        let out = sub.join("run");
+        let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
+            .args(["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{stderr}");
+        taken.push(snapshots_taken(&stderr));
+        tables_of.push(tables(&out));
+    }
+    // 3 designs: 3 + 3 + 2 episodes (3 initial episodes on each initial design, then 2).
+    let episodes = rows(&dir.join("share-1/run/episodes.csv"));
+    assert_eq!(episodes, 8, "the tiny protocol's episodes");
+    // Share 1: after every episode but each design's last (the design's end takes that one).
+    assert_eq!(taken[0], episodes - 3 + 3, "share 1: {taken:?}");
+    // A millionth: the first periodic one, then only the designs' ends.
+    assert_eq!(taken[1], 1 + 3, "share 1e-6: {taken:?}");
+    assert_eq!(tables_of[0], tables_of[1], "the snapshots changed the rows");
 }

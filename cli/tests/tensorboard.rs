@@ -72,6 +72,8 @@ fn a_run_killed_mid_write_is_readable_and_resumes_without_a_step_twice() {
     let mut c: coadapt_coadaptation::RunConfig = coadapt_test_support::read_config("configs/half-cheetah-tiny.toml");
     c.schedule.designs = 6;
     c.snapshot.every_episodes = 2;
+    // Every 2 episodes, however short they are (no bound on the snapshots' share of the time).
+    c.snapshot.max_share = 1.0;
     // A slower search, so the kill lands inside the run and not after it.
     c.optimizer.pso.particles = 5_000;
     c.optimizer.pso.iterations = 20;

@@ -55,7 +55,7 @@ pub struct RunConfig {
     pub optimizer: OptimizerConfig,
     /// Deadlines and retries of a remote environment.
     pub remote: coadapt_fleet::RemoteEnvConfig,
-    /// Snapshots of the whole run for `--resume` (`every-episodes`, `keep`).
+    /// Snapshots of the whole run for `--resume` (`every-episodes`, `keep`, `max-share`).
     pub snapshot: coadapt_learner::snapshot::SnapshotConfig,
     /// Prometheus `/metrics` of the learner and the optimiser (`learner-listen`,
     /// `optimizer-listen`; empty: off).

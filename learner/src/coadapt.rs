@@ -500,11 +500,12 @@ pub fn run(
             p.global += 1;
             since_snapshot += 1;
             // Nothing out with an actor: the state is whole. A snapshot every `every-episodes`
-            // and, on shutdown, one now (the design's end takes its own).
+            // (later while the last one's write time would exceed `max-share` of the time since
+            // it) and, on shutdown, one now (the design's end takes its own).
             let quiet = l.fleet.outstanding() == 0 && awaiting_eval.is_empty();
             let stopping = shutdown.load(Ordering::Relaxed);
-            let every = snaps.cfg.every_episodes;
-            if quiet && written < n && (stopping || every > 0 && since_snapshot >= every) {
+            let due = snaps.cfg.periodic_due(since_snapshot, snaps.last_at.map(|t| t.elapsed()), snaps.last_write_seconds);
+            if quiet && written < n && (stopping || due) {
                 p.in_design = Some(resume::InDesign { row: row.clone(), episodes: written });
                 p.seconds = seconds_before + start.elapsed().as_secs_f64();
                 l.snapshot(&mut p, out, snaps, &format!("design {index} episode {written}"))?;

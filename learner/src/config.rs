@@ -15,6 +15,9 @@ pub enum ConfigError {
     /// `snapshot.keep` below 2.
     #[error("snapshot.keep: {0} is fewer than 2 (a damaged newest snapshot needs one to fall back to)")]
     TooFewSnapshots(usize),
+    /// `snapshot.max-share` outside (0, 1].
+    #[error("snapshot.max-share: {0} is not a share of the run's time in (0, 1] (1: no bound)")]
+    SnapshotShare(f64),
     /// `learner.population-critics` below 2.
     #[error("learner.population-critics: {0} is fewer than 2 (the twin critics are SAC's; more are ensemble heads)")]
     TooFewCritics(usize),

@@ -50,6 +50,8 @@ pub struct Snapshots {
     /// Size of the newest snapshot (bytes) and when it was taken.
     pub last_bytes: u64,
     pub last_at: Option<Instant>,
+    /// How long the newest snapshot took to write (seconds).
+    pub last_write_seconds: f64,
     /// The newest snapshot's time, seconds since the Unix epoch (0: none yet).
     pub last_unix: f64,
 }
@@ -180,7 +182,8 @@ impl Learner<'_> {
         })?;
         snaps.next_sequence += 1;
         snaps.taken += 1;
-        snaps.seconds += t.elapsed().as_secs_f64();
+        snaps.last_write_seconds = t.elapsed().as_secs_f64();
+        snaps.seconds += snaps.last_write_seconds;
         snaps.last_bytes = std::fs::read_dir(&dir)?.filter_map(|e| e.ok()?.metadata().ok()).map(|m| m.len()).sum();
         snaps.last_at = Some(Instant::now());
         snaps.last_unix = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64());

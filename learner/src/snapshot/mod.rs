@@ -40,11 +40,19 @@ pub struct SnapshotConfig {
     /// Snapshots kept (the newest); at least 2, so that a damaged newest one has a
     /// predecessor to fall back to.
     pub keep: usize,
+    /// The largest share of the run's time the periodic snapshots may take (0 < share <= 1): a
+    /// periodic snapshot waits, beyond `every-episodes`, until the time since the last one is at
+    /// least the last one's write time over this share. A snapshot holds the whole replay, so
+    /// its cost grows with the run (the reference protocol's reach 1-2 GB, seconds each to
+    /// write, against about 4 s per episode); the wait bounds it, at the price of more episodes
+    /// to redo after a crash. The end of a design and a shutdown always snapshot.
+    /// 1: no bound (`every-episodes` alone decides).
+    pub max_share: f64,
 }
 
 impl Default for SnapshotConfig {
     fn default() -> Self {
-        Self { every_episodes: 10, keep: 3 }
+        Self { every_episodes: 10, keep: 3, max_share: 0.05 }
     }
 }
 
@@ -53,7 +61,22 @@ impl SnapshotConfig {
         if self.keep < 2 {
             return Err(ConfigError::TooFewSnapshots(self.keep));
         }
+        if !(self.max_share > 0.0 && self.max_share <= 1.0) {
+            return Err(ConfigError::SnapshotShare(self.max_share));
+        }
         Ok(())
+    }
+
+    /// Whether a periodic snapshot is due after `episodes` episodes since the last snapshot,
+    /// taken `since` ago (`None`: none yet in this start) and `write_seconds` long.
+    pub fn periodic_due(&self, episodes: usize, since: Option<std::time::Duration>, write_seconds: f64) -> bool {
+        if self.every_episodes == 0 || episodes < self.every_episodes {
+            return false;
+        }
+        match since {
+            Some(t) if self.max_share < 1.0 => t.as_secs_f64() * self.max_share >= write_seconds,
+            _ => true,
+        }
     }
 }
 
@@ -267,4 +290,38 @@ pub fn load_latest(root: &Path) -> Result<(PathBuf, Manifest, StateIn, Vec<Strin
         }
     }
     Err(SnapshotError::None { dir: root.to_path_buf(), why })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::*;
+
+    #[test]
+    fn a_periodic_snapshot_waits_until_its_write_time_is_within_the_share() {
+        let c = SnapshotConfig { every_episodes: 10, keep: 3, max_share: 0.05 };
+        // Too few episodes: never, however long ago.
+        assert!(!c.periodic_due(9, Some(Duration::from_secs(1_000)), 0.0));
+        // The first of this start: as soon as the episodes are there.
+        assert!(c.periodic_due(10, None, 0.0));
+        // A 2 s write allows the next one 40 s after it, not before.
+        assert!(!c.periodic_due(10, Some(Duration::from_secs(39)), 2.0));
+        assert!(c.periodic_due(25, Some(Duration::from_secs(40)), 2.0));
+        // Share 1: the episode count alone.
+        let every = SnapshotConfig { max_share: 1.0, ..c.clone() };
+        assert!(every.periodic_due(10, Some(Duration::from_millis(1)), 2.0));
+        // every-episodes 0: only at designs' ends and on shutdown.
+        let off = SnapshotConfig { every_episodes: 0, ..c };
+        assert!(!off.periodic_due(1_000, Some(Duration::from_secs(1_000)), 0.0));
+    }
+
+    #[test]
+    fn a_share_outside_zero_to_one_is_refused_by_name() {
+        for bad in [0.0, -0.1, 1.5, f64::NAN] {
+            let e = SnapshotConfig { max_share: bad, ..SnapshotConfig::default() }.validate().unwrap_err();
+            assert!(e.to_string().starts_with("snapshot.max-share:"), "{e}");
+        }
+        assert!(SnapshotConfig { max_share: 1.0, ..SnapshotConfig::default() }.validate().is_ok());
+    }
 }
