@@ -50,3 +50,59 @@ fn an_update_on_two_threads_equals_one_on_one_thread_bit_for_bit() {
         assert_eq!(differing, 0, "{precision:?}: {differing} of {} parameters differ between 1 and 2 threads", one.len());
     }
 }
+
+/// Every parameter of both pairs after FEAR episodes on a pool of `threads`: designs 0-4 of a
+/// small learner, the population pair training from design 3 on (`population-updates-from-
+/// design`), so the last episodes train both pairs at once.
+fn fear_after_episodes(threads: usize) -> Vec<f32> {
+    use coadapt_core::Transition;
+    use coadapt_learner::fear::{ActingPolicy, FearLearner, FearLearnerConfig};
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    pool.install(|| {
+        let cfg = FearLearnerConfig {
+            sac: SacConfig { hidden: vec![32, 32], batch_size: 32, ..SacConfig::default() },
+            population_batch: 8,
+            species_batch: 24,
+            individual_updates: 12,
+            population_updates: 5,
+            warmup_episodes: 1,
+            ..FearLearnerConfig::default()
+        };
+        let mut l = FearLearner::new(9, 3, cfg, 5).unwrap();
+        let mut r = rng(2, 7);
+        let mut trained = (0, 0);
+        for design in 0..5 {
+            l.begin_design(design);
+            for _ in 0..3 {
+                for _ in 0..40 {
+                    let mut v = || -> Vec<f32> { (0..9).map(|_| r.random_range(-1.0..1.0)).collect() };
+                    let (o, n) = (v(), v());
+                    let a: Vec<f32> = (0..3).map(|_| r.random_range(-1.0..1.0)).collect();
+                    l.add_transition(&Transition { obs: &o, action: &a, reward: r.random(), next_obs: &n, terminated: false }).unwrap();
+                }
+                let t = l.end_episode().unwrap();
+                trained = (trained.0 + t.individual_updates, trained.1 + t.population_updates);
+            }
+        }
+        // 5 designs x 2 trained episodes x 12 individual updates; designs 3-4 x 2 x 5 population.
+        assert_eq!(trained, (120, 20));
+        let mut all = Vec::new();
+        for which in [ActingPolicy::Population, ActingPolicy::Individual] {
+            let sac = l.agent(which);
+            let (q1, q1_bar) = sac.critic_params(0);
+            let (q2, q2_bar) = sac.critic_params(1);
+            all.extend([sac.policy_params(), q1, q1_bar, q2, q2_bar].concat());
+        }
+        all
+    })
+}
+
+/// FEAR trains its individual and population pairs at once on two cores (their batches drawn
+/// ahead in the order one-after-the-other would draw them): the same bits as on one thread.
+#[test]
+fn fear_episodes_on_two_threads_equal_those_on_one_thread_bit_for_bit() {
+    let (one, two) = (fear_after_episodes(1), fear_after_episodes(2));
+    assert_eq!(one.len(), two.len());
+    let differing = one.iter().zip(&two).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+    assert_eq!(differing, 0, "{differing} of {} parameters differ between 1 and 2 threads", one.len());
+}
