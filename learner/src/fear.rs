@@ -150,33 +150,6 @@ fn non_finite_param(sac: &Sac) -> Option<String> {
         .or_else(|| (!sac.alpha().is_finite()).then(|| format!("alpha ({})", sac.alpha())))
 }
 
-/// `sac`'s updates on the batches `rows` names (one batch's rows after another, drawn from
-/// `parts`): how many and the last losses, or the update that made a loss non-finite and what;
-/// with `check`, the parameters afterwards too.
-fn train_pair(
-    sac: &mut Sac,
-    batch: &mut Batch,
-    parts: &[(&ReplayBuffer, usize)],
-    rows: &[usize],
-    check: bool,
-) -> Result<(usize, Option<SacLosses>), (u64, String)> {
-    let mut last = None;
-    let mut n = 0;
-    for r in rows.chunks_exact(batch.rows) {
-        ReplayBuffer::gather_mixed(parts, r, batch);
-        let l = sac.update(batch);
-        if let Some(what) = non_finite_loss(&l) {
-            return Err((sac.updates(), what));
-        }
-        last = Some(l);
-        n += 1;
-    }
-    if check && let Some(what) = non_finite_param(sac) {
-        return Err((sac.updates(), what));
-    }
-    Ok((n, last))
-}
-
 /// The scalars of [`FearLearner::save_state`].
 #[derive(Serialize, Deserialize)]
 struct FearScalars {
@@ -217,10 +190,6 @@ pub struct FearLearner {
     episode_in_design: usize,
     ind_batch: Batch,
     pop_batch: Batch,
-    /// An episode's batches, drawn ahead (see `train_episode`): rows of each buffer, batch
-    /// after batch.
-    ind_rows: Vec<usize>,
-    pop_rows: Vec<usize>,
     rng: Rng64,
     rollbacks_in_a_row: usize,
 }
@@ -237,8 +206,6 @@ impl FearLearner {
             start_states: ReplayBuffer::new(obs_dim, 0, cfg.start_state_capacity),
             ind_batch: Batch::new(cfg.population_batch + cfg.species_batch, obs_dim, act_dim),
             pop_batch: Batch::new(cfg.sac.batch_size, obs_dim, act_dim),
-            ind_rows: Vec::new(),
-            pop_rows: Vec::new(),
             population,
             individual,
             design_index: None,
@@ -356,39 +323,38 @@ impl FearLearner {
             return Ok(out);
         }
         let design = self.design_index.unwrap_or(0);
-        let Self { cfg, individual, population, ind_batch, pop_batch, pop_replay, species_replay, ind_rows, pop_rows, rng, .. } = self;
-        let (pop_replay, species_replay): (&ReplayBuffer, &ReplayBuffer) = (pop_replay, species_replay);
-        let individual_n = if cfg.population_only { 0 } else { cfg.individual_updates };
-        let population_n = match () {
-            _ if cfg.population_only => cfg.individual_updates,
-            _ if design >= cfg.population_updates_from_design => cfg.population_updates,
-            _ => 0,
-        };
-        // Every batch of the episode drawn first, individual then population, as the updates
-        // used to draw them in turn: the two pairs read the buffers and write only their own
-        // networks, so they can train at once (rayon's second core takes the population's
-        // updates while the first does the individual's, then helps with the rest of those)
-        // and give the bits they give one after the other.
-        let ind_parts = [(pop_replay, cfg.population_batch), (species_replay, cfg.species_batch)];
-        let pop_parts = [(pop_replay, pop_batch.rows)];
-        ind_rows.clear();
-        for _ in 0..individual_n {
-            ReplayBuffer::draw_mixed(&ind_parts, rng, ind_rows)?;
+        if !self.cfg.population_only {
+            for _ in 0..self.cfg.individual_updates {
+                let parts = [(&self.pop_replay, self.cfg.population_batch), (&self.species_replay, self.cfg.species_batch)];
+                ReplayBuffer::sample_mixed(&parts, &mut self.rng, &mut self.ind_batch)?;
+                let l = self.individual.update(&self.ind_batch);
+                if let Some(what) = non_finite_loss(&l) {
+                    return Err(TrainError::NonFinite { pair: "individual", update: self.individual.updates(), design, episode, what });
+                }
+                out.last = Some(l);
+                out.individual_updates += 1;
+            }
+            if let Some(what) = non_finite_param(&self.individual) {
+                return Err(TrainError::NonFinite { pair: "individual", update: self.individual.updates(), design, episode, what });
+            }
         }
-        pop_rows.clear();
-        for _ in 0..population_n {
-            ReplayBuffer::draw_mixed(&pop_parts, rng, pop_rows)?;
+        if self.cfg.population_only || design >= self.cfg.population_updates_from_design {
+            let n = if self.cfg.population_only { self.cfg.individual_updates } else { self.cfg.population_updates };
+            for _ in 0..n {
+                self.pop_replay.sample(&mut self.rng, &mut self.pop_batch)?;
+                let l = self.population.update(&self.pop_batch);
+                if let Some(what) = non_finite_loss(&l) {
+                    return Err(TrainError::NonFinite { pair: "population", update: self.population.updates(), design, episode, what });
+                }
+                if self.cfg.population_only {
+                    out.last = Some(l);
+                }
+                out.population_updates += 1;
+            }
+            if let Some(what) = non_finite_param(&self.population) {
+                return Err(TrainError::NonFinite { pair: "population", update: self.population.updates(), design, episode, what });
+            }
         }
-        let (ind, pop) = rayon::join(
-            || train_pair(individual, ind_batch, &ind_parts, ind_rows, !cfg.population_only),
-            || train_pair(population, pop_batch, &pop_parts, pop_rows, population_n > 0),
-        );
-        let fail = |pair, (update, what)| TrainError::NonFinite { pair, update, design, episode, what };
-        let ind = ind.map_err(|e| fail("individual", e))?;
-        let pop = pop.map_err(|e| fail("population", e))?;
-        out.individual_updates = ind.0;
-        out.population_updates = pop.0;
-        out.last = if self.cfg.population_only { pop.1 } else { ind.1 };
         Ok(out)
     }
 

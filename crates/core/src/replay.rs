@@ -226,42 +226,6 @@ impl ReplayBuffer {
         Self::sample_mixed(&[(self, batch.rows)], rng, batch)
     }
 
-    /// Draws the rows of one [`ReplayBuffer::sample_mixed`] batch and appends them to `rows`,
-    /// consuming `rng` exactly as `sample_mixed` does, so that batches drawn ahead and filled
-    /// later with [`ReplayBuffer::gather_mixed`] are the ones `sample_mixed` would have given.
-    pub fn draw_mixed<R: Rng + ?Sized>(parts: &[(&ReplayBuffer, usize)], rng: &mut R, rows: &mut Vec<usize>) -> Result<(), ReplayError> {
-        for (buf, n) in parts {
-            if *n == 0 {
-                continue;
-            }
-            if buf.is_empty() {
-                return Err(ReplayError::Empty);
-            }
-            for _ in 0..*n {
-                rows.push(rng.random_range(0..buf.len()));
-            }
-        }
-        Ok(())
-    }
-
-    /// Fills `batch` with the transitions `rows` names (one batch's worth, as
-    /// [`ReplayBuffer::draw_mixed`] drew them from the same `parts`).
-    pub fn gather_mixed(parts: &[(&ReplayBuffer, usize)], rows: &[usize], batch: &mut Batch) {
-        assert_eq!(rows.len(), batch.rows, "one batch's rows");
-        let mut row = 0;
-        for (buf, n) in parts {
-            let (o, a) = (buf.obs_dim, buf.act_dim);
-            for &i in &rows[row..row + n] {
-                batch.obs[row * o..(row + 1) * o].copy_from_slice(&buf.obs[i * o..(i + 1) * o]);
-                batch.act[row * a..(row + 1) * a].copy_from_slice(&buf.act[i * a..(i + 1) * a]);
-                batch.rew[row] = buf.rew[i];
-                batch.next_obs[row * o..(row + 1) * o].copy_from_slice(&buf.next_obs[i * o..(i + 1) * o]);
-                batch.done[row] = buf.done[i];
-                row += 1;
-            }
-        }
-    }
-
     /// Fills `batch` with `n_k` transitions from each buffer `k` of `parts`, in order (e.g.
     /// `[(population, 26), (species, 230)]`). The counts must add up to `batch.rows`.
     pub fn sample_mixed<R: Rng + ?Sized>(parts: &[(&ReplayBuffer, usize)], rng: &mut R, batch: &mut Batch) -> Result<(), ReplayError> {

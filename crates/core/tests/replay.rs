@@ -100,35 +100,3 @@ fn pop_newest_removes_exactly_the_newest_rows_before_and_after_wrapping() {
     b.pop_newest(100);
     assert!(b.is_empty());
 }
-
-/// Batches drawn ahead (`draw_mixed`) and filled later (`gather_mixed`) are those `sample_mixed`
-/// gives from the same generator, batch after batch, and leave the generator where it leaves it
-/// (FEAR draws an episode's batches first so that its two network pairs can train at once).
-#[test]
-fn batches_drawn_ahead_equal_batches_sampled_in_turn() {
-    use rand::Rng;
-    let mut pop = ReplayBuffer::new(2, 1, 100);
-    let mut species = ReplayBuffer::new(2, 1, 100);
-    for v in 0..37 {
-        push(&mut pop, v as f32);
-        push(&mut species, 100.0 + v as f32);
-    }
-    let parts = [(&pop, 3), (&species, 5)];
-    let (mut r1, mut r2) = (rng(9, 1), rng(9, 1));
-    let mut rows = Vec::new();
-    for _ in 0..4 {
-        ReplayBuffer::draw_mixed(&parts, &mut r2, &mut rows).unwrap();
-    }
-    assert_eq!(rows.len(), 4 * 8);
-    let (mut a, mut b) = (Batch::new(8, 2, 1), Batch::new(8, 2, 1));
-    for k in 0..4 {
-        ReplayBuffer::sample_mixed(&parts, &mut r1, &mut a).unwrap();
-        ReplayBuffer::gather_mixed(&parts, &rows[k * 8..(k + 1) * 8], &mut b);
-        assert_eq!((&a.obs, &a.act, &a.rew, &a.next_obs, &a.done), (&b.obs, &b.act, &b.rew, &b.next_obs, &b.done), "batch {k}");
-        assert!(a.rew[..3].iter().all(|r| *r < 100.0) && a.rew[3..].iter().all(|r| *r >= 100.0), "parts in order");
-    }
-    assert_eq!(r1.random::<u64>(), r2.random::<u64>(), "the generators part ways");
-    // An empty part is refused as sample_mixed refuses it.
-    let empty = ReplayBuffer::new(2, 1, 4);
-    assert_eq!(ReplayBuffer::draw_mixed(&[(&empty, 1)], &mut r1, &mut rows), Err(ReplayError::Empty));
-}
