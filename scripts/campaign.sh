@@ -58,6 +58,13 @@ fi
 
 archive_run() {
   local dir=$1 archive=$2 t0=$3
+  # A run stopped by a signal (Ctrl-C, a session's end) exits 0 with "interrupted": true: it
+  # is not finished, so it is neither archived nor marked done; its snapshots resume it.
+  if grep -Eq '"interrupted": *true' "$dir.summary.tmp"; then
+    mv "$dir.summary.tmp" "$dir.interrupted.json"
+    echo "campaign: stopped $dir before its end after $((SECONDS - t0)) s (not archived; the queue started again resumes it)" >&2
+    return 0
+  fi
   mv "$dir.summary.tmp" "$dir/summary.json"
   mkdir -p "$archive"
   cp "$dir"/{summary.json,config.toml,designs.csv,episodes.csv} "$archive/"
@@ -191,14 +198,24 @@ run_one() {
   fi
 }
 
+# Ctrl-C or a TERM stops the queue, not only the run in hand: the runs under way are stopped
+# (each snapshots and exits) and no further line starts.
+stopping=0
+trap 'stopping=1; pkill -INT -P $$ 2>/dev/null; for p in $(jobs -p); do pkill -INT -P "$p" 2>/dev/null; done' INT TERM
 start_fork_watchers
 running=0
 while read -r name config seed rest; do
   case $name in ''|'#'*) continue ;; esac
+  [ "$stopping" = 0 ] || break
   # shellcheck disable=SC2086 # the flags are words
   run_one "$name" "$config" "$seed" $rest &
   running=$((running + 1))
   if [ "$running" -ge "$jobs" ]; then wait -n || true; running=$((running - 1)); fi
 done < "$queue"
-wait
+while [ "$(jobs -pr | wc -l)" -gt 0 ]; do wait || true; done
+if [ "$stopping" = 1 ]; then
+  for f in "$root"/*.fork.pid; do [ -s "$f" ] && kill "$(cat "$f")" 2>/dev/null; done
+  echo "campaign: stopped; start the queue again to resume"
+  exit 130
+fi
 echo "campaign: queue $queue finished"
