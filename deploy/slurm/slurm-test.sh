@@ -2,7 +2,8 @@
 # deploy/slurm/coadapt.sbatch on a real Slurm (Debian's slurmctld, slurmd and munge, installed
 # by deploy/slurm/local-cluster.sh when missing): a controller and three compute nodes in
 # network namespaces. A co-adaptation is submitted with a two-minute time limit, so that the
-# time-limit signal stops and requeues it at least once; in a later allocation, once the resumed
+# time-limit signal stops and requeues it at least once; in the first allocation its learner is
+# SIGKILLed a few episodes in (the job must start it again from the newest snapshot); in a later allocation, once the resumed
 # run is under way, one actor node crashes while its actor holds the episode the run waits for
 # (caught by stopping the actor and seeing the run stall; then its network down, SIGKILL to its
 # slurmd, job steps and actors: the episode must go to the other actor) and
@@ -117,7 +118,16 @@ n3_holds_an_episode() {
   kill -CONT "${pids[@]}" 2>/dev/null
   return 1
 }
-crashed=0 restarted_node=0 released=0 crash_at="" pending_since="" held=0
+# learner_pid: the learner's pid on the head node n1 (the first allocation's, or any).
+learner_pid() {
+  local ns pid
+  ns=$(sed -n 's/^ns_prefix=//p' "$cluster/env")-n1
+  for pid in $(ip netns pids "$ns" 2>/dev/null); do
+    if tr '\0' ' ' <"/proc/$pid/cmdline" 2>/dev/null | grep -q ' learner --config'; then echo "$pid"; return 0; fi
+  done
+  return 1
+}
+crashed=0 restarted_node=0 released=0 crash_at="" pending_since="" held=0 learner_killed=0
 deadline=$((SECONDS + timeout))
 while :; do
   state=$(job_field JobState)
@@ -131,6 +141,14 @@ while :; do
       sl scontrol update JobId="$job" StartTime=now && released=$((released + 1))
       say "job $job requeued ($restarts restart(s)): released after $((SECONDS - pending_since)) s instead of Slurm's 2 min"
       pending_since=""
+    fi
+  fi
+  # In the first allocation, a few episodes in, the learner is SIGKILLed (as the out-of-memory
+  # killer does): coadapt.sbatch must start it again from the run's newest snapshot.
+  if ((!learner_killed)) && [[ $state == RUNNING && ${restarts:-0} -eq 0 ]] && (($(episodes) >= 8)); then
+    if lpid=$(learner_pid) && kill -KILL "$lpid" 2>/dev/null; then
+      learner_killed=1
+      say "the learner (pid $lpid) SIGKILLed at episode $(episodes)"
     fi
   fi
   # Crash an actor node once the run has resumed in a later allocation and gone on a little.
@@ -174,6 +192,8 @@ cat "$out" >&2 || true
 ((restarts >= 1)) || fail "the time limit never requeued the job (the run ended within one allocation: raise --designs)"
 ((crashed)) || fail "the run ended before node n3 could be crashed (raise --designs)"
 grep -q "requeueing job $job" "$out" || fail "the job output does not say it requeued itself"
+((learner_killed)) || fail "the run ended before its learner could be SIGKILLed (raise --designs)"
+grep -q "restarting it from the run's newest snapshot" "$out" || fail "the job output does not say it restarted the killed learner"
 last=$run_dir/slurm/job-$job-$restarts/learner.out
 grep -q '"interrupted":false' "$last" || fail "the last allocation's learner did not finish the run"
 after=$(($(episodes) - crashed_at))
@@ -191,6 +211,6 @@ say "no token in any log; allocations: ${allocs[*]##*/}"
 
 wait "$undisturbed" || fail "the undisturbed in-process run failed (see $work/undisturbed.err)"
 python3 "$REPO_ROOT/deploy/compare_runs.py" "$run_dir" "$work/undisturbed" "$designs" || fail "the rows differ from the undisturbed run's"
-say "every row equals the undisturbed run's: nothing lost or counted twice across $restarts requeue(s) and a crashed node"
+say "every row equals the undisturbed run's: nothing lost or counted twice across a SIGKILLed learner, $restarts requeue(s) and a crashed node"
 passed=1
-say "PASS: coadapt.sbatch on Slurm: requeued by the time limit, resumed, survived a crashed actor node"
+say "PASS: coadapt.sbatch on Slurm: restarted its SIGKILLed learner, requeued by the time limit, resumed, survived a crashed actor node"
