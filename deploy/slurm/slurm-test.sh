@@ -192,6 +192,7 @@ cat "$out" >&2 || true
 ((restarts >= 1)) || fail "the time limit never requeued the job (the run ended within one allocation: raise --designs)"
 ((crashed)) || fail "the run ended before node n3 could be crashed (raise --designs)"
 grep -q "requeueing job $job" "$out" || fail "the job output does not say it requeued itself"
+if grep -q "scontrol requeue failed" "$out"; then fail "the job output tells the operator to resubmit a job Slurm requeued"; fi
 ((learner_killed)) || fail "the run ended before its learner could be SIGKILLed (raise --designs)"
 grep -q "restarting it from the run's newest snapshot" "$out" || fail "the job output does not say it restarted the killed learner"
 last=$run_dir/slurm/job-$job-$restarts/learner.out
