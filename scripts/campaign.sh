@@ -98,6 +98,11 @@ retrain_one() {
     rm -rf "$dir/train-seed$k"
     if RAYON_NUM_THREADS=$threads "$bin" train --env "$env" --algo sac --design "$design" "${steps[@]}" --seed "$k" --quiet \
         --out "$dir/train-seed$k" "$@" > "$dir/train-seed$k.summary" 2>> "$dir.log"; then
+      # Stopped by Ctrl-C (exit 0, "interrupted": true): not done; trained again from the start.
+      if grep -Eq '"interrupted": *true' "$dir/train-seed$k.summary"; then
+        echo "campaign: stopped $dir train seed $k before its end (not archived)" >&2
+        return 0
+      fi
       mv "$dir/train-seed$k.summary" "$dir/train-seed$k/summary.json"
     else
       echo "campaign: FAILED $dir train seed $k (see $dir.log)" >&2

@@ -75,6 +75,11 @@ for k in $(seq 1 "$designs"); do
       echo "latent_exploration: $arm, design $k ($design), seed $s ($(date -u +%H:%M:%S))" >&2
       RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1} "$bin" train --env "$env" --algo sac --design "$design" --steps "$steps" \
         --seed "$s" --precision "$precision" --quiet --out "$dir" "${flags[@]}" > "$dir.summary" 2>> "$out/log.txt"
+      # Ctrl-C stops coadapt train with exit 0 and "interrupted": true: not a finished run.
+      if grep -Eq '"interrupted": *true' "$dir.summary"; then
+        echo "latent_exploration: stopped during $arm, design $k, seed $s (not archived; run again to go on)" >&2
+        exit 130
+      fi
       mkdir -p "$archive/$arm-d$k-seed$s"
       mv "$dir.summary" "$dir/summary.json"
       cp "$dir"/{summary.json,config.toml,episodes.csv} "$archive/$arm-d$k-seed$s/"

@@ -218,6 +218,9 @@ pub struct TrainSummary {
     pub updates: u64,
     pub wall_s: f64,
     pub run_dir: PathBuf,
+    /// Stopped by the shutdown signal (Ctrl-C) before `steps` and before the target: the run is
+    /// not finished, whatever the exit status (a campaign must not take it as done).
+    pub interrupted: bool,
 }
 
 /// Builds the agent `cfg.algo` for the environment's dimensions.
@@ -427,5 +430,6 @@ pub fn run(
         updates,
         wall_s: start.elapsed().as_secs_f64(),
         run_dir: run_dir.to_path_buf(),
+        interrupted: step < cfg.steps && shutdown.load(Ordering::Relaxed) && !(cfg.stop_at_target && reached.is_some()),
     })
 }

@@ -53,3 +53,25 @@ fn per_episode_takes_the_same_updates_after_the_episode() {
     assert_ne!(ep_returns[1], ep3_returns[1], "the first episode's burst trained the policy of the second");
     assert_ne!(ep_returns[1], step_returns[1], "the two schedules are different runs");
 }
+
+/// A run stopped by the shutdown flag before its steps says so (`interrupted`), so that a
+/// campaign does not take it for a finished one; a run that reaches its steps does not.
+#[test]
+fn a_run_stopped_before_its_steps_says_it_was_interrupted() {
+    let (done, _) = run("whole", UpdateSchedule::PerStep, 1);
+    assert!(!done.interrupted, "a whole run: {done:?}");
+    let dir: PathBuf = std::env::temp_dir().join(format!("coadapt-update-schedule-stopped-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = TrainConfig { seed: 3, steps: 450, checkpoint_every: 0, ..TrainConfig::default() };
+    let mut env = coadapt_robots::make("pendulum").unwrap();
+    let stop = AtomicBool::new(false);
+    let mut episodes = 0;
+    let s = train::run(&cfg, env.as_mut(), &dir, &stop, &mut |_| {
+        episodes += 1;
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    })
+    .unwrap();
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!((episodes, s.steps), (1, 200), "stopped after its first episode");
+    assert!(s.interrupted, "{s:?}");
+}
