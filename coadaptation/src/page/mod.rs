@@ -236,14 +236,23 @@ async fn index(State(p): Shared, parts: Parts) -> Response {
         },
     };
     let flash = p.sessions.take_flash(&id);
-    let files = status::RunFiles::read(&p.dir);
-    let panel = html::panel(&files, &s);
-    let frame = html::Frame { title: &p.title, session: &s, login: p.sessions.needs_login(), flash };
-    let mut r = html(StatusCode::OK, html::page(&frame, &panel, &p.live_html()));
+    let mut r = off_the_runtime(move || {
+        let files = status::RunFiles::read(&p.dir);
+        let panel = html::panel(&files, &s);
+        let frame = html::Frame { title: &p.title, session: &s, login: p.sessions.needs_login(), flash };
+        html(StatusCode::OK, html::page(&frame, &panel, &p.live_html()))
+    })
+    .await;
     if let Some(c) = cookie.and_then(|c| HeaderValue::from_str(&c).ok()) {
         r.headers_mut().insert(header::SET_COOKIE, c);
     }
     r
+}
+
+/// A response made from the run's files, off the async runtime: the reads grow with the run
+/// (episodes.csv has a row per episode), and a slow disk would stall every other request.
+async fn off_the_runtime(f: impl FnOnce() -> Response + Send + 'static) -> Response {
+    tokio::task::spawn_blocking(f).await.unwrap_or_else(|e| text(StatusCode::INTERNAL_SERVER_ERROR, format!("the page failed: {e}")))
 }
 
 /// The session of a request for a part of the page, or the 401 to answer (the page's script
@@ -259,14 +268,14 @@ fn viewer(p: &Page, parts: &Parts) -> Result<session::Session, Box<Response>> {
 
 async fn live(State(p): Shared, parts: Parts) -> Response {
     match viewer(&p, &parts) {
-        Ok(_) => html(StatusCode::OK, p.live_html()),
+        Ok(_) => off_the_runtime(move || html(StatusCode::OK, p.live_html())).await,
         Err(r) => *r,
     }
 }
 
 async fn panel(State(p): Shared, parts: Parts) -> Response {
     match viewer(&p, &parts) {
-        Ok(s) => html(StatusCode::OK, html::panel(&status::RunFiles::read(&p.dir), &s)),
+        Ok(s) => off_the_runtime(move || html(StatusCode::OK, html::panel(&status::RunFiles::read(&p.dir), &s))).await,
         Err(r) => *r,
     }
 }
