@@ -96,7 +96,7 @@ cleanup() {
   # A pod whose creation failed half-way (seen: coadapt-actor-pod-3, "Created", no containers)
   # is not taken down by `kube down`; remove every pod the manifests name.
   podman pod ls --format '{{.Name}}' 2>/dev/null | grep '^coadapt-' | xargs -r podman pod rm -f -t 0 >/dev/null 2>&1 || true
-  for v in coadapt-runs coadapt-config coadapt-tls coadapt-tokens coadapt-actor-token coadapt-optimizer-token tmp state tls token config runs; do
+  for v in coadapt-runs coadapt-optimizer-state coadapt-config coadapt-tls coadapt-tokens coadapt-actor-token coadapt-optimizer-token tmp state tls token config runs; do
     podman volume rm -f "$v" >/dev/null 2>&1 || true
   done
   for s in coadapt-tls coadapt-tokens coadapt-actor-token coadapt-optimizer-token; do podman secret rm "$s" >/dev/null 2>&1 || true; done
@@ -111,6 +111,8 @@ trap 'say "interrupted"; exit 130' INT TERM
 if podman pod exists coadapt-learner-pod-0 2>/dev/null || podman volume exists coadapt-runs 2>/dev/null; then
   fail "podman already has a coadapt-learner pod or a coadapt-runs volume (podman kube down, podman volume rm coadapt-runs)"
 fi
+# The optimiser's state volume alone (no learner) is debris too: its state would answer a new run.
+podman volume rm -f coadapt-optimizer-state >/dev/null 2>&1 || true
 # Without a learner, other coadapt pods are the debris of a run that died before its cleanup
 # (a half-created pod keeps its name and makes `kube play` fail with "pod already exists").
 for p in $(podman pod ls --format '{{.Name}}' 2>/dev/null | grep '^coadapt-' || true); do
@@ -241,5 +243,10 @@ for tok in "$work"/secrets/*.token; do
     if grep -qF -- "$(<"$tok")" <<< "$log"; then fail "a token ($tok) appears in the log of $c"; fi
   done
 done
+# The optimiser kept its state on its claim (optimizer-pvc.yaml), not in the pod.
+mp=$(podman volume inspect coadapt-optimizer-state --format '{{.Mountpoint}}' 2>/dev/null) ||
+  fail "no coadapt-optimizer-state volume: the optimiser's state is not on its claim"
+[[ -n $(ls -A "$mp" 2>/dev/null) ]] || fail "the optimiser wrote no state to its volume ($mp)"
+say "the optimiser's state is on its claim: $(ls -A "$mp" | tr '\n' ' ')"
 passed=1
 say "PASS: the manifests ran a co-adaptation in podman: probes answered, the deleted learner pod resumed from its volume, rows equal the undisturbed run's"
