@@ -5,6 +5,7 @@
 # results as a fleet of processes, tested byte for byte; fewer processes competing for two cores).
 #
 #   usage: [BIN=coadapt-binary] [THREADS=1] scripts/campaign.sh [-j N] QUEUE_FILE
+#   stop: kill -TERM <this script's pid> (or Ctrl-C in its terminal): the runs snapshot and stop
 #
 # QUEUE_FILE: one experiment per line, `NAME CONFIG SEED [coadapt run flags...]`; `#` starts a
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
@@ -203,10 +204,14 @@ run_one() {
   fi
 }
 
-# Ctrl-C or a TERM stops the queue, not only the run in hand: the runs under way are stopped
-# (each snapshots and exits) and no further line starts.
+# Ctrl-C or a TERM to this script stops the queue, not only the run in hand: every process
+# below it gets SIGINT (a run snapshots and exits; the lanes' subshells, started in the
+# background, ignore it and see their run end) and no further line starts. Signal this script's
+# pid alone: `pkill -f campaign.sh` would also hit the lanes' subshells, which share its command
+# line and die of a TERM, leaving their runs going.
+descendants() { local c; for c in $(pgrep -P "$1"); do echo "$c"; descendants "$c"; done; }
 stopping=0
-trap 'stopping=1; pkill -INT -P $$ 2>/dev/null; for p in $(jobs -p); do pkill -INT -P "$p" 2>/dev/null; done' INT TERM
+trap 'stopping=1; for p in $(descendants $$); do kill -INT "$p" 2>/dev/null || true; done' INT TERM
 start_fork_watchers
 running=0
 while read -r name config seed rest; do
@@ -219,7 +224,9 @@ while read -r name config seed rest; do
 done < "$queue"
 while [ "$(jobs -pr | wc -l)" -gt 0 ]; do wait || true; done
 if [ "$stopping" = 1 ]; then
-  for f in "$root"/*.fork.pid; do [ -s "$f" ] && kill "$(cat "$f")" 2>/dev/null; done
+  for f in "$root"/*.fork.pid; do
+    if [ -s "$f" ]; then kill "$(cat "$f")" 2>/dev/null || true; fi
+  done
   echo "campaign: stopped; start the queue again to resume"
   exit 130
 fi
