@@ -213,5 +213,19 @@ say "no token in any log; allocations: ${allocs[*]##*/}"
 wait "$undisturbed" || fail "the undisturbed in-process run failed (see $work/undisturbed.err)"
 python3 "$REPO_ROOT/deploy/compare_runs.py" "$run_dir" "$work/undisturbed" "$designs" || fail "the rows differ from the undisturbed run's"
 say "every row equals the undisturbed run's: nothing lost or counted twice across a SIGKILLed learner, $restarts requeue(s) and a crashed node"
+# A job whose run is already complete (as when the time limit comes just as the last design
+# ends, and the requeued allocation finds nothing left): its learner ends at once, before it
+# listens; that is the run's end, not a failure.
+again=$(COADAPT_BIN=$bin COADAPT_RUN_DIR=$run_dir COADAPT_NO_REQUEUE=1 \
+  sl sbatch --parsable --time=2 --output="$work/again.out" "$REPO_ROOT/deploy/slurm/coadapt.sbatch") || fail "sbatch (again) failed"
+again=${again%%;*}
+for _ in $(seq 120); do
+  st=$(sl scontrol show job "$again" -o 2>/dev/null | tr ' ' '\n' | sed -n 's/^JobState=//p')
+  case $st in COMPLETED | FAILED | CANCELLED | TIMEOUT | NODE_FAIL) break ;; esac
+  sleep 1
+done
+[[ $st == COMPLETED ]] || fail "a job submitted on a complete run ended ${st:-unknown} (see $work/again.out)"
+grep -q "the run completed" "$work/again.out" || fail "a job submitted on a complete run did not say the run completed (see $work/again.out)"
+say "a job submitted on the complete run ends at once, COMPLETED: the run completed"
 passed=1
 say "PASS: coadapt.sbatch on Slurm: restarted its SIGKILLed learner, requeued by the time limit, resumed, survived a crashed actor node"
