@@ -225,7 +225,10 @@ def report(root, title, prefix, tables):
             a = (f"{cr.signed_sd(t)} ({len(t)}) | {cr.signed_sd(adj)} | {sum(x > 0 for x in adj)}/{len(adj)} | {sign_flip_p(adj)}"
                  if adj else "- | - | - | -")
             b = f"{cr.signed_sd(both)} ({len(both)}) | {sum(x > 0 for x in both)}/{len(both)} | {sign_flip_p(both)}" if both else "- | - | -"
-            print(f"| {m} | {len(runs[m])} | {a} | {b} |")
+            # The trend needs the random-designs run of the same seed; say when it had fewer.
+            paired = sum(seed in runs.get("random", {}) for seed in runs[m])
+            n = f"{len(runs[m])}" if paired == len(runs[m]) else f"{len(runs[m])} (trend: {paired})"
+            print(f"| {m} | {n} | {a} | {b} |")
         print()
     if "bodies" in tables and bodies:
         print("| body, trained from scratch with plain SAC | run seeds | training runs | last-10-episode return |")

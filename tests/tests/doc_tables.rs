@@ -111,3 +111,30 @@ fn the_trend_table_removes_the_random_runs_time_trend_pair_by_pair() {
     // neighbours, 90 - (130 + 150) / 2 = -50 (the one at slot 2 has an initial design before it).
     assert!(text.contains("| fear | 1 | +45.0 ± 7.1 (2) | +0.0 ± 14.1 | 1/2 | 1.00 | -50.0 (1) | 0/1 | 1.00 |"), "trend row:\n{text}");
 }
+
+/// The reference run's tables (`scripts/reference_report.py`, EXPERIMENTS 5.13) on a run with two
+/// initial designs (50, 70: mean 60.0, sd 14.1) and two exploit/explore pairs, 100 - 130 = -30
+/// and 160 - 90 = +70 (mean +20.0, sd 70.7, one win in two, exact p 1.00); chosen designs'
+/// mean (100 + 130 + 160 + 90) / 4 = 120.0, exploitation designs' 130.0, the best design 4.
+#[test]
+fn the_reference_report_summarises_a_run_design_by_design() {
+    let dir = std::env::temp_dir().join(format!("coadapt-reference-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let k = ["initial", "initial", "exploit", "explore", "exploit", "explore"];
+    synthetic_run(&dir, "hc-reference-seed1", &k, &[50.0, 70.0, 100.0, 130.0, 160.0, 90.0]);
+    let o = Command::new("python3")
+        .arg(root().join("scripts/reference_report.py"))
+        .arg(dir.join("hc-reference-seed1"))
+        .args(["--initial", "2", "--tables", "designs,summary"])
+        .current_dir(root())
+        .output()
+        .expect("running python3 scripts/reference_report.py");
+    let _ = std::fs::remove_dir_all(&dir);
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "reference_report failed:\n{text}");
+    assert!(text.contains("| 4 | exploit | 1.00 1.00 1.00 1.00 1.00 1.00 | 16 | 160.0 | - | 0/6 |"), "designs row:\n{text}");
+    assert!(
+        text.contains("| 6 | 96 | 60.0 ± 14.1 (n = 2) | 120.0 (n = 4) | 130.0 (n = 2) | +20.0 ± 70.7 (1/2, p = 1.00) | 160.0 (design 4, exploit) |"),
+        "summary row:\n{text}"
+    );
+}
