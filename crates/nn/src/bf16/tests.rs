@@ -157,3 +157,16 @@ fn a_product_with_b_packed_by_rows_is_the_same_product() {
         }
     }
 }
+
+/// The config's names (serde), the flags' (`FromStr`) and what summaries print (`name()`) are
+/// written in three places; they must stay one set of names.
+#[test]
+fn precision_names_agree_in_config_flags_and_summaries() {
+    for p in [Precision::F32, Precision::Bf16] {
+        assert_eq!(serde_json::to_string(&p).unwrap(), format!("\"{}\"", p.name()));
+        assert_eq!(serde_json::from_str::<Precision>(&format!("\"{}\"", p.name())).unwrap(), p);
+        assert_eq!(p.name().parse::<Precision>().unwrap(), p);
+    }
+    let err = "f16".parse::<Precision>().unwrap_err();
+    assert!(err.contains("f16") && err.contains("f32 or bf16"), "{err}");
+}
