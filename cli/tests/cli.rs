@@ -331,6 +331,9 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
     let critics = dir.join("critics.toml");
     std::fs::write(&critics, tiny.replace("[learner]\n", "[learner]\npopulation-critics = 1\n")).unwrap();
     let critics = critics.to_str().unwrap();
+    let conservative = dir.join("conservative.toml");
+    std::fs::write(&conservative, format!("{tiny}\n[learner.conservative]\nweight = 1.0\nstep = 0.0\n")).unwrap();
+    let conservative = conservative.to_str().unwrap();
     let good = coadapt_test_support::workspace_file("configs/half-cheetah-tiny.toml");
     let good = good.to_str().unwrap();
     let search = coadapt_test_support::workspace_file("configs/search/planar-groups1.toml");
@@ -341,6 +344,7 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
         (v(&["search-actor", "--config", search, "--id", "0", "--transport", "in-process"]), "fleet.transport"),
         (v(&["run", "--config", bad, "--transport", "in-process"]), "optimizer.pessimism: -1 is not a finite number >= 0"),
         (v(&["run", "--config", critics, "--transport", "in-process"]), "learner.population-critics: 1 is fewer than 2"),
+        (v(&["run", "--config", conservative, "--transport", "in-process"]), "learner.conservative.step: 0 is not in (0, 1] box widths"),
         // The supervisor stops the fleet naming the role; the role's log names the setting.
         (
             v(&["run", "--config", bad, "--transport", "shm", "--actors", "1"]),

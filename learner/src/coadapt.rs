@@ -361,7 +361,8 @@ pub fn run(
     }
     snaps.cfg.validate()?;
     fear_cfg.check()?;
-    let fear = FearLearner::new(dims.obs, dims.act, fear_cfg.clone(), seed).map_err(|e| CoadaptError::Config(e.to_string()))?;
+    let mut fear = FearLearner::new(dims.obs, dims.act, fear_cfg.clone(), seed).map_err(|e| CoadaptError::Config(e.to_string()))?;
+    fear.set_design_box(&spec.design.low, &spec.design.high);
     let lease = flow.lease()?;
     let in_flight = flow.in_flight(actors);
     let dir = out.dir().to_path_buf();

@@ -21,6 +21,10 @@ pub enum ConfigError {
     /// `learner.population-critics` below 2.
     #[error("learner.population-critics: {0} is fewer than 2 (the twin critics are SAC's; more are ensemble heads)")]
     TooFewCritics(usize),
+    /// Another setting that cannot work; the message names its key (e.g.
+    /// `learner.conservative.step`).
+    #[error("{0}")]
+    Invalid(String),
 }
 
 /// A setting fails the same way every time.

@@ -57,6 +57,9 @@ pub struct FearLearnerConfig {
     /// the mean minus `pessimism` sd over all of them, and the design service reports their
     /// disagreement (beyond the thesis: issue 28's ensemble lower confidence bound).
     pub population_critics: usize,
+    /// `[learner.conservative]`: COMs' conservative term on the population critics (beyond the
+    /// thesis, issue 28; off by default): [`crate::conservative`].
+    pub conservative: crate::conservative::ConservativeConfig,
     /// What a NaN or infinite loss or parameter does: `stop` the run (naming the update), or
     /// `roll-back` both network pairs (and their optimisers and generator) to where they were
     /// before the episode's updates, report it and go on; `max-rollbacks-in-a-row` roll-backs
@@ -89,6 +92,7 @@ impl Default for FearLearnerConfig {
             start_state_capacity: 100_000,
             population_only: false,
             population_critics: 2,
+            conservative: crate::conservative::ConservativeConfig::default(),
             on_non_finite: OnNonFinite::Stop,
             max_rollbacks_in_a_row: 5,
         }
@@ -101,7 +105,7 @@ impl FearLearnerConfig {
         if self.population_critics < 2 {
             return Err(crate::ConfigError::TooFewCritics(self.population_critics));
         }
-        Ok(())
+        self.conservative.check()
     }
 }
 
@@ -173,6 +177,8 @@ pub struct EpisodeTraining {
     pub population_updates: usize,
     /// Losses of the last individual (or, population-only, population) update.
     pub last: Option<SacLosses>,
+    /// Losses of the last population update (the conservative term's gap is watched there).
+    pub last_population: Option<SacLosses>,
     /// The updates produced a non-finite value (named) and the networks were rolled back.
     pub rolled_back: Option<String>,
 }
@@ -214,6 +220,31 @@ impl FearLearner {
             rollbacks_in_a_row: 0,
             cfg,
         })
+    }
+
+    /// The design box of the robot (`low`, `high`, one bound per design coordinate; the
+    /// observation is the state with the design appended): what the conservative term
+    /// ([`FearLearnerConfig::conservative`]) searches over. With its weight above 0 the
+    /// population critics train with the term from here on; with 0 this changes nothing.
+    pub fn set_design_box(&mut self, low: &[f32], high: &[f32]) {
+        let c = &self.cfg.conservative;
+        if c.weight <= 0.0 {
+            self.population.set_conservative(None);
+            return;
+        }
+        // The spec's observation is state then design, so this holds for every robot.
+        let Some(state_dim) = self.pop_replay.obs_dim().checked_sub(low.len()) else {
+            self.population.set_conservative(None);
+            return;
+        };
+        self.population.set_conservative(Some(crate::conservative::Conservative {
+            weight: c.weight,
+            steps: c.steps,
+            step: c.step,
+            design: state_dim..state_dim + low.len(),
+            low: low.to_vec(),
+            high: high.to_vec(),
+        }));
     }
 
     /// Starts design `index`: the individual networks become copies of the population ones
@@ -349,6 +380,7 @@ impl FearLearner {
                 if self.cfg.population_only {
                     out.last = Some(l);
                 }
+                out.last_population = Some(l);
                 out.population_updates += 1;
             }
             if let Some(what) = non_finite_param(&self.population) {

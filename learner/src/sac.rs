@@ -17,6 +17,7 @@ use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 use crate::config::SacConfig;
+use crate::conservative::{Conservative, ConservativeWork};
 use crate::networks::{concat_rows, critic, gaussian_policy, resize};
 use crate::snapshot::{SnapshotError, StateIn, StateOut};
 
@@ -31,6 +32,9 @@ pub struct SacLosses {
     pub log_pi: f32,
     /// Mean loss of the ensemble heads (0 without heads).
     pub heads: f32,
+    /// The conservative term's gap, mean over the twin critics of mean Q at the adversarial
+    /// designs minus mean Q at the batch's (0 when the term is off; [`crate::conservative`]).
+    pub conservative_gap: f32,
 }
 
 /// The scalars of [`Sac::save_state`].
@@ -64,6 +68,8 @@ struct Critic {
     dx: Vec<f32>,
     dq_da: Vec<f32>,
     dy: Vec<f32>,
+    /// Scratch of the conservative term (empty while it is off).
+    cons: ConservativeWork,
 }
 
 /// The policy's scratch for one update.
@@ -97,6 +103,8 @@ pub struct Sac {
     critics: [Critic; 2],
     /// Ensemble heads beyond the twin (see [`Sac::with_heads`]); empty in plain SAC.
     heads: Vec<Head>,
+    /// COMs' conservative term on the twin critics ([`Sac::set_conservative`]); off in plain SAC.
+    conservative: Option<Conservative>,
     log_alpha: f32,
     alpha_adam: Adam,
     target_entropy: f32,
@@ -177,6 +185,7 @@ impl Critic {
             dx: vec![],
             dq_da: vec![],
             dy: vec![],
+            cons: ConservativeWork::default(),
         }
     }
 
@@ -222,14 +231,26 @@ impl Critic {
         loss / n as f32
     }
 
-    /// The weight gradient from [`Critic::step_deltas`], clamp, Adam, then the Polyak target.
-    fn step_finish(&mut self, critic: &Mlp, cfg: &SacConfig) {
+    /// The weight gradient from [`Critic::step_deltas`] (plus the conservative term's over the
+    /// `n` batch rows, at the same parameters, when `cons` is on), clamp, Adam, then the Polyak
+    /// target. Returns the conservative gap (0 when off).
+    fn step_finish(&mut self, critic: &Mlp, cfg: &SacConfig, cons: Option<&Conservative>, n: usize) -> f32 {
         critic.weight_gradient(&self.x, &mut self.act, &mut self.grad);
+        let mut gap = 0.0;
+        if let Some(c) = cons {
+            let w = critic.n_in();
+            c.adversary(critic, &self.theta, &self.x[..n * w], n, &mut self.cons);
+            gap = c.gradient(critic, &self.theta, n, &mut self.cons);
+            for (g, d) in self.grad.iter_mut().zip(&self.cons.grad) {
+                *g += d;
+            }
+        }
         if cfg.grad_clamp > 0.0 {
             clamp_elementwise(&mut self.grad, cfg.grad_clamp);
         }
         self.adam.step(&mut self.theta, &self.grad);
         polyak(&mut self.theta_bar, &self.theta, cfg.tau);
+        gap
     }
 }
 
@@ -255,6 +276,7 @@ impl Sac {
             phi,
             critics: [c1, c2],
             heads: Vec::new(),
+            conservative: None,
             work: PolicyWork::default(),
             act_ws: Activations::default(),
             act_eps: Vec::new(),
@@ -274,6 +296,12 @@ impl Sac {
         let mut rng = coadapt_core::rng(seed, 9);
         sac.heads = (0..extra).map(|_| Head::new(&sac.critic, &sac.cfg, &mut rng)).collect();
         Ok(sac)
+    }
+
+    /// Turns COMs' conservative term on the twin critics on (`Some`) or off (`None`, SAC's own
+    /// update bit for bit); see [`crate::conservative`]. FEAR sets it on the population pair.
+    pub fn set_conservative(&mut self, c: Option<Conservative>) {
+        self.conservative = c;
     }
 
     /// Ensemble heads beyond the twin.
@@ -379,7 +407,10 @@ impl Sac {
     /// test can reproduce it exactly against a reference.
     fn update_with_noise(&mut self, b: &Batch) -> SacLosses {
         let (n, act, obs) = (b.rows, self.act_dim, self.obs_dim);
-        let Self { cfg, policy, critic, phi, phi_adam, critics, heads, log_alpha, alpha_adam, target_entropy, work: w, .. } = self;
+        let Self {
+            cfg, policy, critic, phi, phi_adam, critics, heads, conservative, log_alpha, alpha_adam, target_entropy, work: w, ..
+        } = self;
+        let cons = conservative.as_ref();
         for v in [&mut w.a_new, &mut w.a_next, &mut w.d_a] {
             resize(v, n * act);
         }
@@ -445,7 +476,7 @@ impl Sac {
         // and step beside the policy's. (Three whole steps as three tasks left one core idle a
         // third of the time.) Each half computes what the whole backward pass does, bit for bit.
         let PolicyWork { act_s, eps, a_new, d_a, d_log_pi, d_head, grad, y, .. } = w;
-        let (q1_loss, q2_loss) = rayon::join(
+        let (q1_loss, (q2_loss, gap2)) = rayon::join(
             || {
                 squashed::backward(act_s.output(), eps, a_new, d_a, d_log_pi, act, d_head);
                 policy.backward_deltas(phi, act_s, 0..n, d_head, None);
@@ -453,12 +484,11 @@ impl Sac {
             },
             || {
                 let loss = c2.step_deltas(critic, y);
-                c2.step_finish(critic, cfg);
-                loss
+                (loss, c2.step_finish(critic, cfg, cons, n))
             },
         );
-        rayon::join(
-            || c1.step_finish(critic, cfg),
+        let (gap1, ()) = rayon::join(
+            || c1.step_finish(critic, cfg, cons, n),
             || {
                 policy.weight_gradient(&b.obs, act_s, grad);
                 if cfg.grad_clamp > 0.0 {
@@ -468,7 +498,15 @@ impl Sac {
             },
         );
         self.updates += 1;
-        SacLosses { q1: q1_loss, q2: q2_loss, policy: policy_loss / n as f32, alpha: alpha_loss, log_pi: mean_log_pi, heads: head_loss }
+        SacLosses {
+            q1: q1_loss,
+            q2: q2_loss,
+            policy: policy_loss / n as f32,
+            alpha: alpha_loss,
+            log_pi: mean_log_pi,
+            heads: head_loss,
+            conservative_gap: (gap1 + gap2) / 2.0,
+        }
     }
 
     /// Saves the policy, critics and targets as one safetensors file (`policy`, `q1`, `q2`,

@@ -134,7 +134,9 @@ fn the_reference_report_summarises_a_run_design_by_design() {
     assert!(o.status.success(), "reference_report failed:\n{text}");
     assert!(text.contains("| 4 | exploit | 1.00 1.00 1.00 1.00 1.00 1.00 | 16 | 160.0 | - | 0/6 |"), "designs row:\n{text}");
     assert!(
-        text.contains("| 6 | 96 | 60.0 ± 14.1 (n = 2) | 120.0 (n = 4) | 130.0 (n = 2) | +20.0 ± 70.7 (1/2, p = 1.00) | 160.0 (design 4, exploit) |"),
+        text.contains(
+            "| 6 | 96 | 60.0 ± 14.1 (n = 2) | 120.0 (n = 4) | 130.0 (n = 2) | +20.0 ± 70.7 (1/2, p = 1.00) | 160.0 (design 4, exploit) |"
+        ),
         "summary row:\n{text}"
     );
 }

@@ -273,6 +273,11 @@ impl Learner<'_> {
                     ("train/log_pi", f64::from(l.log_pi)),
                 ]);
             }
+            // Mean Q at the designs the critic's own ascent reaches minus at the batch's: what
+            // the conservative term holds down (COMs watches it).
+            if let Some(p) = t.last_population.as_ref().filter(|_| self.fear.cfg.conservative.weight > 0.0) {
+                v.push(("train/conservative_gap", f64::from(p.conservative_gap)));
+            }
         }
         v
     }

@@ -1,0 +1,145 @@
+//! A conservative population critic (beyond the thesis, issue 28 section 3), after COMs
+//! (Trabucco, Kumar, Geng, Levine, "Conservative Objective Models for Effective Offline
+//! Model-Based Optimization", ICML 2021): a model searched for its best input is driven to
+//! inputs far from the data where it is wrong and high. COMs trains the model to be low there:
+//!
+//!   L(theta) = L_Bellman(theta) + lambda (E_{x ~ mu_theta}[f_theta(x)] - E_{x ~ D}[f_theta(x)]),
+//!
+//! where mu_theta is where a few steps of gradient ascent on f_theta from the data's inputs end
+//! (held fixed in the gradient). For FEAR the model is the population critic Q(s, a, xi) and the
+//! search is over the design xi: from each batch row `(s, a, xi)` the design alone climbs
+//! `steps` normalised steps of `step` box widths uphill on Q (clamped to the box), giving
+//! `xi'`; the critic's gradient gains lambda (grad mean Q(s, a, xi') - grad mean Q(s, a, xi)).
+//! So the critic is pushed down where its own search would go and up on the bodies trained,
+//! which is what the design optimiser's PSO over Q (Eq. 5.6) exploits. The term acts only in
+//! training (the search and the objective are FEAR's), and only on the population critics
+//! when `learner.conservative.weight` is above 0.
+
+use std::ops::Range;
+
+use coadapt_nn::{Activations, Mlp};
+use serde::{Deserialize, Serialize};
+
+use crate::networks::resize;
+
+/// `[learner.conservative]`: the conservative term on the population critics; off by default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
+pub struct ConservativeConfig {
+    /// lambda, the weight of the term against the Bellman loss; 0 (the default) is FEAR's
+    /// critic, bit for bit. COMs used 0.5-2 on normalised objectives; Q here is in return units.
+    pub weight: f32,
+    /// Gradient-ascent steps from each batch row's design to its adversarial design.
+    pub steps: usize,
+    /// Length of each step, in box widths (the design normalised to [0, 1] per coordinate). With
+    /// `steps` the reach: 5 x 0.1 = half the box from each trained body, enough to reach the
+    /// edges PSO over Q goes to from bodies spread over the box. Each step is one more forward
+    /// and input-backward pass of each population critic on the batch.
+    pub step: f32,
+}
+
+impl Default for ConservativeConfig {
+    fn default() -> Self {
+        Self { weight: 0.0, steps: 5, step: 0.1 }
+    }
+}
+
+impl ConservativeConfig {
+    /// The settings that cannot work, named as a config file spells them.
+    pub fn check(&self) -> Result<(), crate::ConfigError> {
+        let bad = |field: &str, why: String| Err(crate::ConfigError::Invalid(format!("learner.conservative.{field}: {why}")));
+        if !(self.weight.is_finite() && self.weight >= 0.0) {
+            return bad("weight", format!("{} is not a finite number >= 0", self.weight));
+        }
+        if self.weight > 0.0 && self.steps == 0 {
+            return bad("steps", "0 steps leave the designs where the data is: the term would be 0".into());
+        }
+        if !(self.step.is_finite() && self.step > 0.0 && self.step <= 1.0) {
+            return bad("step", format!("{} is not in (0, 1] box widths", self.step));
+        }
+        Ok(())
+    }
+}
+
+/// The term as one critic applies it: the settings and where the design sits in a critic's
+/// input row (`[state, design, action]`: the observation is the state with the design
+/// appended), with the design box.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Conservative {
+    pub weight: f32,
+    pub steps: usize,
+    pub step: f32,
+    /// Columns of the design in a critic input row.
+    pub design: Range<usize>,
+    pub low: Vec<f32>,
+    pub high: Vec<f32>,
+}
+
+/// Scratch of one critic's conservative term (no allocation once warm).
+#[derive(Clone, Debug, Default)]
+pub struct ConservativeWork {
+    /// Rows `[x_data; x_adv]`.
+    x: Vec<f32>,
+    dx: Vec<f32>,
+    dy: Vec<f32>,
+    act: Activations,
+    /// d(term)/d(theta).
+    pub grad: Vec<f32>,
+}
+
+impl Conservative {
+    /// Writes the adversarial rows into the second half of `work.x` (the first half a copy of
+    /// `x_data`): each row's design climbs `steps` steps of `step` box widths along the
+    /// normalised gradient of `Q_theta` with respect to the design (in box units), clamped to
+    /// the box; the state and action columns stay the data's.
+    pub fn adversary(&self, critic: &Mlp, theta: &[f32], x_data: &[f32], rows: usize, work: &mut ConservativeWork) {
+        let w = critic.n_in();
+        resize(&mut work.x, 2 * rows * w);
+        resize(&mut work.dx, rows * w);
+        resize(&mut work.dy, 2 * rows);
+        let (data, adv) = work.x.split_at_mut(rows * w);
+        data.copy_from_slice(x_data);
+        adv.copy_from_slice(x_data);
+        work.dy[..rows].fill(1.0);
+        for _ in 0..self.steps {
+            critic.forward(theta, adv, rows, &mut work.act);
+            critic.backward_deltas(theta, &mut work.act, 0..rows, &work.dy[..rows], Some(&mut work.dx));
+            for (row, g) in adv.chunks_exact_mut(w).zip(work.dx.chunks_exact(w)) {
+                // dQ/du for the design in box units u = (xi - low) / (high - low).
+                let norm = self
+                    .design
+                    .clone()
+                    .zip(self.low.iter().zip(&self.high))
+                    .map(|(c, (lo, hi))| (g[c] * (hi - lo)).powi(2))
+                    .sum::<f32>()
+                    .sqrt();
+                if !(norm > 0.0 && norm.is_finite()) {
+                    continue;
+                }
+                for (c, (lo, hi)) in self.design.clone().zip(self.low.iter().zip(&self.high)) {
+                    let du = self.step * g[c] * (hi - lo) / norm;
+                    row[c] = (row[c] + du * (hi - lo)).clamp(*lo, *hi);
+                }
+            }
+        }
+    }
+
+    /// After [`Self::adversary`]: `weight (mean_b Q(x_adv_b) - mean_b Q(x_data_b))` (the
+    /// adversarial rows held fixed) and its gradient with respect to theta in `work.grad`.
+    /// Returns the gap `mean Q(x_adv) - mean Q(x_data)` (unweighted; COMs watches it).
+    pub fn gradient(&self, critic: &Mlp, theta: &[f32], rows: usize, work: &mut ConservativeWork) -> f32 {
+        resize(&mut work.grad, critic.n_params());
+        let q = critic.forward(theta, &work.x, 2 * rows, &mut work.act);
+        let gap = (q[rows..].iter().sum::<f32>() - q[..rows].iter().sum::<f32>()) / rows as f32;
+        let k = self.weight / rows as f32;
+        work.dy[..rows].fill(-k);
+        work.dy[rows..].fill(k);
+        critic.backward(theta, &work.x, &mut work.act, 0..2 * rows, &work.dy, Some(&mut work.grad), None);
+        gap
+    }
+
+    /// The adversarial rows of the last [`Self::adversary`] (`rows x n_in`).
+    pub fn adversarial_rows<'a>(&self, work: &'a ConservativeWork, rows: usize, n_in: usize) -> &'a [f32] {
+        &work.x[rows * n_in..2 * rows * n_in]
+    }
+}
