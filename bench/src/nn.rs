@@ -1,10 +1,12 @@
 //! `coadapt bench nn`: SAC updates per second (three network sizes, batch 256), the design
 //! objective's forward throughput (700 particles over 32, optionally 256, start states), and
 //! what the population critics' ensemble (`learner.population-critics`) costs: FEAR's
-//! population update and the pessimistic design objective with 2 critics against 5.
+//! population update and the pessimistic design objective with 2 critics against 5; and what
+//! the conservative term (`[learner.conservative]`) costs a population update.
 
 use coadapt_core::{Batch, rng};
 use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
+use coadapt_learner::conservative::{Conservative, ConservativeConfig};
 use coadapt_learner::{Sac, SacConfig};
 use coadapt_nn::Precision;
 use rand::Rng;
@@ -43,6 +45,9 @@ pub fn run(a: &NnOptions) -> Result<(), AppError> {
     }
     if wanted("ensemble_cost") {
         ensemble_cost(a)?;
+    }
+    if wanted("conservative_cost") {
+        conservative_cost(a)?;
     }
     Ok(())
 }
@@ -95,6 +100,53 @@ fn ensemble_cost(a: &NnOptions) -> Result<(), AppError> {
     line("population-update-5-critics", &updates[1], "updates/s");
     line("pessimistic-objective-2-critics-22400rows", &passes[0], "passes/s");
     line("pessimistic-objective-5-critics-22400rows", &passes[1], "passes/s");
+    Ok(())
+}
+
+/// What the conservative term (`[learner.conservative]`, COMs) costs, both sides in one run on
+/// the same thread, interleaved as [`ensemble_cost`]: FEAR's population update (3 x 200
+/// networks, HalfCheetah's 17 + 6 inputs, batch 256) without the term and with it at its
+/// default reach (5 steps of 0.1 box widths over the box [0.8, 2]^6). One line per side: mean
+/// and sample sd of the rounds' rates, n = 5.
+fn conservative_cost(a: &NnOptions) -> Result<(), AppError> {
+    let (obs, act, design) = (23, 6, 6);
+    let cfg = SacConfig { hidden: vec![200; 3], auto_alpha: true, precision: a.precision, ..SacConfig::default() };
+    let mut agents = [Sac::new(obs, act, cfg.clone(), 1)?, Sac::new(obs, act, cfg, 1)?];
+    let c = ConservativeConfig { weight: 1.0, ..ConservativeConfig::default() };
+    agents[1].set_conservative(Some(Conservative {
+        weight: c.weight,
+        steps: c.steps,
+        step: c.step,
+        design: obs - design..obs,
+        low: vec![0.8; design],
+        high: vec![2.0; design],
+    }));
+    let mut batch = random_batch(256, obs, act, 2);
+    for row in batch.obs.chunks_exact_mut(obs).chain(batch.next_obs.chunks_exact_mut(obs)) {
+        for v in &mut row[obs - design..] {
+            *v = 1.4 + 0.6 * *v;
+        }
+    }
+    let rounds = 5;
+    let each = a.seconds / rounds as f64;
+    let mut updates = [Vec::new(), Vec::new()];
+    for _ in 0..rounds {
+        for (k, agent) in agents.iter_mut().enumerate() {
+            updates[k].push(rate(each, || {
+                agent.update(&batch);
+            }));
+        }
+    }
+    let suffix = if a.precision == Precision::Bf16 { "-bf16" } else { "" };
+    for (k, config) in ["population-update-fear", "population-update-conservative-5x0.1"].into_iter().enumerate() {
+        let v = &updates[k];
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+        let l = serde_json::json!({"bench": "conservative_cost", "config": format!("{config}{suffix}"),
+            "value": (mean * 1000.0).round() / 1000.0, "sd": (sd * 1000.0).round() / 1000.0, "n": v.len(),
+            "unit": "updates/s", "impl": "coadapt"});
+        coadapt_log::print_stdout_line(&l.to_string());
+    }
     Ok(())
 }
 
