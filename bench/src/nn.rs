@@ -6,7 +6,7 @@
 
 use coadapt_core::{Batch, rng};
 use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
-use coadapt_learner::conservative::{Conservative, ConservativeConfig};
+use coadapt_learner::conservative::ConservativeConfig;
 use coadapt_learner::{Sac, SacConfig};
 use coadapt_nn::Precision;
 use rand::Rng;
@@ -89,18 +89,21 @@ fn ensemble_cost(a: &NnOptions) -> Result<(), AppError> {
             passes[k].push(rate(each, || f.evaluate(&designs, QMode::MeanMinusKStd(2.0), a.chunk_rows, &mut out, &mut ws)));
         }
     }
-    let line = |config: &str, v: &[f64], unit: &str| {
-        let mean = v.iter().sum::<f64>() / v.len() as f64;
-        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
-        let l = serde_json::json!({"bench": "ensemble_cost", "config": config, "value": (mean * 1000.0).round() / 1000.0,
-            "sd": (sd * 1000.0).round() / 1000.0, "n": v.len(), "unit": unit, "impl": "coadapt"});
-        coadapt_log::print_stdout_line(&l.to_string());
-    };
-    line("population-update-2-critics", &updates[0], "updates/s");
-    line("population-update-5-critics", &updates[1], "updates/s");
-    line("pessimistic-objective-2-critics-22400rows", &passes[0], "passes/s");
-    line("pessimistic-objective-5-critics-22400rows", &passes[1], "passes/s");
+    rounds_line("ensemble_cost", "population-update-2-critics", &updates[0], "updates/s");
+    rounds_line("ensemble_cost", "population-update-5-critics", &updates[1], "updates/s");
+    rounds_line("ensemble_cost", "pessimistic-objective-2-critics-22400rows", &passes[0], "passes/s");
+    rounds_line("ensemble_cost", "pessimistic-objective-5-critics-22400rows", &passes[1], "passes/s");
     Ok(())
+}
+
+/// One JSON line for a figure timed in interleaved rounds: the mean and sample sd of the rounds'
+/// rates `v`, n = the rounds.
+fn rounds_line(bench: &str, config: &str, v: &[f64], unit: &str) {
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+    let l = serde_json::json!({"bench": bench, "config": config, "value": (mean * 1000.0).round() / 1000.0,
+        "sd": (sd * 1000.0).round() / 1000.0, "n": v.len(), "unit": unit, "impl": "coadapt"});
+    coadapt_log::print_stdout_line(&l.to_string());
 }
 
 /// What the conservative term (`[learner.conservative]`, COMs) costs, both sides in one run on
@@ -113,14 +116,7 @@ fn conservative_cost(a: &NnOptions) -> Result<(), AppError> {
     let cfg = SacConfig { hidden: vec![200; 3], auto_alpha: true, precision: a.precision, ..SacConfig::default() };
     let mut agents = [Sac::new(obs, act, cfg.clone(), 1)?, Sac::new(obs, act, cfg, 1)?];
     let c = ConservativeConfig { weight: 1.0, ..ConservativeConfig::default() };
-    agents[1].set_conservative(Some(Conservative {
-        weight: c.weight,
-        steps: c.steps,
-        step: c.step,
-        design: obs - design..obs,
-        low: vec![0.8; design],
-        high: vec![2.0; design],
-    }));
+    agents[1].set_conservative(c.on_box(obs - design..obs, &[0.8; 6], &[2.0; 6]));
     let mut batch = random_batch(256, obs, act, 2);
     for row in batch.obs.chunks_exact_mut(obs).chain(batch.next_obs.chunks_exact_mut(obs)) {
         for v in &mut row[obs - design..] {
@@ -139,13 +135,7 @@ fn conservative_cost(a: &NnOptions) -> Result<(), AppError> {
     }
     let suffix = if a.precision == Precision::Bf16 { "-bf16" } else { "" };
     for (k, config) in ["population-update-fear", "population-update-conservative-5x0.1"].into_iter().enumerate() {
-        let v = &updates[k];
-        let mean = v.iter().sum::<f64>() / v.len() as f64;
-        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
-        let l = serde_json::json!({"bench": "conservative_cost", "config": format!("{config}{suffix}"),
-            "value": (mean * 1000.0).round() / 1000.0, "sd": (sd * 1000.0).round() / 1000.0, "n": v.len(),
-            "unit": "updates/s", "impl": "coadapt"});
-        coadapt_log::print_stdout_line(&l.to_string());
+        rounds_line("conservative_cost", &format!("{config}{suffix}"), &updates[k], "updates/s");
     }
     Ok(())
 }

@@ -59,6 +59,19 @@ impl ConservativeConfig {
         }
         Ok(())
     }
+
+    /// The term for critics whose input rows hold the design in columns `design`, over the box
+    /// `low`..`high`; `None` at weight 0 (FEAR's critic).
+    pub fn on_box(&self, design: Range<usize>, low: &[f32], high: &[f32]) -> Option<Conservative> {
+        (self.weight > 0.0).then(|| Conservative {
+            weight: self.weight,
+            steps: self.steps,
+            step: self.step,
+            design,
+            low: low.to_vec(),
+            high: high.to_vec(),
+        })
+    }
 }
 
 /// The term as one critic applies it: the settings and where the design sits in a critic's

@@ -132,6 +132,7 @@ fn non_finite_loss(l: &SacLosses) -> Option<String> {
         ("alpha loss", l.alpha),
         ("log pi", l.log_pi),
         ("ensemble heads' loss", l.heads),
+        ("conservative gap", l.conservative_gap),
     ]
     .into_iter()
     .find(|(_, v)| !v.is_finite())
@@ -227,24 +228,12 @@ impl FearLearner {
     /// ([`FearLearnerConfig::conservative`]) searches over. With its weight above 0 the
     /// population critics train with the term from here on; with 0 this changes nothing.
     pub fn set_design_box(&mut self, low: &[f32], high: &[f32]) {
-        let c = &self.cfg.conservative;
-        if c.weight <= 0.0 {
-            self.population.set_conservative(None);
-            return;
-        }
-        // The spec's observation is state then design, so this holds for every robot.
-        let Some(state_dim) = self.pop_replay.obs_dim().checked_sub(low.len()) else {
-            self.population.set_conservative(None);
-            return;
-        };
-        self.population.set_conservative(Some(crate::conservative::Conservative {
-            weight: c.weight,
-            steps: c.steps,
-            step: c.step,
-            design: state_dim..state_dim + low.len(),
-            low: low.to_vec(),
-            high: high.to_vec(),
-        }));
+        // The spec's observation is state then design (its conformance suite checks it), so the
+        // design is the observation's last `low.len()` columns.
+        let obs = self.pop_replay.obs_dim();
+        debug_assert!(low.len() <= obs, "a design wider than the observation");
+        let design = obs.saturating_sub(low.len())..obs;
+        self.population.set_conservative(self.cfg.conservative.on_box(design, low, high));
     }
 
     /// Starts design `index`: the individual networks become copies of the population ones

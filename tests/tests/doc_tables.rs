@@ -62,6 +62,19 @@ fn a_changed_digit_in_a_generated_table_is_caught() {
     assert!(text.contains("disagree with the archive"), "unexpected output:\n{text}");
 }
 
+/// Runs `python3 scripts/NAME ARGS...` from the root; its stdout and stderr, asserting it succeeded.
+fn script(name: &str, args: &[&std::ffi::OsStr]) -> String {
+    let o = Command::new("python3")
+        .arg(root().join("scripts").join(name))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .unwrap_or_else(|e| panic!("running python3 scripts/{name}: {e}"));
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{name} failed:\n{text}");
+    text
+}
+
 /// Writes a finished benchmark run (designs.csv with the given best evaluation returns after two
 /// initial designs, summary.json, one episode row) under `root/name`.
 fn synthetic_run(root: &Path, name: &str, kinds: &[&str], best: &[f64]) {
@@ -95,16 +108,11 @@ fn the_trend_table_removes_the_random_runs_time_trend_pair_by_pair() {
         &["initial", "initial", "exploit", "exploit", "exploit", "exploit"],
         &[50.0, 60.0, 100.0, 140.0, 110.0, 160.0],
     );
-    let o = Command::new("python3")
-        .arg(root().join("scripts/design_bench_report.py"))
-        .arg(&dir)
-        .args(["--robots", "hc", "--tables", "within,trend"])
-        .current_dir(root())
-        .output()
-        .expect("running python3 scripts/design_bench_report.py");
+    let text = script(
+        "design_bench_report.py",
+        &[dir.as_os_str(), "--robots".as_ref(), "hc".as_ref(), "--tables".as_ref(), "within,trend".as_ref()],
+    );
     let _ = std::fs::remove_dir_all(&dir);
-    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "design_bench_report failed:\n{text}");
     // The plain within-run row, then the adjusted one.
     assert!(text.contains("| fear | 1 | 2 | -45.0 ± 21.2 | 0/2 |"), "within row:\n{text}");
     // The trend row; then the chosen design at slot 4 against the mean of its random
@@ -122,16 +130,12 @@ fn the_reference_report_summarises_a_run_design_by_design() {
     let _ = std::fs::remove_dir_all(&dir);
     let k = ["initial", "initial", "exploit", "explore", "exploit", "explore"];
     synthetic_run(&dir, "hc-reference-seed1", &k, &[50.0, 70.0, 100.0, 130.0, 160.0, 90.0]);
-    let o = Command::new("python3")
-        .arg(root().join("scripts/reference_report.py"))
-        .arg(dir.join("hc-reference-seed1"))
-        .args(["--initial", "2", "--tables", "designs,summary"])
-        .current_dir(root())
-        .output()
-        .expect("running python3 scripts/reference_report.py");
+    let run = dir.join("hc-reference-seed1");
+    let text = script(
+        "reference_report.py",
+        &[run.as_os_str(), "--initial".as_ref(), "2".as_ref(), "--tables".as_ref(), "designs,summary".as_ref()],
+    );
     let _ = std::fs::remove_dir_all(&dir);
-    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "reference_report failed:\n{text}");
     assert!(text.contains("| 4 | exploit | 1.00 1.00 1.00 1.00 1.00 1.00 | 16 | 160.0 | - | 0/6 |"), "designs row:\n{text}");
     assert!(
         text.contains(
