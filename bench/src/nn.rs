@@ -2,7 +2,7 @@
 //! objective's forward throughput (700 particles over 32, optionally 256, start states), and
 //! what the population critics' ensemble (`learner.population-critics`) costs: FEAR's
 //! population update and the pessimistic design objective with 2 critics against 5; and what
-//! the conservative term (`[learner.conservative]`) costs a population update.
+//! the conservative design critic (`[learner.conservative]`) costs a population update.
 
 use coadapt_core::{Batch, rng};
 use coadapt_design_optimizer::{DesignObjective, ObjectiveWorkspace, QMode};
@@ -106,15 +106,15 @@ fn rounds_line(bench: &str, config: &str, v: &[f64], unit: &str) {
     coadapt_log::print_stdout_line(&l.to_string());
 }
 
-/// What the conservative term (`[learner.conservative]`, COMs) costs, both sides in one run on
-/// the same thread, interleaved as [`ensemble_cost`]: FEAR's population update (3 x 200
-/// networks, HalfCheetah's 17 + 6 inputs, batch 256) without the term and with it at its
-/// default reach (5 steps of 0.1 box widths over the box [0.8, 2]^6). One line per side: mean
-/// and sample sd of the rounds' rates, n = 5.
+/// What the conservative design critic (`[learner.conservative]`, COMs' term on one ensemble
+/// head) costs, both sides in one run on the same thread, interleaved as [`ensemble_cost`]:
+/// FEAR's population update (3 x 200 networks, HalfCheetah's 17 + 6 inputs, batch 256) alone
+/// and with one head trained with the term at its default reach (5 steps of 0.1 box widths over
+/// the box [0.8, 2]^6). One line per side: mean and sample sd of the rounds' rates, n = 5.
 fn conservative_cost(a: &NnOptions) -> Result<(), AppError> {
     let (obs, act, design) = (23, 6, 6);
     let cfg = SacConfig { hidden: vec![200; 3], auto_alpha: true, precision: a.precision, ..SacConfig::default() };
-    let mut agents = [Sac::new(obs, act, cfg.clone(), 1)?, Sac::new(obs, act, cfg, 1)?];
+    let mut agents = [Sac::new(obs, act, cfg.clone(), 1)?, Sac::with_heads(obs, act, cfg, 1, 1)?];
     let c = ConservativeConfig { weight: 1.0, ..ConservativeConfig::default() };
     agents[1].set_conservative(c.on_box(obs - design..obs, &[0.8; 6], &[2.0; 6]));
     let mut batch = random_batch(256, obs, act, 2);
@@ -134,7 +134,7 @@ fn conservative_cost(a: &NnOptions) -> Result<(), AppError> {
         }
     }
     let suffix = if a.precision == Precision::Bf16 { "-bf16" } else { "" };
-    for (k, config) in ["population-update-fear", "population-update-conservative-5x0.1"].into_iter().enumerate() {
+    for (k, config) in ["population-update-fear", "population-update-conservative-head-5x0.1"].into_iter().enumerate() {
         rounds_line("conservative_cost", &format!("{config}{suffix}"), &updates[k], "updates/s");
     }
     Ok(())

@@ -21,8 +21,8 @@ use coadapt_design_service::ServeConfig;
 /// The values are the thesis's Eq. 5.6 with the population networks of the run's newest
 /// snapshot, averaged over a batch of `schedule.start-state-batch` start states drawn from the
 /// run's start-state buffer (the same draw every time the run is served), with the run's
-/// `optimizer.q` (Q1, min of twin, or pessimistic). Serves until Ctrl-C or SIGTERM; the address
-/// is printed on stdout as `grpc://ADDR`.
+/// `optimizer.q` (Q1, min of twin, pessimistic, or the heads beyond the twin). Serves until
+/// Ctrl-C or SIGTERM; the address is printed on stdout as `grpc://ADDR`.
 ///
 /// How far to trust a difference between two scores: the README's "Reading a score" gives the
 /// critic's calibration on the design benchmark per robot (how often the body it preferred

@@ -334,6 +334,12 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
     let conservative = dir.join("conservative.toml");
     std::fs::write(&conservative, format!("{tiny}\n[learner.conservative]\nweight = 1.0\nstep = 0.0\n")).unwrap();
     let conservative = conservative.to_str().unwrap();
+    let no_head = dir.join("no-head.toml");
+    std::fs::write(&no_head, format!("{tiny}\n[learner.conservative]\nweight = 1.0\n")).unwrap();
+    let no_head = no_head.to_str().unwrap();
+    let heads = dir.join("heads.toml");
+    std::fs::write(&heads, tiny.replace("[optimizer]\n", "[optimizer]\nq = \"heads\"\n")).unwrap();
+    let heads = heads.to_str().unwrap();
     let good = coadapt_test_support::workspace_file("configs/half-cheetah-tiny.toml");
     let good = good.to_str().unwrap();
     let search = coadapt_test_support::workspace_file("configs/search/planar-groups1.toml");
@@ -345,6 +351,11 @@ fn a_setting_that_cannot_work_exits_78_from_any_role() {
         (v(&["run", "--config", bad, "--transport", "in-process"]), "optimizer.pessimism: -1 is not a finite number >= 0"),
         (v(&["run", "--config", critics, "--transport", "in-process"]), "learner.population-critics: 1 is fewer than 2"),
         (v(&["run", "--config", conservative, "--transport", "in-process"]), "learner.conservative.step: 0 is not in (0, 1] box widths"),
+        (v(&["run", "--config", no_head, "--transport", "in-process"]), "learner.conservative.weight: the term trains the ensemble heads"),
+        (
+            v(&["run", "--config", heads, "--transport", "in-process"]),
+            "optimizer.q: \"heads\" scores designs with the critics beyond the twin",
+        ),
         // The supervisor stops the fleet naming the role; the role's log names the setting.
         (
             v(&["run", "--config", bad, "--transport", "shm", "--actors", "1"]),

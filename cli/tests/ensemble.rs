@@ -1,7 +1,8 @@
 //! The population critic's ensemble (`learner.population-critics`, issue 28 section 3) through
-//! the binary, over shared memory: the heads reach the design optimiser (its pessimistic choice
-//! differs from the twin's alone, while the episodes before it are the plain run's, episode for
-//! episode) and the run ends as any run does.
+//! the binary, over shared memory: the heads reach the design optimiser (its pessimistic choice,
+//! and the conservative heads' choice under `q = "heads"`, differ from the twin's alone, while
+//! the episodes before it are the plain run's, episode for episode) and the run ends as any run
+//! does.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // tests: a panic is the failure report
 
@@ -10,11 +11,12 @@ use std::process::Command;
 
 const TINY: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/half-cheetah-tiny.toml");
 
-fn run(dir: &Path, name: &str, learner_extra: &str) -> (Vec<String>, Vec<String>) {
+fn run(dir: &Path, name: &str, learner_extra: &str, q: &str) -> (Vec<String>, Vec<String>) {
     let tiny = std::fs::read_to_string(TINY).unwrap();
     let cfg = dir.join(format!("{name}.toml"));
-    let text =
-        tiny.replace("[learner]\n", &format!("[learner]\n{learner_extra}")).replace("[optimizer]\n", "[optimizer]\nq = \"pessimistic\"\n");
+    let text = tiny
+        .replace("[learner]\n", &format!("[learner]\n{learner_extra}"))
+        .replace("[optimizer]\n", &format!("[optimizer]\nq = \"{q}\"\n"));
     std::fs::write(&cfg, text).unwrap();
     let out = dir.join(name);
     let o = Command::new(env!("CARGO_BIN_EXE_coadapt"))
@@ -38,8 +40,8 @@ fn episode_rows(rows: &[String]) -> Vec<String> {
 fn ensemble_heads_reach_the_optimiser_and_change_its_pessimistic_choice_only() {
     let dir = coadapt_test_support::scratch("cli", "ensemble");
     std::fs::create_dir_all(&dir).unwrap();
-    let (twin_designs, twin_eps) = run(&dir, "twin", "");
-    let (ens_designs, ens_eps) = run(&dir, "ensemble", "population-critics = 5\n");
+    let (twin_designs, twin_eps) = run(&dir, "twin", "", "pessimistic");
+    let (ens_designs, ens_eps) = run(&dir, "ensemble", "population-critics = 5\n", "pessimistic");
     assert_eq!(ens_designs.len(), 5, "header and four designs: {ens_designs:?}");
     // The initial designs and their episodes are the plain run's: the heads only watch.
     assert_eq!(twin_designs[..3], ens_designs[..3]);
@@ -50,4 +52,23 @@ fn ensemble_heads_reach_the_optimiser_and_change_its_pessimistic_choice_only() {
     assert_ne!(design(&twin_designs), design(&ens_designs), "the heads did not reach the optimiser");
     let predicted: f64 = ens_designs[3].split(',').nth(6).unwrap().parse().unwrap();
     assert!(predicted.is_finite(), "{}", ens_designs[3]);
+}
+
+/// COMs' conservative term on one head beyond the twin, which alone scores designs
+/// (`q = "heads"`): everything before the first chosen design is FEAR's, episode for episode
+/// (the head acts on nothing) and the chosen design is the head's.
+#[test]
+fn a_conservative_head_scores_the_designs_and_changes_nothing_else() {
+    let dir = coadapt_test_support::scratch("cli", "conservative-head");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (fear_designs, fear_eps) = run(&dir, "fear", "", "q1");
+    let (cons_designs, cons_eps) = run(&dir, "conservative", "population-critics = 3\nconservative = { weight = 1.0 }\n", "heads");
+    assert_eq!(cons_designs.len(), 5, "header and four designs: {cons_designs:?}");
+    assert_eq!(fear_designs[..3], cons_designs[..3]);
+    let initial_episodes = 2 * 3 + 1; // header + 2 initial designs x 3 episodes
+    assert_eq!(episode_rows(&fear_eps)[..initial_episodes], episode_rows(&cons_eps)[..initial_episodes]);
+    let design = |rows: &[String]| rows[3].split(',').nth(2).unwrap().to_string();
+    assert_ne!(design(&fear_designs), design(&cons_designs), "the head did not reach the optimiser");
+    let predicted: f64 = cons_designs[3].split(',').nth(6).unwrap().parse().unwrap();
+    assert!(predicted.is_finite(), "{}", cons_designs[3]);
 }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use coadapt_core::EnvSpec;
-use coadapt_design_optimizer::role::{ExploitMethod, ExploreMethod, OptimizerConfig};
+use coadapt_design_optimizer::role::{ExploitMethod, ExploreMethod, OptimizerConfig, QModeConfig};
 use coadapt_fleet::{FleetConfig, TransportKind};
 use coadapt_learner::coadapt::ScheduleConfig;
 use coadapt_learner::fear::FearLearnerConfig;
@@ -221,6 +221,13 @@ pub fn check(cfg: &RunConfig, spec: &EnvSpec) -> crate::Result<()> {
     }
     for (i, d) in cfg.schedule.initial_designs.iter().enumerate() {
         spec.design.check("design", d).map_err(|e| crate::AppError::Config(format!("schedule.initial-designs[{i}]: {e}")))?;
+    }
+    if cfg.optimizer.q == QModeConfig::Heads && cfg.learner.population_critics < 3 {
+        crate::error::bail_config!(
+            "optimizer.q: \"heads\" scores designs with the critics beyond the twin and learner.population-critics = {} leaves none; \
+             set learner.population-critics = 3 or more (with [learner.conservative] weight above 0 they are conservative design critics)",
+            cfg.learner.population_critics
+        );
     }
     cfg.flow.lease()?;
     cfg.schedule.poll_interval()?;

@@ -6,8 +6,6 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use coadapt_design_optimizer::objective::QMode;
-use coadapt_design_optimizer::role::QModeConfig;
 use coadapt_design_service::{DesignModel, HistoryRow, StaticSource};
 use coadapt_learner::fear::{ActingPolicy, FearLearner};
 use coadapt_learner::{coadapt, networks, run_dir, snapshot};
@@ -27,11 +25,7 @@ pub fn design_model(
     let hidden = &cfg.learner.sac.hidden;
     let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), hidden)?;
     let critic = networks::critic(spec.obs_dim(), spec.act_dim(), hidden)?;
-    let mode = match cfg.optimizer.q {
-        QModeConfig::Q1 => QMode::First,
-        QModeConfig::MinOfTwin => QMode::MinOfTwin,
-        QModeConfig::Pessimistic => QMode::MeanMinusKStd(cfg.optimizer.pessimism),
-    };
+    let mode = cfg.optimizer.q.mode(cfg.optimizer.pessimism);
     // Every critic always: Q1 alone scores under `q1`, min-of-twin takes the first two, and
     // all of them give each score's disagreement (over the ensemble when the run has one).
     let thetas = critics;

@@ -24,14 +24,20 @@ pub enum QMode {
     /// different initialisations, so they agree where data constrain them and drift apart
     /// where the critic extrapolates: far from the designs tried, where Q1 alone overestimates.
     MeanMinusKStd(f32),
+    /// The mean of the critics beyond the twin (the third on): ensemble heads that regress on
+    /// the twin's target and, with the learner's conservative term on, critics trained to be
+    /// low where their own ascent over designs goes (a design critic that acts on nothing).
+    Heads,
 }
 
 impl QMode {
-    fn critics(self) -> usize {
+    /// Which of `n` loaded critics the mode reads.
+    fn critics(self, n: usize) -> std::ops::Range<usize> {
         match self {
-            QMode::First => 1,
-            QMode::MinOfTwin => 2,
-            QMode::MeanMinusKStd(_) => usize::MAX,
+            QMode::First => 0..1.min(n),
+            QMode::MinOfTwin => 0..2.min(n),
+            QMode::MeanMinusKStd(_) => 0..n,
+            QMode::Heads => 2.min(n)..n,
         }
     }
 }
@@ -288,6 +294,22 @@ impl DesignObjective {
         self.critics.len()
     }
 
+    /// Whether `mode` has critics to read here: [`QMode::Heads`] needs a critic beyond the twin
+    /// (scoring with none would score every design NaN).
+    pub fn check_mode(&self, mode: QMode) -> Result<(), ObjectiveError> {
+        if mode.critics(self.critics.len()).is_empty() {
+            return Err(ObjectiveError::Shape {
+                what: "critic parameters",
+                why: format!(
+                    "the objective reads the critics beyond the twin (optimizer.q = \"heads\") and the learner sent {} critics, none beyond \
+                     the twin (learner.population-critics = 2)",
+                    self.critics.len()
+                ),
+            });
+        }
+        Ok(())
+    }
+
     /// How far the critics disagree about each design: per design the mean over the start
     /// states of their standard deviation over the heads (population form: for the twin
     /// `|Q1 - Q2| / 2`, the two heads are that far either side of their mean), into `out`
@@ -326,16 +348,23 @@ impl DesignObjective {
             *a = m.tanh();
         }
         q.resize(rows, 0.0);
-        let n_critics = mode.critics().min(self.critics.len());
-        // Over more than two heads, `q` holds the running mean and `q_m2` Welford's sum of
-        // squared deviations (a two-pass-free sd that keeps its digits when Q is large); the
-        // twin keeps its closed form, so its scores are the ones archived runs made.
-        let ensemble = matches!(mode, QMode::MeanMinusKStd(_)) && n_critics > 2;
+        let read = mode.critics(self.critics.len());
+        if read.is_empty() {
+            // `check_mode` refuses this before a search; never a silent score.
+            q.fill(f32::NAN);
+            return;
+        }
+        let n_critics = read.len();
+        // Over more than two heads (and for the heads' mean), `q` holds the running mean and
+        // `q_m2` Welford's sum of squared deviations (a two-pass-free sd that keeps its digits
+        // when Q is large); the twin keeps its closed form, so its scores are the ones archived
+        // runs made.
+        let ensemble = (matches!(mode, QMode::MeanMinusKStd(_)) && n_critics > 2) || mode == QMode::Heads;
         if ensemble {
             q_m2.clear();
             q_m2.resize(rows, 0.0);
         }
-        for (i, split) in self.critics.iter().take(n_critics).enumerate() {
+        for (i, (split, params)) in self.critics[read.clone()].iter().zip(&self.critic_tail_params[read]).enumerate() {
             h_critic.resize(rows * split.width, 0.0);
             // W_a a for every row, then the per-state and per-design parts on top.
             matmul(
@@ -347,10 +376,10 @@ impl DesignObjective {
                 Par::Seq,
             );
             self.first_layer(split, designs, h_critic, design_part, true);
-            let qi = self.critic_tail.forward(&self.critic_tail_params[i], h_critic, rows, act_q);
+            let qi = self.critic_tail.forward(params, h_critic, rows, act_q);
             match (i, mode) {
                 (0, _) => q.copy_from_slice(qi),
-                (_, QMode::MeanMinusKStd(_)) if ensemble => {
+                (_, QMode::MeanMinusKStd(_) | QMode::Heads) if ensemble => {
                     let c = (i + 1) as f32;
                     for ((m, m2), x) in q.iter_mut().zip(q_m2.iter_mut()).zip(qi) {
                         let delta = x - *m;

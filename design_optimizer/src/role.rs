@@ -101,6 +101,22 @@ pub enum QModeConfig {
     /// twin, and with `learner.population-critics` above 2 the ensemble heads too (a lower
     /// confidence bound over an ensemble).
     Pessimistic,
+    /// The mean of the critics beyond the twin (`learner.population-critics` above 2): with
+    /// `[learner.conservative]` on, critics trained to be low where their own ascent over
+    /// designs goes, which score designs and act on nothing (beyond the thesis, after COMs).
+    Heads,
+}
+
+impl QModeConfig {
+    /// The objective's mode, with `pessimism` the k of `pessimistic`.
+    pub fn mode(self, pessimism: f32) -> QMode {
+        match self {
+            QModeConfig::Q1 => QMode::First,
+            QModeConfig::MinOfTwin => QMode::MinOfTwin,
+            QModeConfig::Pessimistic => QMode::MeanMinusKStd(pessimism),
+            QModeConfig::Heads => QMode::Heads,
+        }
+    }
 }
 
 /// The optimiser's settings; defaults are the reference's.
@@ -112,7 +128,7 @@ pub struct OptimizerConfig {
     pub exploit: ExploitMethod,
     /// `random` or `novelty`.
     pub explore: ExploreMethod,
-    /// `q1` (the reference), `min-of-twin` or `pessimistic`.
+    /// `q1` (the reference), `min-of-twin`, `pessimistic` or `heads`.
     pub q: QModeConfig,
     /// k of `q = "pessimistic"`: the objective is mean - k sd over the critics' heads.
     pub pessimism: f32,
@@ -307,11 +323,7 @@ impl<'a> Optimizer<'a> {
 
     /// How the objective combines the critics (`optimizer.q`).
     pub(crate) fn q_mode(&self) -> QMode {
-        match self.cfg.q {
-            QModeConfig::Q1 => QMode::First,
-            QModeConfig::MinOfTwin => QMode::MinOfTwin,
-            QModeConfig::Pessimistic => QMode::MeanMinusKStd(self.cfg.pessimism),
-        }
+        self.cfg.q.mode(self.cfg.pessimism)
     }
 
     pub(crate) fn spec_bounds(&self) -> &BoxSpace {
@@ -324,9 +336,10 @@ impl<'a> Optimizer<'a> {
             QModeConfig::MinOfTwin => vec![&w.q1, &w.q2],
             // Every head the learner sends: the twin, and the ensemble heads of
             // `learner.population-critics` when there are more.
-            QModeConfig::Pessimistic => [&w.q1, &w.q2].into_iter().chain(&w.heads).map(Vec::as_slice).collect(),
+            // (`heads` reads them from the third on.)
+            QModeConfig::Pessimistic | QModeConfig::Heads => [&w.q1, &w.q2].into_iter().chain(&w.heads).map(Vec::as_slice).collect(),
         };
-        DesignObjective::new(
+        let objective = DesignObjective::new(
             &self.spec.policy,
             &w.policy,
             &self.spec.critic,
@@ -334,7 +347,9 @@ impl<'a> Optimizer<'a> {
             start_states,
             self.spec.design_at,
             self.spec.bounds.dim(),
-        )
+        )?;
+        objective.check_mode(self.q_mode())?;
+        Ok(objective)
     }
 
     /// The counters for `/metrics`.

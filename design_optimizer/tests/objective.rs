@@ -44,6 +44,7 @@ fn batched_objective_equals_the_per_particle_definition() {
                     let std = (((v1 - mean).powi(2) + (v2 - mean).powi(2)) / 2.0).sqrt();
                     mean - k * std
                 }
+                QMode::Heads => unreachable!("two critics have no heads beyond the twin"),
             };
         }
         total / n_states as f32
@@ -121,7 +122,7 @@ fn ensemble_heads_score_the_mean_minus_k_sd_over_every_head() {
     let twin = DesignObjective::new(&policy, &phi, &critic, &thetas[..2], &start, design_at, design_dim).unwrap();
 
     // Per design: (mean over states of mean - k sd, mean over states of sd), in f64.
-    let naive = |xi: &[f32], k: f64| -> (f64, f64) {
+    let naive_over = |hs: &[Vec<f32>], xi: &[f32], k: f64| -> (f64, f64) {
         let (mut lcb, mut sd_total) = (0.0, 0.0);
         for s in start.chunks_exact(obs) {
             let mut o = s.to_vec();
@@ -131,7 +132,7 @@ fn ensemble_heads_score_the_mean_minus_k_sd_over_every_head() {
             squashed::mean_action(policy.forward(&phi, &o, 1, &mut a_pi), act, &mut a);
             let x: Vec<f32> = o.iter().chain(&a).copied().collect();
             let mut aq = critic.activations(1);
-            let v: Vec<f64> = heads.iter().map(|q| f64::from(critic.forward(q, &x, 1, &mut aq)[0])).collect();
+            let v: Vec<f64> = hs.iter().map(|q| f64::from(critic.forward(q, &x, 1, &mut aq)[0])).collect();
             let mean = v.iter().sum::<f64>() / v.len() as f64;
             let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
             lcb += mean - k * sd;
@@ -139,6 +140,7 @@ fn ensemble_heads_score_the_mean_minus_k_sd_over_every_head() {
         }
         (lcb / n_states as f64, sd_total / n_states as f64)
     };
+    let naive = |xi: &[f32], k: f64| naive_over(&heads, xi, k);
     let mut spread_seen = 0.0f64;
     for (k, chunk_rows, cores) in [(2.0, 12, 2), (0.0, 64, 1), (1.0, 4, 3)] {
         let mut out = vec![0.0; particles];
@@ -163,6 +165,23 @@ fn ensemble_heads_score_the_mean_minus_k_sd_over_every_head() {
         f.evaluate(&designs, mode, 64, &mut a, &mut [ObjectiveWorkspace::default()]);
         twin.evaluate(&designs, mode, 64, &mut b, &mut [ObjectiveWorkspace::default()]);
         assert_eq!(a, b, "{mode:?}");
+    }
+    // `Heads` is the mean of the critics beyond the twin (the conservative design critics),
+    // from one head on; with none beyond the twin the objective refuses the mode.
+    for n in [3, 5] {
+        let g = DesignObjective::new(&policy, &phi, &critic, &thetas[..n], &start, design_at, design_dim).unwrap();
+        g.check_mode(QMode::Heads).unwrap();
+        let mut out = vec![0.0; particles];
+        g.evaluate(&designs, QMode::Heads, 12, &mut out, &mut vec![ObjectiveWorkspace::default(); 2]);
+        for (p, xi) in designs.chunks_exact(design_dim).enumerate() {
+            let (expect, _) = naive_over(&heads[2..n], xi, 0.0);
+            assert!((f64::from(out[p]) - expect).abs() < 2e-3, "{n} critics, particle {p}: {} vs {expect}", out[p]);
+        }
+    }
+    let e = twin.check_mode(QMode::Heads).unwrap_err().to_string();
+    assert!(e.contains("optimizer.q") && e.contains("population-critics"), "{e}");
+    for mode in [QMode::First, QMode::MinOfTwin, QMode::MeanMinusKStd(1.0)] {
+        twin.check_mode(mode).unwrap();
     }
 }
 

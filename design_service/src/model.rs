@@ -24,8 +24,8 @@ pub struct DesignModel {
 }
 
 impl DesignModel {
-    /// `policy`/`phi` the population policy, `critic`/`thetas` its critic(s) (Q1, or Q1 and
-    /// Q2 for `mode`s that use both), `start_states` `n x obs_dim`, the design in the
+    /// `policy`/`phi` the population policy, `critic`/`thetas` its critic(s) (Q1, Q1 and Q2,
+    /// then any ensemble heads, as many as `mode` reads), `start_states` `n x obs_dim`, the design in the
     /// observation columns `design_at..`.
     pub fn new(
         robot: String,
@@ -46,6 +46,7 @@ impl DesignModel {
             });
         }
         let objective = DesignObjective::new(policy, phi, critic, thetas, start_states, design_at, bounds.dim())?;
+        objective.check_mode(mode)?;
         Ok(Self { robot, names, bounds, weights_version, run_id, objective, mode })
     }
 

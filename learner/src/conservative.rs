@@ -1,19 +1,25 @@
-//! A conservative population critic (beyond the thesis, issue 28 section 3), after COMs
+//! A conservative design critic (beyond the thesis, issue 28 section 3), after COMs
 //! (Trabucco, Kumar, Geng, Levine, "Conservative Objective Models for Effective Offline
 //! Model-Based Optimization", ICML 2021): a model searched for its best input is driven to
 //! inputs far from the data where it is wrong and high. COMs trains the model to be low there:
 //!
-//!   L(theta) = L_Bellman(theta) + lambda (E_{x ~ mu_theta}[f_theta(x)] - E_{x ~ D}[f_theta(x)]),
+//!   L(theta) = L_regression(theta) + lambda (E_{x ~ mu_theta}[f_theta(x)] - E_{x ~ D}[f_theta(x)]),
 //!
 //! where mu_theta is where a few steps of gradient ascent on f_theta from the data's inputs end
-//! (held fixed in the gradient). For FEAR the model is the population critic Q(s, a, xi) and the
+//! (held fixed in the gradient). For FEAR the model is a population critic Q(s, a, xi) and the
 //! search is over the design xi: from each batch row `(s, a, xi)` the design alone climbs
 //! `steps` normalised steps of `step` box widths uphill on Q (clamped to the box), giving
 //! `xi'`; the critic's gradient gains lambda (grad mean Q(s, a, xi') - grad mean Q(s, a, xi)).
 //! So the critic is pushed down where its own search would go and up on the bodies trained,
-//! which is what the design optimiser's PSO over Q (Eq. 5.6) exploits. The term acts only in
-//! training (the search and the objective are FEAR's), and only on the population critics
-//! when `learner.conservative.weight` is above 0.
+//! which is what the design optimiser's PSO over Q (Eq. 5.6) exploits.
+//!
+//! The term trains the population pair's ensemble heads only (`learner.population-critics`
+//! above 2), which regress on the twin's Bellman target and which the optimiser's
+//! `q = "heads"` scores designs with; the twin, the policy and every action stay FEAR's. A
+//! first form put it on the twin critics themselves (runs `*-conservative`, EXPERIMENTS 5.13):
+//! there the term's push entered the critics' own bootstrapped targets (compounding to about
+//! lambda / (2 (1 - gamma)) in Q) and the policies trained on those critics learnt worse from
+//! the first body on. A head with the twin's target carries the push once and acts on nothing.
 
 use std::ops::Range;
 
@@ -22,7 +28,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::networks::resize;
 
-/// `[learner.conservative]`: the conservative term on the population critics; off by default.
+/// `[learner.conservative]`: the conservative term on the population ensemble heads; off by
+/// default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct ConservativeConfig {

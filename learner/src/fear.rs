@@ -57,8 +57,9 @@ pub struct FearLearnerConfig {
     /// the mean minus `pessimism` sd over all of them, and the design service reports their
     /// disagreement (beyond the thesis: issue 28's ensemble lower confidence bound).
     pub population_critics: usize,
-    /// `[learner.conservative]`: COMs' conservative term on the population critics (beyond the
-    /// thesis, issue 28; off by default): [`crate::conservative`].
+    /// `[learner.conservative]`: COMs' conservative term on the population pair's ensemble heads
+    /// (beyond the thesis, issue 28; off by default; needs `population-critics` above 2), which
+    /// the design optimiser's `q = "heads"` scores designs with: [`crate::conservative`].
     pub conservative: crate::conservative::ConservativeConfig,
     /// What a NaN or infinite loss or parameter does: `stop` the run (naming the update), or
     /// `roll-back` both network pairs (and their optimisers and generator) to where they were
@@ -105,7 +106,15 @@ impl FearLearnerConfig {
         if self.population_critics < 2 {
             return Err(crate::ConfigError::TooFewCritics(self.population_critics));
         }
-        self.conservative.check()
+        self.conservative.check()?;
+        if self.conservative.weight > 0.0 && self.population_critics == 2 {
+            return Err(crate::ConfigError::Invalid(
+                "learner.conservative.weight: the term trains the ensemble heads beyond the twin critics and this run has none; \
+                 set learner.population-critics = 3 (one conservative head) and optimizer.q = \"heads\" to score designs with it"
+                    .into(),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -226,7 +235,8 @@ impl FearLearner {
     /// The design box of the robot (`low`, `high`, one bound per design coordinate; the
     /// observation is the state with the design appended): what the conservative term
     /// ([`FearLearnerConfig::conservative`]) searches over. With its weight above 0 the
-    /// population critics train with the term from here on; with 0 this changes nothing.
+    /// population pair's ensemble heads train with the term from here on; with 0 this changes
+    /// nothing.
     pub fn set_design_box(&mut self, low: &[f32], high: &[f32]) {
         // The spec's observation is state then design (its conformance suite checks it), so the
         // design is the observation's last `low.len()` columns.

@@ -8,8 +8,8 @@
 //! - [`networks`]: network shapes (critic `[obs, action] -> 1`, Gaussian and deterministic
 //!   policies).
 //! - [`sac`]: Soft Actor-Critic, the update in the paper's notation.
-//! - [`conservative`]: COMs' conservative term on FEAR's population critics (beyond the
-//!   thesis): Q pushed down at the designs its own gradient ascent reaches.
+//! - [`conservative`]: COMs' conservative term on FEAR's population ensemble heads (beyond
+//!   the thesis): a design critic pushed down at the designs its own gradient ascent reaches.
 //! - [`ddpg`]: DDPG with Ornstein-Uhlenbeck or Gaussian exploration.
 //! - [`agent`]: [`Agent`], what a training loop needs of either algorithm.
 //! - [`fear`]: the FEAR learner: population and individual SAC pairs, their buffers and the

@@ -32,7 +32,7 @@ pub struct SacLosses {
     pub log_pi: f32,
     /// Mean loss of the ensemble heads (0 without heads).
     pub heads: f32,
-    /// The conservative term's gap, mean over the twin critics of mean Q at the adversarial
+    /// The conservative term's gap, mean over the ensemble heads of mean Q at the adversarial
     /// designs minus mean Q at the batch's (0 when the term is off; [`crate::conservative`]).
     pub conservative_gap: f32,
 }
@@ -68,8 +68,6 @@ struct Critic {
     dx: Vec<f32>,
     dq_da: Vec<f32>,
     dy: Vec<f32>,
-    /// Scratch of the conservative term (empty while it is off).
-    cons: ConservativeWork,
 }
 
 /// The policy's scratch for one update.
@@ -103,7 +101,8 @@ pub struct Sac {
     critics: [Critic; 2],
     /// Ensemble heads beyond the twin (see [`Sac::with_heads`]); empty in plain SAC.
     heads: Vec<Head>,
-    /// COMs' conservative term on the twin critics ([`Sac::set_conservative`]); off in plain SAC.
+    /// COMs' conservative term on the ensemble heads ([`Sac::set_conservative`]); off in plain
+    /// SAC.
     conservative: Option<Conservative>,
     log_alpha: f32,
     alpha_adam: Adam,
@@ -119,7 +118,9 @@ pub struct Sac {
 /// An ensemble head: a critic of the twin's shape that regresses on the twin's Bellman target
 /// and is never used by the policy or the target, so that the heads' spread at a state-action
 /// (or, for FEAR's population critic, a design) far from the data measures how little the data
-/// pins Q down there (a deep ensemble of independently initialised regressors).
+/// pins Q down there (a deep ensemble of independently initialised regressors). With the
+/// conservative term on, each head also learns COMs' push down at the designs its own ascent
+/// reaches: a critic that scores designs and nothing else.
 #[derive(Clone, Debug)]
 struct Head {
     theta: Vec<f32>,
@@ -128,6 +129,8 @@ struct Head {
     act: Activations,
     x: Vec<f32>,
     dy: Vec<f32>,
+    /// Scratch of the conservative term (empty while it is off).
+    cons: ConservativeWork,
 }
 
 impl Head {
@@ -141,12 +144,25 @@ impl Head {
             act: Activations::default(),
             x: vec![],
             dy: vec![],
+            cons: ConservativeWork::default(),
         }
     }
 
-    /// J_Q(theta_h) = mean_b (Q_h(s_b, a_b) - y_b)^2: gradient, clamp, Adam (no target network:
-    /// the twin's target `y` is the head's).
-    fn fit(&mut self, critic: &Mlp, b: &Batch, y: &[f32], obs_dim: usize, act_dim: usize, cfg: &SacConfig) -> f32 {
+    /// J_Q(theta_h) = mean_b (Q_h(s_b, a_b) - y_b)^2, plus the conservative term when `cons` is
+    /// on: gradient, clamp, Adam (no target network: the twin's target `y` is the head's, so the
+    /// term's push is not bootstrapped into the head's own targets). Returns the loss and the
+    /// conservative gap (0 when off).
+    #[allow(clippy::too_many_arguments)]
+    fn fit(
+        &mut self,
+        critic: &Mlp,
+        b: &Batch,
+        y: &[f32],
+        obs_dim: usize,
+        act_dim: usize,
+        cfg: &SacConfig,
+        cons: Option<&Conservative>,
+    ) -> (f32, f32) {
         let n = b.rows;
         resize(&mut self.x, n * (obs_dim + act_dim));
         resize(&mut self.dy, n);
@@ -158,11 +174,19 @@ impl Head {
             *d = 2.0 * (q - y) / n as f32;
         }
         critic.backward(&self.theta, &self.x, &mut self.act, 0..n, &self.dy, Some(&mut self.grad), None);
+        let mut gap = 0.0;
+        if let Some(c) = cons {
+            c.adversary(critic, &self.theta, &self.x, n, &mut self.cons);
+            gap = c.gradient(critic, &self.theta, n, &mut self.cons);
+            for (g, d) in self.grad.iter_mut().zip(&self.cons.grad) {
+                *g += d;
+            }
+        }
         if cfg.grad_clamp > 0.0 {
             clamp_elementwise(&mut self.grad, cfg.grad_clamp);
         }
         self.adam.step(&mut self.theta, &self.grad);
-        loss / n as f32
+        (loss / n as f32, gap)
     }
 }
 
@@ -185,7 +209,6 @@ impl Critic {
             dx: vec![],
             dq_da: vec![],
             dy: vec![],
-            cons: ConservativeWork::default(),
         }
     }
 
@@ -231,26 +254,14 @@ impl Critic {
         loss / n as f32
     }
 
-    /// The weight gradient from [`Critic::step_deltas`] (plus the conservative term's over the
-    /// `n` batch rows, at the same parameters, when `cons` is on), clamp, Adam, then the Polyak
-    /// target. Returns the conservative gap (0 when off).
-    fn step_finish(&mut self, critic: &Mlp, cfg: &SacConfig, cons: Option<&Conservative>, n: usize) -> f32 {
+    /// The weight gradient from [`Critic::step_deltas`], clamp, Adam, then the Polyak target.
+    fn step_finish(&mut self, critic: &Mlp, cfg: &SacConfig) {
         critic.weight_gradient(&self.x, &mut self.act, &mut self.grad);
-        let mut gap = 0.0;
-        if let Some(c) = cons {
-            let w = critic.n_in();
-            c.adversary(critic, &self.theta, &self.x[..n * w], n, &mut self.cons);
-            gap = c.gradient(critic, &self.theta, n, &mut self.cons);
-            for (g, d) in self.grad.iter_mut().zip(&self.cons.grad) {
-                *g += d;
-            }
-        }
         if cfg.grad_clamp > 0.0 {
             clamp_elementwise(&mut self.grad, cfg.grad_clamp);
         }
         self.adam.step(&mut self.theta, &self.grad);
         polyak(&mut self.theta_bar, &self.theta, cfg.tau);
-        gap
     }
 }
 
@@ -298,8 +309,9 @@ impl Sac {
         Ok(sac)
     }
 
-    /// Turns COMs' conservative term on the twin critics on (`Some`) or off (`None`, SAC's own
-    /// update bit for bit); see [`crate::conservative`]. FEAR sets it on the population pair.
+    /// Turns COMs' conservative term on the ensemble heads on (`Some`) or off (`None`: the heads
+    /// regress on the twin's target alone); see [`crate::conservative`]. The twin, the policy
+    /// and every action are the same either way. FEAR sets it on the population pair.
     pub fn set_conservative(&mut self, c: Option<Conservative>) {
         self.conservative = c;
     }
@@ -447,13 +459,17 @@ impl Sac {
             w.y[i] = cfg.reward_scale * b.rew[i] + cfg.gamma * (1.0 - b.done[i]) * v_next;
         }
 
-        // The ensemble heads regress on the same target; nothing else reads them.
-        let mut head_loss = 0.0;
+        // The ensemble heads regress on the same target (with the conservative term when it is
+        // on); nothing else reads them.
+        let (mut head_loss, mut gap) = (0.0, 0.0);
         for h in heads.iter_mut() {
-            head_loss += h.fit(critic, b, &w.y, obs, act, cfg);
+            let (loss, g) = h.fit(critic, b, &w.y, obs, act, cfg, cons);
+            head_loss += loss;
+            gap += g;
         }
         if !heads.is_empty() {
             head_loss /= heads.len() as f32;
+            gap /= heads.len() as f32;
         }
 
         // J_pi(phi) = mean_b [alpha log pi(a~_b|s_b) - min_i Q_theta_i(s_b, a~_b)]; the gradient
@@ -476,7 +492,7 @@ impl Sac {
         // and step beside the policy's. (Three whole steps as three tasks left one core idle a
         // third of the time.) Each half computes what the whole backward pass does, bit for bit.
         let PolicyWork { act_s, eps, a_new, d_a, d_log_pi, d_head, grad, y, .. } = w;
-        let (q1_loss, (q2_loss, gap2)) = rayon::join(
+        let (q1_loss, q2_loss) = rayon::join(
             || {
                 squashed::backward(act_s.output(), eps, a_new, d_a, d_log_pi, act, d_head);
                 policy.backward_deltas(phi, act_s, 0..n, d_head, None);
@@ -484,11 +500,12 @@ impl Sac {
             },
             || {
                 let loss = c2.step_deltas(critic, y);
-                (loss, c2.step_finish(critic, cfg, cons, n))
+                c2.step_finish(critic, cfg);
+                loss
             },
         );
-        let (gap1, ()) = rayon::join(
-            || c1.step_finish(critic, cfg, cons, n),
+        rayon::join(
+            || c1.step_finish(critic, cfg),
             || {
                 policy.weight_gradient(&b.obs, act_s, grad);
                 if cfg.grad_clamp > 0.0 {
@@ -505,7 +522,7 @@ impl Sac {
             alpha: alpha_loss,
             log_pi: mean_log_pi,
             heads: head_loss,
-            conservative_gap: (gap1 + gap2) / 2.0,
+            conservative_gap: gap,
         }
     }
 

@@ -1,9 +1,9 @@
-//! COMs' conservative term on FEAR's population critics (`[learner.conservative]`, issue 28
-//! section 3): its gradient against central finite differences (the adversarial designs held
+//! COMs' conservative term on FEAR's population ensemble heads (`[learner.conservative]`, issue
+//! 28 section 3): its gradient against central finite differences (the adversarial designs held
 //! fixed, as COMs holds them), the adversary's ascent (uphill on Q, inside the box, state and
-//! action untouched), the learner's wiring (off is FEAR bit for bit; on, only the population
-//! critics train differently), what it does to a critic trained on bodies in the middle of the
-//! box, and the config's refusals.
+//! action untouched), the learner's wiring (the twin, the policy and the individual pair are
+//! FEAR's bit for bit, on or off; on, only the heads train differently), what it does to a
+//! design critic trained on bodies in the middle of the box, and the config's refusals.
 //!
 //! Tolerance as in crates/nn/tests/gradcheck.rs: f32 networks, so with step h the difference
 //! carries ~1e-6/h of rounding noise; a perturbation that flips a ReLU straddles a kink and is
@@ -147,6 +147,7 @@ fn fear_cfg(weight: f32) -> FearLearnerConfig {
         population_updates: 4,
         population_updates_from_design: 0,
         warmup_episodes: 0,
+        population_critics: 3,
         conservative: ConservativeConfig { weight, steps: 5, step: 0.1 },
         ..FearLearnerConfig::default()
     }
@@ -174,12 +175,11 @@ fn episode(l: &mut FearLearner, design: [f32; 2], rng: &mut Pcg64Mcg) {
 }
 
 #[test]
-fn off_is_fear_bit_for_bit_and_on_changes_only_the_population_critics() {
-    let run = |weight: f32, set_box: bool| {
-        let mut l = FearLearner::new(3, 1, fear_cfg(weight), 3).unwrap();
-        if set_box {
-            l.set_design_box(&[0.0, 0.0], &[1.0, 1.0]);
-        }
+fn the_term_changes_only_the_heads_and_fear_stays_bit_for_bit() {
+    let run = |critics: usize, weight: f32| {
+        let cfg = FearLearnerConfig { population_critics: critics, ..fear_cfg(weight) };
+        let mut l = FearLearner::new(3, 1, cfg, 3).unwrap();
+        l.set_design_box(&[0.0, 0.0], &[1.0, 1.0]);
         let mut rng = Pcg64Mcg::seed_from_u64(1);
         l.begin_design(0);
         let mut last = None;
@@ -189,50 +189,54 @@ fn off_is_fear_bit_for_bit_and_on_changes_only_the_population_critics() {
         }
         (l, last.unwrap())
     };
-    let (plain, lp) = run(0.0, false);
-    let (off, lo) = run(0.0, true);
-    let (on, ln) = run(1.0, true);
+    let (fear, lf) = run(2, 0.0);
+    let (off, lo) = run(3, 0.0);
+    let (on, ln) = run(3, 1.0);
     let pop = |l: &FearLearner, i| l.agent(ActingPolicy::Population).critic_params(i).0.to_vec();
     let ind = |l: &FearLearner, i| l.agent(ActingPolicy::Individual).critic_params(i).0.to_vec();
-    for i in 0..2 {
-        assert_eq!(pop(&plain, i), pop(&off, i), "weight 0 changed population critic {i}");
-        // Within a design the individual pair trains before the population pair and from its own
-        // copy: the term never reaches it.
-        assert_eq!(ind(&plain, i), ind(&on, i), "the term reached individual critic {i}");
-        assert_ne!(pop(&plain, i), pop(&on, i), "weight 1 left population critic {i} as FEAR's");
+    let policy = |l: &FearLearner, p| l.agent(p).policy_params().to_vec();
+    for l in [&off, &on] {
+        for i in 0..2 {
+            assert_eq!(pop(&fear, i), pop(l, i), "a head or the term changed population critic {i}");
+            assert_eq!(ind(&fear, i), ind(l, i), "a head or the term changed individual critic {i}");
+        }
+        for p in [ActingPolicy::Population, ActingPolicy::Individual] {
+            assert_eq!(policy(&fear, p), policy(l, p), "a head or the term changed the {p:?} policy");
+        }
     }
-    assert_eq!(lp.conservative_gap, 0.0);
-    assert_eq!(lo, lp);
+    let head = |l: &FearLearner| l.agent(ActingPolicy::Population).head_params(0).to_vec();
+    assert_ne!(head(&off), head(&on), "weight 1 left the head as a plain ensemble head");
+    assert_eq!((lf.q1, lf.q2, lf.policy), (ln.q1, ln.q2, ln.policy));
+    assert_eq!(lo.conservative_gap, 0.0);
     assert!(ln.conservative_gap.is_finite() && ln.conservative_gap != 0.0, "{ln:?}");
 }
 
 /// What the term is for: trained on bodies in the middle of the box only, with a reward that
-/// does not depend on the body, FEAR's critic still finds bodies it scores above the trained
-/// ones (the best of an 11 x 11 grid over the box, what PSO over Q goes to: its "optimism");
-/// the conservative critic's best is close to its score of the trained bodies. Same data, same
-/// seeds, 8 seeds. Not every seed: gradient ascent climbs from the data to the maxima it can
-/// reach, and a maximum it does not climb to stays (on this machine seed 2 of 8, where the
-/// conservative critic's optimism was 1.81 against FEAR's 1.32; the other seven 0.000-0.011
-/// against 0.22-0.84).
+/// does not depend on the body, FEAR's critic (Q1, what PSO over Q scores with) still finds
+/// bodies it scores above the trained ones (the best of an 11 x 11 grid over the box, what PSO
+/// over Q goes to: its "optimism"); the conservative head of the same run, trained on the same
+/// batches and the twin's targets, scores its best close to the trained bodies. 8 seeds; the
+/// test allows two where it does not hold (gradient ascent climbs from the data to the maxima it
+/// can reach, and a maximum it does not climb to stays). On this machine it held on all 8: the
+/// head's optimism 0.0001-0.17 against Q1's 0.22-1.32.
 #[test]
-fn trained_on_middle_bodies_the_conservative_critic_does_not_invent_a_better_body() {
+fn trained_on_middle_bodies_the_conservative_head_does_not_invent_a_better_body() {
     let mut optimism = [Vec::new(), Vec::new()];
     for seed in 1..=8 {
-        for (k, weight) in [0.0, 2.0].into_iter().enumerate() {
-            let mut l = learner(weight, seed);
-            let mut rng = Pcg64Mcg::seed_from_u64(seed);
-            for d in 0..4 {
-                l.begin_design(d);
-                let design = [rng.random_range(0.3..0.7), rng.random_range(0.3..0.7)];
-                for _ in 0..2 {
-                    episode(&mut l, design, &mut rng);
-                    l.end_episode().unwrap();
-                }
+        let mut l = learner(2.0, seed);
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        for d in 0..4 {
+            l.begin_design(d);
+            let design = [rng.random_range(0.3..0.7), rng.random_range(0.3..0.7)];
+            for _ in 0..2 {
+                episode(&mut l, design, &mut rng);
+                l.end_episode().unwrap();
             }
-            l.train_population(1500).unwrap();
-            // Q(s, a = 0, design) over a few states, at a body and at the middle of the box.
-            let sac = l.agent(ActingPolicy::Population);
-            let (theta, _) = sac.critic_params(0);
+        }
+        l.train_population(1500).unwrap();
+        // Q(s, a = 0, design) over a few states, at a body and at the middle of the box.
+        let sac = l.agent(ActingPolicy::Population);
+        for (k, theta) in [sac.critic_params(0).0, sac.head_params(0)].into_iter().enumerate() {
             let mut act = Activations::default();
             let q = |xi: [f32; 2], act: &mut Activations| {
                 let x: Vec<f32> = (0..5).flat_map(|i| [i as f32 * 0.2, xi[0], xi[1], 0.0]).collect();
@@ -248,9 +252,10 @@ fn trained_on_middle_bodies_the_conservative_critic_does_not_invent_a_better_bod
         (v[3] + v[4]) / 2.0
     };
     let (fear, cons) = (&optimism[0], &optimism[1]);
+    eprintln!("optimism of FEAR's Q1 {fear:?}\nof the conservative head {cons:?}");
     assert!(median(fear) > 0.2, "FEAR's critic invented no better body ({fear:?}): the test shows nothing");
     let held = fear.iter().zip(cons).filter(|(f, c)| **c < **f / 2.0).count();
-    assert!(held >= 6, "the conservative critic's optimism was under half FEAR's on {held} of 8 seeds: {cons:?} vs {fear:?}");
+    assert!(held >= 6, "the conservative head's optimism was under half FEAR's on {held} of 8 seeds: {cons:?} vs {fear:?}");
     assert!(median(cons) < median(fear) / 4.0, "median optimism {} vs FEAR's {}", median(cons), median(fear));
 }
 
@@ -268,12 +273,9 @@ fn bad_settings_are_refused_naming_the_key() {
         assert!(e.starts_with(key), "{c:?}: {e}");
     }
     assert!(FearLearnerConfig::default().check().is_ok());
-    assert!(
-        FearLearnerConfig {
-            conservative: ConservativeConfig { weight: 0.5, ..ConservativeConfig::default() },
-            ..FearLearnerConfig::default()
-        }
-        .check()
-        .is_ok()
-    );
+    let on = ConservativeConfig { weight: 0.5, ..ConservativeConfig::default() };
+    // The term trains the heads beyond the twin: a run without them is refused, naming the key.
+    let e = FearLearnerConfig { conservative: on.clone(), ..FearLearnerConfig::default() }.check().unwrap_err().to_string();
+    assert!(e.starts_with("learner.conservative.weight") && e.contains("population-critics"), "{e}");
+    assert!(FearLearnerConfig { conservative: on, population_critics: 3, ..FearLearnerConfig::default() }.check().is_ok());
 }
