@@ -6,20 +6,26 @@
 //! Notation: policy pi_phi, critics Q_theta_i with targets Q_theta_bar_i, entropy weight alpha,
 //! a batch `(s, a, r, s', d)` of size B, and reparameterised actions
 //! `a~ = tanh(mu_phi(s) + sigma_phi(s) eps)`, `eps ~ N(0, I)`.
-
-use std::path::Path;
+//!
+//! # Layout
+//! - this file: [`Sac`], its update in the paper's notation, acting, parameter access.
+//! - `critics`: one twin critic with its target (what one core owns in an update) and the
+//!   ensemble heads, with the conservative term when it is on.
+//! - `state`: networks to and from safetensors, and the whole state for a snapshot.
 
 use coadapt_core::{Batch, Rng64};
-use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NamedNetwork, NnError, clamp_elementwise, polyak, squashed};
+use coadapt_nn::{Activations, Adam, AdamConfig, Mlp, NnError, clamp_elementwise, squashed};
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use serde::{Deserialize, Serialize};
-
 use crate::config::SacConfig;
-use crate::conservative::{Conservative, ConservativeWork};
-use crate::networks::{concat_rows, critic, gaussian_policy, resize};
-use crate::snapshot::{SnapshotError, StateIn, StateOut};
+use crate::conservative::Conservative;
+use crate::networks::{critic, gaussian_policy, resize};
+
+mod critics;
+mod state;
+
+use critics::{Critic, Head};
 
 /// Losses of one update, for logging.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -35,39 +41,6 @@ pub struct SacLosses {
     /// The conservative term's gap, mean over the ensemble heads of mean Q at the adversarial
     /// designs minus mean Q at the batch's (0 when the term is off; [`crate::conservative`]).
     pub conservative_gap: f32,
-}
-
-/// The scalars of [`Sac::save_state`].
-#[derive(Serialize, Deserialize)]
-struct SacScalars {
-    log_alpha: f32,
-    adam_steps: [u32; 4],
-    updates: u64,
-    #[serde(with = "crate::snapshot::bits::rng")]
-    rng: Rng64,
-    /// Adam steps of each ensemble head (absent without heads, and in older snapshots).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    head_steps: Vec<u32>,
-}
-
-/// One critic with its target, optimiser and scratch: what one core owns during an update.
-#[derive(Clone, Debug)]
-struct Critic {
-    theta: Vec<f32>,
-    theta_bar: Vec<f32>,
-    adam: Adam,
-    grad: Vec<f32>,
-    act: Activations,
-    act_bar: Activations,
-    /// Rows `[s, a]` then rows `[s, a~]`.
-    x: Vec<f32>,
-    x_next: Vec<f32>,
-    /// Q(s, a) then Q(s, a~).
-    q: Vec<f32>,
-    q_next: Vec<f32>,
-    dx: Vec<f32>,
-    dq_da: Vec<f32>,
-    dy: Vec<f32>,
 }
 
 /// The policy's scratch for one update.
@@ -113,156 +86,6 @@ pub struct Sac {
     act_eps: Vec<f32>,
     rng: Rng64,
     updates: u64,
-}
-
-/// An ensemble head: a critic of the twin's shape that regresses on the twin's Bellman target
-/// and is never used by the policy or the target, so that the heads' spread at a state-action
-/// (or, for FEAR's population critic, a design) far from the data measures how little the data
-/// pins Q down there (a deep ensemble of independently initialised regressors). With the
-/// conservative term on, each head also learns COMs' push down at the designs its own ascent
-/// reaches: a critic that scores designs and nothing else.
-#[derive(Clone, Debug)]
-struct Head {
-    theta: Vec<f32>,
-    adam: Adam,
-    grad: Vec<f32>,
-    act: Activations,
-    x: Vec<f32>,
-    dy: Vec<f32>,
-    /// Scratch of the conservative term (empty while it is off).
-    cons: ConservativeWork,
-}
-
-impl Head {
-    fn new(critic: &Mlp, cfg: &SacConfig, rng: &mut Rng64) -> Self {
-        let mut theta = critic.zeros();
-        critic.init_with(cfg.hidden_init, &mut theta, cfg.critic_final_init, rng);
-        Self {
-            adam: Adam::new(critic.n_params(), AdamConfig { lr: cfg.critic_lr, ..AdamConfig::default() }),
-            grad: critic.zeros(),
-            theta,
-            act: Activations::default(),
-            x: vec![],
-            dy: vec![],
-            cons: ConservativeWork::default(),
-        }
-    }
-
-    /// J_Q(theta_h) = mean_b (Q_h(s_b, a_b) - y_b)^2, plus the conservative term when `cons` is
-    /// on: gradient, clamp, Adam (no target network: the twin's target `y` is the head's, so the
-    /// term's push is not bootstrapped into the head's own targets). Returns the loss and the
-    /// conservative gap (0 when off).
-    #[allow(clippy::too_many_arguments)]
-    fn fit(
-        &mut self,
-        critic: &Mlp,
-        b: &Batch,
-        y: &[f32],
-        obs_dim: usize,
-        act_dim: usize,
-        cfg: &SacConfig,
-        cons: Option<&Conservative>,
-    ) -> (f32, f32) {
-        let n = b.rows;
-        resize(&mut self.x, n * (obs_dim + act_dim));
-        resize(&mut self.dy, n);
-        concat_rows(&b.obs, obs_dim, &b.act, act_dim, &mut self.x);
-        let q = critic.forward(&self.theta, &self.x, n, &mut self.act);
-        let mut loss = 0.0;
-        for ((d, q), y) in self.dy.iter_mut().zip(q).zip(y) {
-            loss += (q - y) * (q - y);
-            *d = 2.0 * (q - y) / n as f32;
-        }
-        critic.backward(&self.theta, &self.x, &mut self.act, 0..n, &self.dy, Some(&mut self.grad), None);
-        let mut gap = 0.0;
-        if let Some(c) = cons {
-            c.adversary(critic, &self.theta, &self.x, n, &mut self.cons);
-            gap = c.gradient(critic, &self.theta, n, &mut self.cons);
-            for (g, d) in self.grad.iter_mut().zip(&self.cons.grad) {
-                *g += d;
-            }
-        }
-        if cfg.grad_clamp > 0.0 {
-            clamp_elementwise(&mut self.grad, cfg.grad_clamp);
-        }
-        self.adam.step(&mut self.theta, &self.grad);
-        (loss / n as f32, gap)
-    }
-}
-
-impl Critic {
-    fn new(critic: &Mlp, cfg: &SacConfig, rng: &mut Rng64) -> Self {
-        let (lr, final_init) = (cfg.critic_lr, cfg.critic_final_init);
-        let mut theta = critic.zeros();
-        critic.init_with(cfg.hidden_init, &mut theta, final_init, rng);
-        Self {
-            theta_bar: theta.clone(),
-            adam: Adam::new(critic.n_params(), AdamConfig { lr, ..AdamConfig::default() }),
-            grad: critic.zeros(),
-            theta,
-            act: Activations::default(),
-            act_bar: Activations::default(),
-            x: vec![],
-            x_next: vec![],
-            q: vec![],
-            q_next: vec![],
-            dx: vec![],
-            dq_da: vec![],
-            dy: vec![],
-        }
-    }
-
-    /// Q_bar(s', a~'), Q(s, a), Q(s, a~) and dQ(s, a~)/da~.
-    #[allow(clippy::too_many_arguments)]
-    fn evaluate(&mut self, critic: &Mlp, b: &Batch, a_new: &[f32], a_next: &[f32], obs_dim: usize, act_dim: usize) {
-        let n = b.rows;
-        let w = obs_dim + act_dim;
-        resize(&mut self.x_next, n * w);
-        resize(&mut self.x, 2 * n * w);
-        resize(&mut self.dx, n * w);
-        resize(&mut self.dq_da, n * act_dim);
-        resize(&mut self.dy, n);
-        concat_rows(&b.next_obs, obs_dim, a_next, act_dim, &mut self.x_next);
-        let q_next = critic.forward(&self.theta_bar, &self.x_next, n, &mut self.act_bar);
-        self.q_next.clear();
-        self.q_next.extend_from_slice(q_next);
-
-        let (x_data, x_new) = self.x.split_at_mut(n * w);
-        concat_rows(&b.obs, obs_dim, &b.act, act_dim, x_data);
-        concat_rows(&b.obs, obs_dim, a_new, act_dim, x_new);
-        let q = critic.forward(&self.theta, &self.x, 2 * n, &mut self.act);
-        self.q.clear();
-        self.q.extend_from_slice(q);
-
-        self.dy.fill(1.0);
-        critic.backward(&self.theta, &self.x, &mut self.act, n..2 * n, &self.dy, None, Some(&mut self.dx));
-        for (g, row) in self.dq_da.chunks_exact_mut(act_dim).zip(self.dx.chunks_exact(w)) {
-            g.copy_from_slice(&row[obs_dim..]);
-        }
-    }
-
-    /// J_Q(theta) = mean_b (Q(s_b, a_b) - y_b)^2 and the first half of its gradient (the
-    /// layers' deltas); [`Critic::step_finish`] takes the step.
-    fn step_deltas(&mut self, critic: &Mlp, y: &[f32]) -> f32 {
-        let n = y.len();
-        let mut loss = 0.0;
-        for ((d, q), y) in self.dy.iter_mut().zip(&self.q[..n]).zip(y) {
-            loss += (q - y) * (q - y);
-            *d = 2.0 * (q - y) / n as f32;
-        }
-        critic.backward_deltas(&self.theta, &mut self.act, 0..n, &self.dy, None);
-        loss / n as f32
-    }
-
-    /// The weight gradient from [`Critic::step_deltas`], clamp, Adam, then the Polyak target.
-    fn step_finish(&mut self, critic: &Mlp, cfg: &SacConfig) {
-        critic.weight_gradient(&self.x, &mut self.act, &mut self.grad);
-        if cfg.grad_clamp > 0.0 {
-            clamp_elementwise(&mut self.grad, cfg.grad_clamp);
-        }
-        self.adam.step(&mut self.theta, &self.grad);
-        polyak(&mut self.theta_bar, &self.theta, cfg.tau);
-    }
 }
 
 impl Sac {
@@ -524,118 +347,6 @@ impl Sac {
             heads: head_loss,
             conservative_gap: gap,
         }
-    }
-
-    /// Saves the policy, critics and targets as one safetensors file (`policy`, `q1`, `q2`,
-    /// `q1_target`, `q2_target`, and `head1`... for ensemble heads).
-    pub fn save(&self, path: &Path) -> Result<(), NnError> {
-        let [c1, c2] = &self.critics;
-        let names: Vec<String> = (1..=self.heads.len()).map(|i| format!("head{i}")).collect();
-        let mut nets = vec![
-            ("policy", &self.policy, self.phi.as_slice()),
-            ("q1", &self.critic, c1.theta.as_slice()),
-            ("q2", &self.critic, c2.theta.as_slice()),
-            ("q1_target", &self.critic, c1.theta_bar.as_slice()),
-            ("q2_target", &self.critic, c2.theta_bar.as_slice()),
-        ];
-        nets.extend(names.iter().zip(&self.heads).map(|(name, h)| (name.as_str(), &self.critic, h.theta.as_slice())));
-        coadapt_nn::save_networks(path, &nets)
-    }
-
-    /// Loads networks saved by [`Sac::save`]; the shapes must match this agent's.
-    pub fn load(&mut self, path: &Path) -> Result<(), NnError> {
-        let nets = coadapt_nn::load_networks(path)?;
-        let get = |name: &str, mlp: &Mlp| NamedNetwork::find(&nets, path, name, mlp.sizes()).map(|n| n.params.clone());
-        let phi = get("policy", &self.policy)?;
-        let q = [get("q1", &self.critic)?, get("q2", &self.critic)?];
-        let q_bar = [get("q1_target", &self.critic)?, get("q2_target", &self.critic)?];
-        self.set_params(&phi, [&q[0], &q[1]], [&q_bar[0], &q_bar[1]]);
-        // Heads the file has; a file without them (a run without heads) leaves ours as they are.
-        for (i, h) in self.heads.iter_mut().enumerate() {
-            let name = format!("head{}", i + 1);
-            if nets.iter().any(|n| n.name == name) {
-                let theta = get(&name, &self.critic)?;
-                h.theta.copy_from_slice(&theta);
-            }
-        }
-        Ok(())
-    }
-
-    /// Writes everything that decides this agent's future (networks, targets, every Adam state,
-    /// log alpha, the generator, the update count) under `prefix`.
-    pub fn save_state(&self, prefix: &str, out: &mut StateOut) -> std::io::Result<()> {
-        let (m, v) = self.phi_adam.moments();
-        out.f32s(&format!("{prefix}.policy"), &self.phi)?;
-        out.f32s(&format!("{prefix}.policy.adam.m"), m)?;
-        out.f32s(&format!("{prefix}.policy.adam.v"), v)?;
-        for (i, c) in self.critics.iter().enumerate() {
-            let (m, v) = c.adam.moments();
-            out.f32s(&format!("{prefix}.q{}", i + 1), &c.theta)?;
-            out.f32s(&format!("{prefix}.q{}.target", i + 1), &c.theta_bar)?;
-            out.f32s(&format!("{prefix}.q{}.adam.m", i + 1), m)?;
-            out.f32s(&format!("{prefix}.q{}.adam.v", i + 1), v)?;
-        }
-        for (i, h) in self.heads.iter().enumerate() {
-            let (m, v) = h.adam.moments();
-            out.f32s(&format!("{prefix}.head{}", i + 1), &h.theta)?;
-            out.f32s(&format!("{prefix}.head{}.adam.m", i + 1), m)?;
-            out.f32s(&format!("{prefix}.head{}.adam.v", i + 1), v)?;
-        }
-        let (m, v) = self.alpha_adam.moments();
-        out.f32s(&format!("{prefix}.log_alpha.adam.m"), m)?;
-        out.f32s(&format!("{prefix}.log_alpha.adam.v"), v)?;
-        out.put(
-            prefix,
-            &SacScalars {
-                log_alpha: self.log_alpha,
-                adam_steps: self.optimiser_steps(),
-                updates: self.updates,
-                rng: self.rng.clone(),
-                head_steps: self.heads.iter().map(|h| h.adam.steps()).collect(),
-            },
-        )
-    }
-
-    /// Restores what [`Self::save_state`] wrote; the shapes must be this agent's.
-    pub fn load_state(&mut self, prefix: &str, inp: &mut StateIn) -> Result<(), SnapshotError> {
-        let mismatch = |e: String| SnapshotError::Mismatch(format!("{prefix}: {e}"));
-        let s: SacScalars = inp.get(prefix)?;
-        let (np, nc) = (self.phi.len(), self.critics[0].theta.len());
-        self.phi = inp.f32s(&format!("{prefix}.policy"), np)?;
-        let (m, v) = (inp.f32s(&format!("{prefix}.policy.adam.m"), np)?, inp.f32s(&format!("{prefix}.policy.adam.v"), np)?);
-        self.phi_adam.restore(&m, &v, s.adam_steps[0]).map_err(|e| mismatch(e.to_string()))?;
-        for i in 0..2 {
-            let theta = inp.f32s(&format!("{prefix}.q{}", i + 1), nc)?;
-            let theta_bar = inp.f32s(&format!("{prefix}.q{}.target", i + 1), nc)?;
-            let m = inp.f32s(&format!("{prefix}.q{}.adam.m", i + 1), nc)?;
-            let v = inp.f32s(&format!("{prefix}.q{}.adam.v", i + 1), nc)?;
-            let c = &mut self.critics[i];
-            c.adam.restore(&m, &v, s.adam_steps[1 + i]).map_err(|e| mismatch(e.to_string()))?;
-            (c.theta, c.theta_bar) = (theta, theta_bar);
-        }
-        if s.head_steps.len() != self.heads.len() {
-            return Err(mismatch(format!(
-                "the snapshot has {} ensemble heads beside the twin critics, this run's settings {} (learner.population-critics)",
-                s.head_steps.len(),
-                self.heads.len()
-            )));
-        }
-        for (i, h) in self.heads.iter_mut().enumerate() {
-            let theta = inp.f32s(&format!("{prefix}.head{}", i + 1), nc)?;
-            let m = inp.f32s(&format!("{prefix}.head{}.adam.m", i + 1), nc)?;
-            let v = inp.f32s(&format!("{prefix}.head{}.adam.v", i + 1), nc)?;
-            h.adam.restore(&m, &v, s.head_steps[i]).map_err(|e| mismatch(e.to_string()))?;
-            h.theta = theta;
-        }
-        let (m, v) = (inp.f32s(&format!("{prefix}.log_alpha.adam.m"), 1)?, inp.f32s(&format!("{prefix}.log_alpha.adam.v"), 1)?);
-        self.alpha_adam.restore(&m, &v, s.adam_steps[3]).map_err(|e| mismatch(e.to_string()))?;
-        if !s.log_alpha.is_finite() {
-            return Err(mismatch(format!("log alpha {} is not finite", s.log_alpha)));
-        }
-        self.log_alpha = s.log_alpha;
-        self.updates = s.updates;
-        self.rng = s.rng;
-        Ok(())
     }
 
     #[doc(hidden)]
