@@ -23,7 +23,8 @@
 //!   no proposal may enter (an objective wrapper scoring it minus infinity).
 //! - [`role`]: the optimiser role: design requests in, designs out, by PSO/CMA-ES over Q,
 //!   the simulation baselines (through a [`rollout::RolloutEvaluator`]), ES or random; and
-//!   exploration by random designs or novelty.
+//!   exploration by random designs or novelty; its settings in [`config`] (`[optimizer]`,
+//!   re-exported from `role`).
 //! - [`rollout`]: [`rollout::RolloutEvaluator`], what scores designs by simulation for the
 //!   baselines and the screened rollouts, and [`rollout::RolloutError`], why it could not.
 //! - [`calibration`]: at each exploitation request, the objective's value for the chosen design,
@@ -41,6 +42,7 @@
 
 pub mod calibration;
 pub mod cmaes;
+pub mod config;
 pub mod es;
 pub mod landscape;
 pub mod novelty;
