@@ -2,7 +2,7 @@
 random one?
 
 usage: python3 scripts/design_bench_report.py [RUNS_ROOT, default docs/campaign/results]
-           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration]
+           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict]
 
 Runs are RUNS_ROOT/PREFIX-METHOD-seedN (docs/campaign/design-bench.queue and
 design-choice.queue): PREFIX names the robot (hc = HalfCheetah, walker-bench, hopper-bench,
@@ -30,7 +30,12 @@ count. Per robot:
    scratch with plain SAC (2 training seeds): the mean return of the last 10 episodes, and
    the difference paired by run seed and training seed, with the exact sign-flip test;
 6. calibration: scripts/calibration_report.py over the robot's methods;
-7. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
+7. verdict (after the robots, with --tables verdict): section 3's rule, that a method becomes
+   the default only if it beats FEAR on at least 3 of the 4 robots (HalfCheetah, Walker, Hopper,
+   Daisy) without losing on HalfCheetah: per method and robot the quality of the chosen designs
+   minus FEAR's, paired by seed (mean ± sd, n, exact sign-flip p); a robot counts only with 3
+   paired seeds or more; the verdict is yes, no, or open (naming what is missing);
+8. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
    the simulation baselines ordered by the simulation they spend on choosing designs: design
    rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
    episodes: an upper bound where an episode can end early), against the quality of the chosen
@@ -268,14 +273,55 @@ def report(root, title, prefix, tables):
     return True
 
 
+VERDICT_ROBOTS = ROBOTS[:4]
+SEEDS_TO_DECIDE = 3
+
+
+def verdict(root):
+    """Section 3's rule over every method run beside FEAR (see the module doc, table 7)."""
+    runs = {prefix: runs_of(root, prefix) for _, prefix in VERDICT_ROBOTS}
+    methods = ordered({m for r in runs.values() for m in r if m not in ("fear", "random")})
+    if not methods:
+        return
+    print("#### Section 3's rule: does a method beat FEAR on 3 of the 4 robots without losing on HalfCheetah?\n")
+    print("| method | " + " | ".join(f"{t}: minus FEAR, paired by seed (n, p)" for t, _ in VERDICT_ROBOTS) + " | verdict |")
+    print("|---|" + "---|" * len(VERDICT_ROBOTS) + "---|")
+    for m in methods:
+        cells, beats, loses, open_ = [], 0, 0, []
+        hc_lost = False
+        for title, prefix in VERDICT_ROBOTS:
+            r = runs[prefix]
+            seeds = sorted(set(r.get(m, {})) & set(r.get("fear", {})))
+            d = [r[m][x][0]["exploit"] - r["fear"][x][0]["exploit"] for x in seeds]
+            cells.append(f"{cr.signed_sd(d)} ({len(d)}, {sign_flip_p(d)})" if d else "-")
+            if len(d) < SEEDS_TO_DECIDE:
+                open_.append(f"{title} {len(d)}/{SEEDS_TO_DECIDE}")
+            elif statistics.mean(d) > 0:
+                beats += 1
+            else:
+                loses += 1
+                hc_lost |= prefix == "hc"
+        if hc_lost or beats + len(open_) < 3:
+            v = "no" + (" (loses on HalfCheetah)" if hc_lost else f" (beats FEAR on {beats} of {beats + loses} decided)")
+        elif beats >= 3 and "HalfCheetah" not in " ".join(open_):
+            v = f"yes (beats FEAR on {beats})"
+        else:
+            v = "open: seeds " + ", ".join(open_)
+        print(f"| {m} | " + " | ".join(cells) + f" | {v} |")
+    print()
+
+
 def main():
     args = [a for i, a in enumerate(sys.argv[1:], 1) if not a.startswith("--") and sys.argv[i - 1] not in {"--robots", "--tables"}]
     root = args[0] if args else "docs/campaign/results"
     keep = option("--robots", None)
     tables = option("--tables", "methods,random,within,trend,bodies,calibration").split(",")
     robots = [r for r in ROBOTS if keep is None or r[1] in keep.split(",")]
-    if not any([report(root, title, prefix, tables) for title, prefix in robots]):
+    per_robot = [t for t in tables if t != "verdict"]
+    if per_robot and not any([report(root, title, prefix, per_robot) for title, prefix in robots]):
         sys.exit(f"design_bench_report: no finished benchmark run under {root}")
+    if "verdict" in tables:
+        verdict(root)
 
 
 if __name__ == "__main__":

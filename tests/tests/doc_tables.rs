@@ -120,6 +120,42 @@ fn the_trend_table_removes_the_random_runs_time_trend_pair_by_pair() {
     assert!(text.contains("| fear | 1 | +45.0 ± 7.1 (2) | +0.0 ± 14.1 | 1/2 | 1.00 | -50.0 (1) | 0/1 | 1.00 |"), "trend row:\n{text}");
 }
 
+/// Section 3's rule (`--tables verdict`): a method becomes the default only if it beats FEAR on 3
+/// of the 4 robots, each with 3 seeds paired with FEAR's, without losing on HalfCheetah. `alt`
+/// beats FEAR by 10 on every seed of HalfCheetah, Walker and Hopper (+10.0 ± 0.0, exact p 0.25
+/// with 3 pairs): yes. `bad` beats it by 20 on Walker and Hopper and loses 10 on HalfCheetah: no.
+/// `thin` has one HalfCheetah seed: open, naming the seeds each robot lacks.
+#[test]
+fn the_verdict_applies_section_3s_rule_robot_by_robot() {
+    let dir = std::env::temp_dir().join(format!("coadapt-verdict-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let k = ["initial", "initial", "exploit", "explore"];
+    for robot in ["hc", "walker-bench", "hopper-bench"] {
+        for seed in 1..=3 {
+            synthetic_run(&dir, &format!("{robot}-fear-seed{seed}"), &k, &[50.0, 60.0, 100.0, 80.0]);
+            synthetic_run(&dir, &format!("{robot}-alt-seed{seed}"), &k, &[50.0, 60.0, 110.0, 80.0]);
+            let bad = if robot == "hc" { 90.0 } else { 120.0 };
+            synthetic_run(&dir, &format!("{robot}-bad-seed{seed}"), &k, &[50.0, 60.0, bad, 80.0]);
+        }
+    }
+    synthetic_run(&dir, "hc-thin-seed1", &k, &[50.0, 60.0, 130.0, 80.0]);
+    let text = script("design_bench_report.py", &[dir.as_os_str(), "--tables".as_ref(), "verdict".as_ref()]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(!text.contains("#### HalfCheetah"), "per-robot tables were not asked for:\n{text}");
+    assert!(
+        text.contains("| alt | +10.0 ± 0.0 (3, 0.25) | +10.0 ± 0.0 (3, 0.25) | +10.0 ± 0.0 (3, 0.25) | - | yes (beats FEAR on 3) |"),
+        "alt row:\n{text}"
+    );
+    assert!(
+        text.contains("| bad | -10.0 ± 0.0 (3, 0.25) | +20.0 ± 0.0 (3, 0.25) | +20.0 ± 0.0 (3, 0.25) | - | no (loses on HalfCheetah) |"),
+        "bad row:\n{text}"
+    );
+    assert!(
+        text.contains("| thin | +30.0 (1, 1.00) | - | - | - | open: seeds HalfCheetah 1/3, Walker 0/3, Hopper 0/3, Daisy 0/3 |"),
+        "thin row:\n{text}"
+    );
+}
+
 /// The reference run's tables (`scripts/reference_report.py`, EXPERIMENTS 5.13) on a run with two
 /// initial designs (50, 70: mean 60.0, sd 14.1) and two exploit/explore pairs, 100 - 130 = -30
 /// and 160 - 90 = +70 (mean +20.0, sd 70.7, one win in two, exact p 1.00); chosen designs'
