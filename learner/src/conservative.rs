@@ -11,7 +11,11 @@
 //! `steps` normalised steps of `step` box widths uphill on Q (clamped to the box), giving
 //! `xi'`; the critic's gradient gains lambda (grad mean Q(s, a, xi') - grad mean Q(s, a, xi)).
 //! So the critic is pushed down where its own search would go and up on the bodies trained,
-//! which is what the design optimiser's PSO over Q (Eq. 5.6) exploits.
+//! which is what the design optimiser's PSO over Q (Eq. 5.6) exploits. As in COMs, lambda is a
+//! Lagrange multiplier, not a constant: dual ascent on log lambda with the loss
+//! lambda (tau - gap) grows it while the gap is above tau (`limit`, in standard deviations of Q
+//! over the batch) and shrinks it below, so the term limits the search's optimism instead of
+//! pushing Q down without end (a fixed lambda drove the gap to -200 on Hopper).
 //!
 //! The term trains the population pair's ensemble heads only (`learner.population-critics`
 //! above 2), which regress on the twin's Bellman target and which the optimiser's
@@ -33,9 +37,19 @@ use crate::networks::resize;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct ConservativeConfig {
-    /// lambda, the weight of the term against the Bellman loss; 0 (the default) is FEAR's
-    /// critic, bit for bit. COMs used 0.5-2 on normalised objectives; Q here is in return units.
+    /// lambda, the weight of the term against the regression loss at the start; 0 (the default)
+    /// turns the term off. With `weight-lr` above 0 it then follows COMs' dual ascent.
     pub weight: f32,
+    /// tau, how far the adversarial designs' mean Q may sit above the trained designs' before
+    /// the weight grows, in standard deviations of the head's Q over the batch's trained rows
+    /// (COMs normalises its scores to unit sd and allows 0.5). Q here is in return units, which
+    /// differ by robot (single digits on Hopper, hundreds on HalfCheetah), hence the sd.
+    pub limit: f32,
+    /// Adam's learning rate on log lambda (COMs' dual ascent: the loss lambda (tau - gap), so
+    /// lambda grows while the gap is above tau and shrinks below it; COMs' rate 0.01). 0 keeps
+    /// lambda at `weight`, a fixed push that grows the gap without bound (a first form did:
+    /// -200 Q below the data on Hopper within 3 designs).
+    pub weight_lr: f32,
     /// Gradient-ascent steps from each batch row's design to its adversarial design.
     pub steps: usize,
     /// Length of each step, in box widths (the design normalised to [0, 1] per coordinate). With
@@ -47,7 +61,7 @@ pub struct ConservativeConfig {
 
 impl Default for ConservativeConfig {
     fn default() -> Self {
-        Self { weight: 0.0, steps: 5, step: 0.1 }
+        Self { weight: 0.0, steps: 5, step: 0.1, limit: 0.5, weight_lr: 0.01 }
     }
 }
 
@@ -64,6 +78,12 @@ impl ConservativeConfig {
         if !(self.step.is_finite() && self.step > 0.0 && self.step <= 1.0) {
             return bad("step", format!("{} is not in (0, 1] box widths", self.step));
         }
+        if !self.limit.is_finite() {
+            return bad("limit", format!("{} is not a finite number of standard deviations", self.limit));
+        }
+        if !(self.weight_lr.is_finite() && self.weight_lr >= 0.0) {
+            return bad("weight-lr", format!("{} is not a finite number >= 0", self.weight_lr));
+        }
         Ok(())
     }
 
@@ -74,6 +94,8 @@ impl ConservativeConfig {
             weight: self.weight,
             steps: self.steps,
             step: self.step,
+            limit: self.limit,
+            weight_lr: self.weight_lr,
             design,
             low: low.to_vec(),
             high: high.to_vec(),
@@ -86,9 +108,12 @@ impl ConservativeConfig {
 /// appended), with the design box.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Conservative {
+    /// lambda now (the agent's dual ascent moves it; see [`ConservativeConfig`]).
     pub weight: f32,
     pub steps: usize,
     pub step: f32,
+    pub limit: f32,
+    pub weight_lr: f32,
     /// Columns of the design in a critic input row.
     pub design: Range<usize>,
     pub low: Vec<f32>,
@@ -146,16 +171,19 @@ impl Conservative {
 
     /// After [`Self::adversary`]: `weight (mean_b Q(x_adv_b) - mean_b Q(x_data_b))` (the
     /// adversarial rows held fixed) and its gradient with respect to theta in `work.grad`.
-    /// Returns the gap `mean Q(x_adv) - mean Q(x_data)` (unweighted; COMs watches it).
-    pub fn gradient(&self, critic: &Mlp, theta: &[f32], rows: usize, work: &mut ConservativeWork) -> f32 {
+    /// Returns the gap `mean Q(x_adv) - mean Q(x_data)` (unweighted; COMs watches it) and the
+    /// standard deviation of Q over the data rows (the scale of [`ConservativeConfig::limit`]).
+    pub fn gradient(&self, critic: &Mlp, theta: &[f32], rows: usize, work: &mut ConservativeWork) -> (f32, f32) {
         resize(&mut work.grad, critic.n_params());
         let q = critic.forward(theta, &work.x, 2 * rows, &mut work.act);
         let gap = (q[rows..].iter().sum::<f32>() - q[..rows].iter().sum::<f32>()) / rows as f32;
+        let mean = q[..rows].iter().map(|&v| f64::from(v)).sum::<f64>() / rows as f64;
+        let sd = (q[..rows].iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / rows as f64).sqrt() as f32;
         let k = self.weight / rows as f32;
         work.dy[..rows].fill(-k);
         work.dy[rows..].fill(k);
         critic.backward(theta, &work.x, &mut work.act, 0..2 * rows, &work.dy, Some(&mut work.grad), None);
-        gap
+        (gap, sd)
     }
 
     /// The adversarial rows of the last [`Self::adversary`] (`rows x n_in`).

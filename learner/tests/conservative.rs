@@ -34,7 +34,16 @@ fn setup(rows: usize, seed: u64) -> (Mlp, Vec<f32>, Vec<f32>, Conservative) {
         x.extend([rng.random_range(0.7..1.3), rng.random_range(0.4..1.6)]);
         x.extend([rng.random_range(-0.9..0.9), rng.random_range(-0.9..0.9)]);
     }
-    let c = Conservative { weight: 0.7, steps: 3, step: 0.1, design: 2..4, low: vec![0.5, 0.0], high: vec![1.5, 2.0] };
+    let c = Conservative {
+        weight: 0.7,
+        steps: 3,
+        step: 0.1,
+        limit: 0.5,
+        weight_lr: 0.01,
+        design: 2..4,
+        low: vec![0.5, 0.0],
+        high: vec![1.5, 2.0],
+    };
     (net, theta, x, c)
 }
 
@@ -53,7 +62,7 @@ fn the_conservative_gradient_matches_central_differences() {
     let (net, theta, x_data, c) = setup(rows, 5);
     let mut work = ConservativeWork::default();
     c.adversary(&net, &theta, &x_data, rows, &mut work);
-    let gap = c.gradient(&net, &theta, rows, &mut work);
+    let (gap, sd) = c.gradient(&net, &theta, rows, &mut work);
     let x_adv = c.adversarial_rows(&work, rows, net.n_in()).to_vec();
     let analytic = work.grad.clone();
 
@@ -96,7 +105,7 @@ fn the_conservative_gradient_matches_central_differences() {
     let c2 = Conservative { weight: 2.0 * c.weight, ..c.clone() };
     let mut w2 = ConservativeWork::default();
     c2.adversary(&net, &theta, &x_data, rows, &mut w2);
-    assert_eq!(c2.gradient(&net, &theta, rows, &mut w2), gap);
+    assert_eq!(c2.gradient(&net, &theta, rows, &mut w2), (gap, sd));
     for (a, b) in w2.grad.iter().zip(&analytic) {
         assert!((a - 2.0 * b).abs() <= 1e-5 * b.abs().max(1.0), "{a} vs 2 x {b}");
     }
@@ -148,7 +157,7 @@ fn fear_cfg(weight: f32) -> FearLearnerConfig {
         population_updates_from_design: 0,
         warmup_episodes: 0,
         population_critics: 3,
-        conservative: ConservativeConfig { weight, steps: 5, step: 0.1 },
+        conservative: ConservativeConfig { weight, ..ConservativeConfig::default() },
         ..FearLearnerConfig::default()
     }
 }
@@ -259,6 +268,73 @@ fn trained_on_middle_bodies_the_conservative_head_does_not_invent_a_better_body(
     assert!(median(cons) < median(fear) / 4.0, "median optimism {} vs FEAR's {}", median(cons), median(fear));
 }
 
+/// COMs' dual ascent on the weight: a fixed weight (`weight-lr = 0`, the form first run) pushes
+/// the adversary's Q down without bound, while the dual lets the weight fall once the gap is
+/// below tau and holds the gap near it. Same data, same seed; and a snapshot carries the weight
+/// and its Adam state, so a resumed learner goes on with the same weight and heads.
+#[test]
+fn the_dual_ascent_bounds_the_gap_and_a_snapshot_carries_the_weight() {
+    let trained = |weight_lr: f32| {
+        let mut l = FearLearner::new(
+            3,
+            1,
+            FearLearnerConfig {
+                conservative: ConservativeConfig { weight: 2.0, weight_lr, ..ConservativeConfig::default() },
+                ..fear_cfg(2.0)
+            },
+            4,
+        )
+        .unwrap();
+        l.set_design_box(&[0.0, 0.0], &[1.0, 1.0]);
+        let mut rng = Pcg64Mcg::seed_from_u64(4);
+        for d in 0..4 {
+            l.begin_design(d);
+            let design = [rng.random_range(0.3..0.7), rng.random_range(0.3..0.7)];
+            for _ in 0..2 {
+                episode(&mut l, design, &mut rng);
+                l.end_episode().unwrap();
+            }
+        }
+        l.train_population(3000).unwrap();
+        episode(&mut l, [0.5, 0.5], &mut rng);
+        let last = l.end_episode().unwrap().last_population;
+        (l, last.unwrap())
+    };
+    let (_, fixed) = trained(0.0);
+    let (mut dual_l, dual) = trained(0.01);
+    eprintln!(
+        "fixed weight: gap {} weight {}; dual: gap {} weight {}",
+        fixed.conservative_gap, fixed.conservative_weight, dual.conservative_gap, dual.conservative_weight
+    );
+    assert_eq!(fixed.conservative_weight, 2.0, "weight-lr 0 keeps the weight");
+    assert!(dual.conservative_weight < 2.0, "the gap sat below tau, yet the weight did not fall: {dual:?}");
+    assert!(fixed.conservative_gap < 2.0 * dual.conservative_gap.min(0.0) - 0.05, "fixed {fixed:?} vs dual {dual:?}");
+
+    let dir = std::env::temp_dir().join(format!("coadapt-dual-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let snap = coadapt_learner::snapshot::write(&dir, 1, "src", "test", 2, |out| dual_l.save_state(out)).unwrap();
+    let mut back = FearLearner::new(
+        3,
+        1,
+        FearLearnerConfig { conservative: ConservativeConfig { weight: 2.0, ..ConservativeConfig::default() }, ..fear_cfg(2.0) },
+        9,
+    )
+    .unwrap();
+    back.set_design_box(&[0.0, 0.0], &[1.0, 1.0]);
+    let (_, mut inp) = coadapt_learner::snapshot::load(&snap).unwrap();
+    back.load_state(&mut inp).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut runs = [(&mut dual_l, Pcg64Mcg::seed_from_u64(8)), (&mut back, Pcg64Mcg::seed_from_u64(8))];
+    let mut after = Vec::new();
+    for (l, rng) in runs.iter_mut() {
+        l.begin_design(4);
+        episode(l, [0.5, 0.5], rng);
+        after.push(l.end_episode().unwrap().last_population.unwrap());
+    }
+    assert_eq!(after[0].conservative_weight, after[1].conservative_weight, "the weight after the resume");
+    assert_eq!(dual_l.agent(ActingPolicy::Population).head_params(0), back.agent(ActingPolicy::Population).head_params(0));
+}
+
 #[test]
 fn bad_settings_are_refused_naming_the_key() {
     let bad = [
@@ -267,6 +343,8 @@ fn bad_settings_are_refused_naming_the_key() {
         (ConservativeConfig { weight: 1.0, steps: 0, ..ConservativeConfig::default() }, "learner.conservative.steps"),
         (ConservativeConfig { weight: 1.0, step: 0.0, ..ConservativeConfig::default() }, "learner.conservative.step"),
         (ConservativeConfig { weight: 1.0, step: 1.5, ..ConservativeConfig::default() }, "learner.conservative.step"),
+        (ConservativeConfig { weight: 1.0, limit: f32::INFINITY, ..ConservativeConfig::default() }, "learner.conservative.limit"),
+        (ConservativeConfig { weight: 1.0, weight_lr: -0.1, ..ConservativeConfig::default() }, "learner.conservative.weight-lr"),
     ];
     for (c, key) in bad {
         let e = FearLearnerConfig { conservative: c.clone(), ..FearLearnerConfig::default() }.check().unwrap_err().to_string();

@@ -277,6 +277,7 @@ impl Learner<'_> {
             // the conservative term holds down (COMs watches it).
             if let Some(p) = t.last_population.as_ref().filter(|_| self.fear.cfg.conservative.weight > 0.0) {
                 v.push(("train/conservative_gap", f64::from(p.conservative_gap)));
+                v.push(("train/conservative_weight", f64::from(p.conservative_weight)));
             }
         }
         v

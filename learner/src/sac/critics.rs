@@ -65,7 +65,7 @@ impl Head {
     /// J_Q(theta_h) = mean_b (Q_h(s_b, a_b) - y_b)^2, plus the conservative term when `cons` is
     /// on: gradient, clamp, Adam (no target network: the twin's target `y` is the head's, so the
     /// term's push is not bootstrapped into the head's own targets). Returns the loss and the
-    /// conservative gap (0 when off).
+    /// conservative gap and the sd of the head's Q over the batch (both 0 when off).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn fit(
         &mut self,
@@ -76,7 +76,7 @@ impl Head {
         act_dim: usize,
         cfg: &SacConfig,
         cons: Option<&Conservative>,
-    ) -> (f32, f32) {
+    ) -> (f32, f32, f32) {
         let n = b.rows;
         resize(&mut self.x, n * (obs_dim + act_dim));
         resize(&mut self.dy, n);
@@ -88,10 +88,10 @@ impl Head {
             *d = 2.0 * (q - y) / n as f32;
         }
         critic.backward(&self.theta, &self.x, &mut self.act, 0..n, &self.dy, Some(&mut self.grad), None);
-        let mut gap = 0.0;
+        let (mut gap, mut sd) = (0.0, 0.0);
         if let Some(c) = cons {
             c.adversary(critic, &self.theta, &self.x, n, &mut self.cons);
-            gap = c.gradient(critic, &self.theta, n, &mut self.cons);
+            (gap, sd) = c.gradient(critic, &self.theta, n, &mut self.cons);
             for (g, d) in self.grad.iter_mut().zip(&self.cons.grad) {
                 *g += d;
             }
@@ -100,7 +100,7 @@ impl Head {
             clamp_elementwise(&mut self.grad, cfg.grad_clamp);
         }
         self.adam.step(&mut self.theta, &self.grad);
-        (loss / n as f32, gap)
+        (loss / n as f32, gap, sd)
     }
 }
 

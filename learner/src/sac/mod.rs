@@ -41,6 +41,15 @@ pub struct SacLosses {
     /// The conservative term's gap, mean over the ensemble heads of mean Q at the adversarial
     /// designs minus mean Q at the batch's (0 when the term is off; [`crate::conservative`]).
     pub conservative_gap: f32,
+    /// The term's weight lambda after this update's dual step (0 when off).
+    pub conservative_weight: f32,
+}
+
+/// COMs' dual ascent on the conservative term's weight: log lambda and its Adam state.
+#[derive(Clone, Debug)]
+struct Dual {
+    log_weight: f32,
+    adam: Adam,
 }
 
 /// The policy's scratch for one update.
@@ -77,6 +86,8 @@ pub struct Sac {
     /// COMs' conservative term on the ensemble heads ([`Sac::set_conservative`]); off in plain
     /// SAC.
     conservative: Option<Conservative>,
+    /// The term's weight under dual ascent (`Some` while the term is on).
+    dual: Option<Dual>,
     log_alpha: f32,
     alpha_adam: Adam,
     target_entropy: f32,
@@ -111,6 +122,7 @@ impl Sac {
             critics: [c1, c2],
             heads: Vec::new(),
             conservative: None,
+            dual: None,
             work: PolicyWork::default(),
             act_ws: Activations::default(),
             act_eps: Vec::new(),
@@ -135,8 +147,20 @@ impl Sac {
     /// Turns COMs' conservative term on the ensemble heads on (`Some`) or off (`None`: the heads
     /// regress on the twin's target alone); see [`crate::conservative`]. The twin, the policy
     /// and every action are the same either way. FEAR sets it on the population pair.
+    /// The term's weight starts at `c.weight` and follows COMs' dual ascent (a weight already
+    /// moving, from an earlier call or a restored snapshot, keeps its state).
     pub fn set_conservative(&mut self, c: Option<Conservative>) {
+        self.dual = match (&c, self.dual.take()) {
+            (None, _) => None,
+            (Some(_), Some(d)) => Some(d),
+            (Some(c), None) => {
+                Some(Dual { log_weight: c.weight.ln(), adam: Adam::new(1, AdamConfig { lr: c.weight_lr, ..AdamConfig::default() }) })
+            }
+        };
         self.conservative = c;
+        if let (Some(c), Some(d)) = (&mut self.conservative, &self.dual) {
+            c.weight = d.log_weight.exp();
+        }
     }
 
     /// Ensemble heads beyond the twin.
@@ -243,9 +267,21 @@ impl Sac {
     fn update_with_noise(&mut self, b: &Batch) -> SacLosses {
         let (n, act, obs) = (b.rows, self.act_dim, self.obs_dim);
         let Self {
-            cfg, policy, critic, phi, phi_adam, critics, heads, conservative, log_alpha, alpha_adam, target_entropy, work: w, ..
+            cfg,
+            policy,
+            critic,
+            phi,
+            phi_adam,
+            critics,
+            heads,
+            conservative,
+            dual,
+            log_alpha,
+            alpha_adam,
+            target_entropy,
+            work: w,
+            ..
         } = self;
-        let cons = conservative.as_ref();
         for v in [&mut w.a_new, &mut w.a_next, &mut w.d_a] {
             resize(v, n * act);
         }
@@ -284,15 +320,30 @@ impl Sac {
 
         // The ensemble heads regress on the same target (with the conservative term when it is
         // on); nothing else reads them.
-        let (mut head_loss, mut gap) = (0.0, 0.0);
+        let (mut head_loss, mut gap, mut sd) = (0.0, 0.0, 0.0);
         for h in heads.iter_mut() {
-            let (loss, g) = h.fit(critic, b, &w.y, obs, act, cfg, cons);
+            let (loss, g, s) = h.fit(critic, b, &w.y, obs, act, cfg, conservative.as_ref());
             head_loss += loss;
             gap += g;
+            sd += s;
         }
         if !heads.is_empty() {
-            head_loss /= heads.len() as f32;
-            gap /= heads.len() as f32;
+            let k = heads.len() as f32;
+            (head_loss, gap, sd) = (head_loss / k, gap / k, sd / k);
+        }
+        // COMs' dual step: the loss lambda (tau - gap) on log lambda, tau in units of the heads'
+        // Q spread over the batch; lambda grows while the adversary's designs score above the
+        // trained ones by more than tau, and shrinks otherwise.
+        let mut cons_weight = 0.0;
+        if let (Some(c), Some(d)) = (conservative.as_mut(), dual.as_mut()) {
+            if c.weight_lr > 0.0 && !heads.is_empty() {
+                let mut lw = [d.log_weight];
+                d.adam.step(&mut lw, &[c.weight * (c.limit * sd - gap)]);
+                // exp stays finite and above 0 (COMs leaves log lambda free).
+                d.log_weight = lw[0].clamp(-20.0, 20.0);
+                c.weight = d.log_weight.exp();
+            }
+            cons_weight = c.weight;
         }
 
         // J_pi(phi) = mean_b [alpha log pi(a~_b|s_b) - min_i Q_theta_i(s_b, a~_b)]; the gradient
@@ -346,6 +397,7 @@ impl Sac {
             log_pi: mean_log_pi,
             heads: head_loss,
             conservative_gap: gap,
+            conservative_weight: cons_weight,
         }
     }
 
