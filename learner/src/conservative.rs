@@ -14,8 +14,9 @@
 //! which is what the design optimiser's PSO over Q (Eq. 5.6) exploits. As in COMs, lambda is a
 //! Lagrange multiplier, not a constant: dual ascent on log lambda with the loss
 //! lambda (tau - gap) grows it while the gap is above tau (`limit`, in standard deviations of Q
-//! over the batch) and shrinks it below, so the term limits the search's optimism instead of
-//! pushing Q down without end (a fixed lambda drove the gap to -200 on Hopper).
+//! over the batch; 0 by default) and shrinks it below, so the term holds the search's optimism
+//! at tau instead of pushing Q down without end (a fixed lambda drove the gap to -200 on
+//! Hopper).
 //!
 //! The term trains the population pair's ensemble heads only (`learner.population-critics`
 //! above 2), which regress on the twin's Bellman target and which the optimiser's
@@ -41,9 +42,13 @@ pub struct ConservativeConfig {
     /// turns the term off. With `weight-lr` above 0 it then follows COMs' dual ascent.
     pub weight: f32,
     /// tau, how far the adversarial designs' mean Q may sit above the trained designs' before
-    /// the weight grows, in standard deviations of the head's Q over the batch's trained rows
-    /// (COMs normalises its scores to unit sd and allows 0.5). Q here is in return units, which
-    /// differ by robot (single digits on Hopper, hundreds on HalfCheetah), hence the sd.
+    /// the weight grows, in standard deviations of the head's Q over the batch's trained rows.
+    /// 0 (the default): no lead at all, the one setting free of Q's units, which differ by
+    /// robot (single digits on Hopper, hundreds on HalfCheetah). COMs allows 0.5 sd of its
+    /// normalised scores, but its sd is over designs; over a batch's rows Q's spread is mostly
+    /// the states', so 0.5 of it lets the search's lead grow to a third of a design's score
+    /// before the term acts (seen on Walker and Hopper: the weight fell from 1 to under 1e-4 by
+    /// the end of design 3 while the search's lead still grew).
     pub limit: f32,
     /// Adam's learning rate on log lambda (COMs' dual ascent: the loss lambda (tau - gap), so
     /// lambda grows while the gap is above tau and shrinks below it; COMs' rate 0.01). 0 keeps
@@ -61,7 +66,7 @@ pub struct ConservativeConfig {
 
 impl Default for ConservativeConfig {
     fn default() -> Self {
-        Self { weight: 0.0, steps: 5, step: 0.1, limit: 0.5, weight_lr: 0.01 }
+        Self { weight: 0.0, steps: 5, step: 0.1, limit: 0.0, weight_lr: 0.01 }
     }
 }
 
