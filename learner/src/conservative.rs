@@ -12,11 +12,11 @@
 //! `xi'`; the critic's gradient gains lambda (grad mean Q(s, a, xi') - grad mean Q(s, a, xi)).
 //! So the critic is pushed down where its own search would go and up on the bodies trained,
 //! which is what the design optimiser's PSO over Q (Eq. 5.6) exploits. As in COMs, lambda is a
-//! Lagrange multiplier, not a constant: dual ascent on log lambda with the loss
-//! lambda (tau - gap) grows it while the gap is above tau (`limit`, in standard deviations of Q
-//! over the batch; 0 by default) and shrinks it below, so the term holds the search's optimism
-//! at tau instead of pushing Q down without end (a fixed lambda drove the gap to -200 on
-//! Hopper).
+//! Lagrange multiplier, not a constant: dual ascent on log lambda grows it while the gap is
+//! above tau (`limit`, in standard deviations of Q over the batch; 0 by default) and shrinks it
+//! below, so the term holds the search's optimism at tau instead of pushing Q down without end
+//! (a fixed lambda drove the gap to -200 on Hopper). Unlike COMs the step is a plain gradient
+//! step on the excess in sd units, not Adam's (see [`ConservativeConfig::weight_lr`]).
 //!
 //! The term trains the population pair's ensemble heads only (`learner.population-critics`
 //! above 2), which regress on the twin's Bellman target and which the optimiser's
@@ -50,10 +50,12 @@ pub struct ConservativeConfig {
     /// before the term acts (seen on Walker and Hopper: the weight fell from 1 to under 1e-4 by
     /// the end of design 3 while the search's lead still grew).
     pub limit: f32,
-    /// Adam's learning rate on log lambda (COMs' dual ascent: the loss lambda (tau - gap), so
-    /// lambda grows while the gap is above tau and shrinks below it; COMs' rate 0.01). 0 keeps
-    /// lambda at `weight`, a fixed push that grows the gap without bound (a first form did:
-    /// -200 Q below the data on Hopper within 3 designs).
+    /// Step size of the dual ascent on log lambda: each population update adds `weight-lr`
+    /// (gap / sd - limit), so lambda grows while the search's lead is above tau, in proportion
+    /// to the excess, and shrinks below it, within [0.001, 100]. 0.05 doubles lambda over an
+    /// episode's 250 updates at a lead of 5 % of an sd. 0 keeps lambda at `weight`, a fixed push
+    /// that grows the gap without bound (a first form did: -200 Q below the data on Hopper
+    /// within 3 designs).
     pub weight_lr: f32,
     /// Gradient-ascent steps from each batch row's design to its adversarial design.
     pub steps: usize,
@@ -66,7 +68,7 @@ pub struct ConservativeConfig {
 
 impl Default for ConservativeConfig {
     fn default() -> Self {
-        Self { weight: 0.0, steps: 5, step: 0.1, limit: 0.0, weight_lr: 0.01 }
+        Self { weight: 0.0, steps: 5, step: 0.1, limit: 0.0, weight_lr: 0.05 }
     }
 }
 

@@ -45,12 +45,17 @@ pub struct SacLosses {
     pub conservative_weight: f32,
 }
 
-/// COMs' dual ascent on the conservative term's weight: log lambda and its Adam state.
+/// Dual ascent on the conservative term's weight: log lambda.
 #[derive(Clone, Debug)]
 struct Dual {
     log_weight: f32,
-    adam: Adam,
 }
+
+/// Bounds of lambda under dual ascent: the term never quite off, and never so heavy that the
+/// heads' regression on the twin's target stops counting (a head held flat over designs by a
+/// weight of 5e8 fits nothing else).
+const MIN_WEIGHT: f32 = 1e-3;
+const MAX_WEIGHT: f32 = 100.0;
 
 /// The policy's scratch for one update.
 #[derive(Clone, Debug, Default)]
@@ -153,9 +158,7 @@ impl Sac {
         self.dual = match (&c, self.dual.take()) {
             (None, _) => None,
             (Some(_), Some(d)) => Some(d),
-            (Some(c), None) => {
-                Some(Dual { log_weight: c.weight.ln(), adam: Adam::new(1, AdamConfig { lr: c.weight_lr, ..AdamConfig::default() }) })
-            }
+            (Some(c), None) => Some(Dual { log_weight: c.weight.clamp(MIN_WEIGHT, MAX_WEIGHT).ln() }),
         };
         self.conservative = c;
         if let (Some(c), Some(d)) = (&mut self.conservative, &self.dual) {
@@ -331,16 +334,17 @@ impl Sac {
             let k = heads.len() as f32;
             (head_loss, gap, sd) = (head_loss / k, gap / k, sd / k);
         }
-        // COMs' dual step: the loss lambda (tau - gap) on log lambda, tau in units of the heads'
-        // Q spread over the batch; lambda grows while the adversary's designs score above the
-        // trained ones by more than tau, and shrinks otherwise.
+        // The dual step, a plain gradient step on log lambda with the gap in units of the heads'
+        // Q spread over the batch: lambda grows while the adversary's designs lead the trained
+        // ones by more than tau, in proportion to the excess, and shrinks otherwise. (COMs steps
+        // log lambda with Adam, whose steps keep their size however small the excess; with
+        // tau = 0 a head held flat by the term leads by rounding noise, and Adam drove lambda up
+        // by 0.01 a step to 5e8.)
         let mut cons_weight = 0.0;
         if let (Some(c), Some(d)) = (conservative.as_mut(), dual.as_mut()) {
-            if c.weight_lr > 0.0 && !heads.is_empty() {
-                let mut lw = [d.log_weight];
-                d.adam.step(&mut lw, &[c.weight * (c.limit * sd - gap)]);
-                // exp stays finite and above 0 (COMs leaves log lambda free).
-                d.log_weight = lw[0].clamp(-20.0, 20.0);
+            if c.weight_lr > 0.0 && !heads.is_empty() && sd > 0.0 {
+                let excess = gap / sd - c.limit;
+                d.log_weight = (d.log_weight + c.weight_lr * excess).clamp(MIN_WEIGHT.ln(), MAX_WEIGHT.ln());
                 c.weight = d.log_weight.exp();
             }
             cons_weight = c.weight;

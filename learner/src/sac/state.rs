@@ -23,18 +23,10 @@ struct SacScalars {
     /// Adam steps of each ensemble head (absent without heads, and in older snapshots).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     head_steps: Vec<u32>,
-    /// The conservative term's dual ascent: log lambda, its Adam moments and steps (absent while
-    /// the term is off, and in older snapshots).
+    /// The conservative term's log lambda under dual ascent (absent while the term is off, and
+    /// in older snapshots).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    conservative_dual: Option<DualState>,
-}
-
-#[derive(Serialize, Deserialize)]
-struct DualState {
-    log_weight: f32,
-    m: f32,
-    v: f32,
-    steps: u32,
+    conservative_log_weight: Option<f32>,
 }
 
 impl Sac {
@@ -104,10 +96,7 @@ impl Sac {
                 updates: self.updates,
                 rng: self.rng.clone(),
                 head_steps: self.heads.iter().map(|h| h.adam.steps()).collect(),
-                conservative_dual: self.dual.as_ref().map(|d| {
-                    let (m, v) = d.adam.moments();
-                    DualState { log_weight: d.log_weight, m: m[0], v: v[0], steps: d.adam.steps() }
-                }),
+                conservative_log_weight: self.dual.as_ref().map(|d| d.log_weight),
             },
         )
     }
@@ -151,14 +140,13 @@ impl Sac {
         self.log_alpha = s.log_alpha;
         // The term's weight goes on where it was (a snapshot from before the term, or of a run
         // without it, leaves the weight this run's settings start from).
-        if let (Some(d), Some(saved)) = (self.dual.as_mut(), s.conservative_dual) {
-            if !(saved.log_weight.is_finite() && saved.m.is_finite() && saved.v.is_finite()) {
-                return Err(mismatch("the conservative term's dual state is not finite".into()));
+        if let (Some(d), Some(saved)) = (self.dual.as_mut(), s.conservative_log_weight) {
+            if !saved.is_finite() {
+                return Err(mismatch(format!("the conservative term's log weight {saved} is not finite")));
             }
-            d.adam.restore(&[saved.m], &[saved.v], saved.steps).map_err(|e| mismatch(e.to_string()))?;
-            d.log_weight = saved.log_weight;
+            d.log_weight = saved;
             if let Some(c) = self.conservative.as_mut() {
-                c.weight = saved.log_weight.exp();
+                c.weight = saved.exp();
             }
         }
         self.updates = s.updates;
