@@ -288,7 +288,7 @@ def verdict(root):
     print("|---|" + "---|" * len(VERDICT_ROBOTS) + "---|")
     for m in methods:
         cells, beats, loses, open_ = [], 0, 0, []
-        hc_lost = False
+        hc_lost = hc_open = False
         for title, prefix in VERDICT_ROBOTS:
             r = runs[prefix]
             seeds = sorted(set(r.get(m, {})) & set(r.get("fear", {})))
@@ -296,6 +296,7 @@ def verdict(root):
             cells.append(f"{cr.signed_sd(d)} ({len(d)}, {sign_flip_p(d)})" if d else "-")
             if len(d) < SEEDS_TO_DECIDE:
                 open_.append(f"{title} {len(d)}/{SEEDS_TO_DECIDE}")
+                hc_open |= prefix == "hc"
             elif statistics.mean(d) > 0:
                 beats += 1
             else:
@@ -303,7 +304,7 @@ def verdict(root):
                 hc_lost |= prefix == "hc"
         if hc_lost or beats + len(open_) < 3:
             v = "no" + (" (loses on HalfCheetah)" if hc_lost else f" (beats FEAR on {beats} of {beats + loses} decided)")
-        elif beats >= 3 and "HalfCheetah" not in " ".join(open_):
+        elif beats >= 3 and not hc_open:
             v = f"yes (beats FEAR on {beats})"
         else:
             v = "open: seeds " + ", ".join(open_)

@@ -56,19 +56,22 @@ fn ensemble_heads_reach_the_optimiser_and_change_its_pessimistic_choice_only() {
 
 /// COMs' conservative term on one head beyond the twin, which alone scores designs
 /// (`q = "heads"`): everything before the first chosen design is FEAR's, episode for episode
-/// (the head acts on nothing) and the chosen design is the head's.
+/// (the head acts on nothing) and the chosen design is the head's. Against the same head without
+/// the term, the choice differs too: the config's term reaches the head through the binary.
 #[test]
 fn a_conservative_head_scores_the_designs_and_changes_nothing_else() {
     let dir = coadapt_test_support::scratch("cli", "conservative-head");
     std::fs::create_dir_all(&dir).unwrap();
     let (fear_designs, fear_eps) = run(&dir, "fear", "", "q1");
     let (cons_designs, cons_eps) = run(&dir, "conservative", "population-critics = 3\nconservative = { weight = 1.0 }\n", "heads");
+    let (head_designs, _) = run(&dir, "head-only", "population-critics = 3\n", "heads");
     assert_eq!(cons_designs.len(), 5, "header and four designs: {cons_designs:?}");
     assert_eq!(fear_designs[..3], cons_designs[..3]);
     let initial_episodes = 2 * 3 + 1; // header + 2 initial designs x 3 episodes
     assert_eq!(episode_rows(&fear_eps)[..initial_episodes], episode_rows(&cons_eps)[..initial_episodes]);
     let design = |rows: &[String]| rows[3].split(',').nth(2).unwrap().to_string();
     assert_ne!(design(&fear_designs), design(&cons_designs), "the head did not reach the optimiser");
+    assert_ne!(design(&head_designs), design(&cons_designs), "the term did not reach the head");
     let predicted: f64 = cons_designs[3].split(',').nth(6).unwrap().parse().unwrap();
     assert!(predicted.is_finite(), "{}", cons_designs[3]);
 }

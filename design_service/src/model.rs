@@ -25,8 +25,8 @@ pub struct DesignModel {
 
 impl DesignModel {
     /// `policy`/`phi` the population policy, `critic`/`thetas` its critic(s) (Q1, Q1 and Q2,
-    /// then any ensemble heads, as many as `mode` reads), `start_states` `n x obs_dim`, the design in the
-    /// observation columns `design_at..`.
+    /// then any ensemble heads, as many as `mode` reads), `start_states` `n x obs_dim`, the
+    /// design in the observation columns `design_at..`.
     pub fn new(
         robot: String,
         names: Vec<String>,

@@ -39,7 +39,8 @@ use crate::networks::resize;
 #[serde(default, rename_all = "kebab-case", deny_unknown_fields)]
 pub struct ConservativeConfig {
     /// lambda, the weight of the term against the regression loss at the start; 0 (the default)
-    /// turns the term off. With `weight-lr` above 0 it then follows COMs' dual ascent.
+    /// turns the term off, else within [0.001, 100] (the dual ascent's bounds). With `weight-lr`
+    /// above 0 it then follows the dual ascent.
     pub weight: f32,
     /// tau, how far the adversarial designs' mean Q may sit above the trained designs' before
     /// the weight grows, in standard deviations of the head's Q over the batch's trained rows.
@@ -76,8 +77,8 @@ impl ConservativeConfig {
     /// The settings that cannot work, named as a config file spells them.
     pub fn check(&self) -> Result<(), crate::ConfigError> {
         let bad = |field: &str, why: String| Err(crate::ConfigError::Invalid(format!("learner.conservative.{field}: {why}")));
-        if !(self.weight.is_finite() && self.weight >= 0.0) {
-            return bad("weight", format!("{} is not a finite number >= 0", self.weight));
+        if !(self.weight == 0.0 || (MIN_WEIGHT..=MAX_WEIGHT).contains(&self.weight)) {
+            return bad("weight", format!("{} is neither 0 (off) nor in [{MIN_WEIGHT}, {MAX_WEIGHT}]", self.weight));
         }
         if self.weight > 0.0 && self.steps == 0 {
             return bad("steps", "0 steps leave the designs where the data is: the term would be 0".into());
@@ -95,14 +96,11 @@ impl ConservativeConfig {
     }
 
     /// The term for critics whose input rows hold the design in columns `design`, over the box
-    /// `low`..`high`; `None` at weight 0 (FEAR's critic).
+    /// `low`..`high`, at lambda = `weight`; `None` at weight 0 (FEAR's critic).
     pub fn on_box(&self, design: Range<usize>, low: &[f32], high: &[f32]) -> Option<Conservative> {
         (self.weight > 0.0).then(|| Conservative {
-            weight: self.weight,
-            steps: self.steps,
-            step: self.step,
-            limit: self.limit,
-            weight_lr: self.weight_lr,
+            log_weight: self.weight.clamp(MIN_WEIGHT, MAX_WEIGHT).ln(),
+            cfg: self.clone(),
             design,
             low: low.to_vec(),
             high: high.to_vec(),
@@ -110,17 +108,21 @@ impl ConservativeConfig {
     }
 }
 
+/// Bounds of lambda under dual ascent: the term never quite off, and never so heavy that the
+/// heads' regression on the twin's target stops counting (a head held flat over designs by a
+/// weight of 5e8 fits nothing else).
+pub const MIN_WEIGHT: f32 = 1e-3;
+pub const MAX_WEIGHT: f32 = 100.0;
+
 /// The term as one critic applies it: the settings and where the design sits in a critic's
 /// input row (`[state, design, action]`: the observation is the state with the design
 /// appended), with the design box.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Conservative {
-    /// lambda now (the agent's dual ascent moves it; see [`ConservativeConfig`]).
-    pub weight: f32,
-    pub steps: usize,
-    pub step: f32,
-    pub limit: f32,
-    pub weight_lr: f32,
+    /// The settings (`cfg.weight` is lambda at the start).
+    pub cfg: ConservativeConfig,
+    /// log lambda now, the dual ascent's state ([`Self::dual_step`]).
+    pub log_weight: f32,
     /// Columns of the design in a critic input row.
     pub design: Range<usize>,
     pub low: Vec<f32>,
@@ -153,7 +155,7 @@ impl Conservative {
         data.copy_from_slice(x_data);
         adv.copy_from_slice(x_data);
         work.dy[..rows].fill(1.0);
-        for _ in 0..self.steps {
+        for _ in 0..self.cfg.steps {
             critic.forward(theta, adv, rows, &mut work.act);
             critic.backward_deltas(theta, &mut work.act, 0..rows, &work.dy[..rows], Some(&mut work.dx));
             for (row, g) in adv.chunks_exact_mut(w).zip(work.dx.chunks_exact(w)) {
@@ -169,7 +171,7 @@ impl Conservative {
                     continue;
                 }
                 for (c, (lo, hi)) in self.design.clone().zip(self.low.iter().zip(&self.high)) {
-                    let du = self.step * g[c] * (hi - lo) / norm;
+                    let du = self.cfg.step * g[c] * (hi - lo) / norm;
                     row[c] = (row[c] + du * (hi - lo)).clamp(*lo, *hi);
                 }
             }
@@ -186,11 +188,29 @@ impl Conservative {
         let gap = (q[rows..].iter().sum::<f32>() - q[..rows].iter().sum::<f32>()) / rows as f32;
         let mean = q[..rows].iter().map(|&v| f64::from(v)).sum::<f64>() / rows as f64;
         let sd = (q[..rows].iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / rows as f64).sqrt() as f32;
-        let k = self.weight / rows as f32;
+        let k = self.weight() / rows as f32;
         work.dy[..rows].fill(-k);
         work.dy[rows..].fill(k);
         critic.backward(theta, &work.x, &mut work.act, 0..2 * rows, &work.dy, Some(&mut work.grad), None);
         (gap, sd)
+    }
+
+    /// lambda now.
+    pub fn weight(&self) -> f32 {
+        self.log_weight.exp()
+    }
+
+    /// The dual step after an update whose term had `gap` and data-row spread `sd` (from
+    /// [`Self::gradient`]): a plain gradient step on log lambda, `weight-lr` (gap / sd - limit),
+    /// within the bounds, so lambda moves in proportion to the search's excess lead. (COMs steps
+    /// log lambda with Adam, whose steps keep their size however small the excess; with
+    /// tau = 0 a head held flat by the term leads by rounding noise, and Adam drove lambda up
+    /// by 0.01 a step to 5e8.) Nothing moves with `weight-lr` 0 or a spread of 0.
+    pub fn dual_step(&mut self, gap: f32, sd: f32) {
+        if self.cfg.weight_lr > 0.0 && sd > 0.0 {
+            let excess = gap / sd - self.cfg.limit;
+            self.log_weight = (self.log_weight + self.cfg.weight_lr * excess).clamp(MIN_WEIGHT.ln(), MAX_WEIGHT.ln());
+        }
     }
 
     /// The adversarial rows of the last [`Self::adversary`] (`rows x n_in`).

@@ -34,16 +34,9 @@ fn setup(rows: usize, seed: u64) -> (Mlp, Vec<f32>, Vec<f32>, Conservative) {
         x.extend([rng.random_range(0.7..1.3), rng.random_range(0.4..1.6)]);
         x.extend([rng.random_range(-0.9..0.9), rng.random_range(-0.9..0.9)]);
     }
-    let c = Conservative {
-        weight: 0.7,
-        steps: 3,
-        step: 0.1,
-        limit: 0.5,
-        weight_lr: 0.01,
-        design: 2..4,
-        low: vec![0.5, 0.0],
-        high: vec![1.5, 2.0],
-    };
+    let c = ConservativeConfig { weight: 0.7, steps: 3, step: 0.1, ..ConservativeConfig::default() }
+        .on_box(2..4, &[0.5, 0.0], &[1.5, 2.0])
+        .unwrap();
     (net, theta, x, c)
 }
 
@@ -73,7 +66,7 @@ fn the_conservative_gradient_matches_central_differences() {
         let pa = relu_pattern(&net, &act, rows);
         let data = mean_q(&net, p, &x_data, rows, &mut act);
         let pd = relu_pattern(&net, &act, rows);
-        (f64::from(c.weight) * (adv - data), adv - data, [pa, pd].concat())
+        (f64::from(c.weight()) * (adv - data), adv - data, [pa, pd].concat())
     };
     let (_, gap0, pattern) = term(&theta);
     assert!((gap0 - f64::from(gap)).abs() < 1e-4, "gap {gap} vs {gap0}");
@@ -102,7 +95,7 @@ fn the_conservative_gradient_matches_central_differences() {
     assert!(skipped * 20 < checked, "{skipped} of {} perturbations straddled a kink", checked + skipped);
 
     // The weight scales the gradient; the gap does not depend on it.
-    let c2 = Conservative { weight: 2.0 * c.weight, ..c.clone() };
+    let c2 = Conservative { log_weight: c.log_weight + 2f32.ln(), ..c.clone() };
     let mut w2 = ConservativeWork::default();
     c2.adversary(&net, &theta, &x_data, rows, &mut w2);
     assert_eq!(c2.gradient(&net, &theta, rows, &mut w2), (gap, sd));
@@ -140,7 +133,7 @@ fn the_adversary_climbs_q_inside_the_box_and_leaves_state_and_action_alone() {
     let rose = q0.iter().zip(&q1).filter(|(a, b)| b > a).count();
     assert!(rose * 4 >= rows * 3, "Q rose in only {rose} of {rows} rows");
     // One short step is first order: Q rises in every row (but one that straddles a kink).
-    let small = Conservative { steps: 1, step: 1e-3, ..c.clone() };
+    let small = Conservative { cfg: ConservativeConfig { steps: 1, step: 1e-3, ..c.cfg.clone() }, ..c.clone() };
     small.adversary(&net, &theta, &x_data, rows, &mut work);
     let q2 = net.forward(&theta, small.adversarial_rows(&work, rows, net.n_in()), rows, &mut act).to_vec();
     let fell: Vec<usize> = (0..rows).filter(|r| q2[*r] <= q0[*r]).collect();
@@ -341,6 +334,9 @@ fn bad_settings_are_refused_naming_the_key() {
     let bad = [
         (ConservativeConfig { weight: -1.0, ..ConservativeConfig::default() }, "learner.conservative.weight"),
         (ConservativeConfig { weight: f32::NAN, ..ConservativeConfig::default() }, "learner.conservative.weight"),
+        // lambda's bounds under dual ascent: a weight outside them is refused, not clamped.
+        (ConservativeConfig { weight: 1000.0, ..ConservativeConfig::default() }, "learner.conservative.weight"),
+        (ConservativeConfig { weight: 1e-4, ..ConservativeConfig::default() }, "learner.conservative.weight"),
         (ConservativeConfig { weight: 1.0, steps: 0, ..ConservativeConfig::default() }, "learner.conservative.steps"),
         (ConservativeConfig { weight: 1.0, step: 0.0, ..ConservativeConfig::default() }, "learner.conservative.step"),
         (ConservativeConfig { weight: 1.0, step: 1.5, ..ConservativeConfig::default() }, "learner.conservative.step"),

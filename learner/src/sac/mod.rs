@@ -45,18 +45,6 @@ pub struct SacLosses {
     pub conservative_weight: f32,
 }
 
-/// Dual ascent on the conservative term's weight: log lambda.
-#[derive(Clone, Debug)]
-struct Dual {
-    log_weight: f32,
-}
-
-/// Bounds of lambda under dual ascent: the term never quite off, and never so heavy that the
-/// heads' regression on the twin's target stops counting (a head held flat over designs by a
-/// weight of 5e8 fits nothing else).
-const MIN_WEIGHT: f32 = 1e-3;
-const MAX_WEIGHT: f32 = 100.0;
-
 /// The policy's scratch for one update.
 #[derive(Clone, Debug, Default)]
 struct PolicyWork {
@@ -91,8 +79,6 @@ pub struct Sac {
     /// COMs' conservative term on the ensemble heads ([`Sac::set_conservative`]); off in plain
     /// SAC.
     conservative: Option<Conservative>,
-    /// The term's weight under dual ascent (`Some` while the term is on).
-    dual: Option<Dual>,
     log_alpha: f32,
     alpha_adam: Adam,
     target_entropy: f32,
@@ -127,7 +113,6 @@ impl Sac {
             critics: [c1, c2],
             heads: Vec::new(),
             conservative: None,
-            dual: None,
             work: PolicyWork::default(),
             act_ws: Activations::default(),
             act_eps: Vec::new(),
@@ -152,17 +137,13 @@ impl Sac {
     /// Turns COMs' conservative term on the ensemble heads on (`Some`) or off (`None`: the heads
     /// regress on the twin's target alone); see [`crate::conservative`]. The twin, the policy
     /// and every action are the same either way. FEAR sets it on the population pair.
-    /// The term's weight starts at `c.weight` and follows COMs' dual ascent (a weight already
-    /// moving, from an earlier call or a restored snapshot, keeps its state).
+    /// The term's weight starts where `c` has it and follows its dual ascent; a term already on
+    /// (an earlier call, or a restored snapshot) keeps the weight it has reached.
     pub fn set_conservative(&mut self, c: Option<Conservative>) {
-        self.dual = match (&c, self.dual.take()) {
-            (None, _) => None,
-            (Some(_), Some(d)) => Some(d),
-            (Some(c), None) => Some(Dual { log_weight: c.weight.clamp(MIN_WEIGHT, MAX_WEIGHT).ln() }),
-        };
+        let reached = self.conservative.as_ref().map(|old| old.log_weight);
         self.conservative = c;
-        if let (Some(c), Some(d)) = (&mut self.conservative, &self.dual) {
-            c.weight = d.log_weight.exp();
+        if let (Some(c), Some(log_weight)) = (self.conservative.as_mut(), reached) {
+            c.log_weight = log_weight;
         }
     }
 
@@ -270,20 +251,7 @@ impl Sac {
     fn update_with_noise(&mut self, b: &Batch) -> SacLosses {
         let (n, act, obs) = (b.rows, self.act_dim, self.obs_dim);
         let Self {
-            cfg,
-            policy,
-            critic,
-            phi,
-            phi_adam,
-            critics,
-            heads,
-            conservative,
-            dual,
-            log_alpha,
-            alpha_adam,
-            target_entropy,
-            work: w,
-            ..
+            cfg, policy, critic, phi, phi_adam, critics, heads, conservative, log_alpha, alpha_adam, target_entropy, work: w, ..
         } = self;
         for v in [&mut w.a_new, &mut w.a_next, &mut w.d_a] {
             resize(v, n * act);
@@ -334,20 +302,13 @@ impl Sac {
             let k = heads.len() as f32;
             (head_loss, gap, sd) = (head_loss / k, gap / k, sd / k);
         }
-        // The dual step, a plain gradient step on log lambda with the gap in units of the heads'
-        // Q spread over the batch: lambda grows while the adversary's designs lead the trained
-        // ones by more than tau, in proportion to the excess, and shrinks otherwise. (COMs steps
-        // log lambda with Adam, whose steps keep their size however small the excess; with
-        // tau = 0 a head held flat by the term leads by rounding noise, and Adam drove lambda up
-        // by 0.01 a step to 5e8.)
+        // lambda follows the heads' lead (the dual step, [`Conservative::dual_step`]).
         let mut cons_weight = 0.0;
-        if let (Some(c), Some(d)) = (conservative.as_mut(), dual.as_mut()) {
-            if c.weight_lr > 0.0 && !heads.is_empty() && sd > 0.0 {
-                let excess = gap / sd - c.limit;
-                d.log_weight = (d.log_weight + c.weight_lr * excess).clamp(MIN_WEIGHT.ln(), MAX_WEIGHT.ln());
-                c.weight = d.log_weight.exp();
+        if let Some(c) = conservative.as_mut() {
+            if !heads.is_empty() {
+                c.dual_step(gap, sd);
             }
-            cons_weight = c.weight;
+            cons_weight = c.weight();
         }
 
         // J_pi(phi) = mean_b [alpha log pi(a~_b|s_b) - min_i Q_theta_i(s_b, a~_b)]; the gradient

@@ -96,7 +96,7 @@ impl Sac {
                 updates: self.updates,
                 rng: self.rng.clone(),
                 head_steps: self.heads.iter().map(|h| h.adam.steps()).collect(),
-                conservative_log_weight: self.dual.as_ref().map(|d| d.log_weight),
+                conservative_log_weight: self.conservative.as_ref().map(|c| c.log_weight),
             },
         )
     }
@@ -140,14 +140,11 @@ impl Sac {
         self.log_alpha = s.log_alpha;
         // The term's weight goes on where it was (a snapshot from before the term, or of a run
         // without it, leaves the weight this run's settings start from).
-        if let (Some(d), Some(saved)) = (self.dual.as_mut(), s.conservative_log_weight) {
+        if let (Some(c), Some(saved)) = (self.conservative.as_mut(), s.conservative_log_weight) {
             if !saved.is_finite() {
                 return Err(mismatch(format!("the conservative term's log weight {saved} is not finite")));
             }
-            d.log_weight = saved;
-            if let Some(c) = self.conservative.as_mut() {
-                c.weight = saved.exp();
-            }
+            c.log_weight = saved;
         }
         self.updates = s.updates;
         self.rng = s.rng;
