@@ -50,8 +50,17 @@ def scalars(path):
     = 5, Summary.value = 1, Value.tag = 1, Value.simple_value = 2)."""
     data = open(path, "rb").read()
     i = 0
-    while i + 12 <= len(data):
+    while i < len(data):
+        # A record is length (u64), its CRC (u32), the bytes, their CRC (u32). A run killed while
+        # writing leaves a cut last record: what came before it is whole and is kept.
+        if i + 12 > len(data):
+            print(f"tb_scalars: {path}: {len(data) - i} bytes of a cut record at the end, ignored", file=sys.stderr)
+            return
         n = struct.unpack("<Q", data[i:i + 8])[0]
+        if i + 12 + n + 4 > len(data):
+            print(f"tb_scalars: {path}: a cut record at byte {i} ({n} bytes announced, "
+                  f"{len(data) - i - 12} present), ignored", file=sys.stderr)
+            return
         record = data[i + 12:i + 12 + n]
         i += 12 + n + 4
         step = 0
