@@ -5,7 +5,10 @@
 # results as a fleet of processes, tested byte for byte; fewer processes competing for two cores).
 #
 #   usage: [BIN=coadapt-binary] [THREADS=1] scripts/campaign.sh [-j N] QUEUE_FILE
-#   stop: kill -TERM <this script's pid> (or Ctrl-C in its terminal): the runs snapshot and stop
+#   stop:  scripts/campaign.sh --stop QUEUE_FILE (or Ctrl-C in its terminal): the runs snapshot
+#          and stop; the queue started again resumes them. While a queue runs, its pid is in
+#          runs/campaign/QUEUE.pid, and a second start of the same queue is refused (two
+#          campaigns would write the same run directories).
 #
 # QUEUE_FILE: one experiment per line, `NAME CONFIG SEED [coadapt run flags...]`; `#` starts a
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
@@ -33,9 +36,30 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=2
 threads=${THREADS:-1}
-if [ "${1:-}" = "-j" ]; then jobs=$2; shift 2; fi
-queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE}
+stop=""
+case ${1:-} in
+  -j) [[ ${2:-} =~ ^[1-9][0-9]*$ ]] || { echo "campaign: -j takes a number of lanes, not '${2:-}'" >&2; exit 2; }
+      jobs=$2; shift 2 ;;
+  --stop) stop=yes; shift ;;
+  -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+esac
+queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE, or --stop QUEUE_FILE}
 [ -f "$queue" ] || { echo "campaign: no queue file $queue" >&2; exit 2; }
+pidfile=runs/campaign/$(basename "$queue" .queue).pid
+# The live campaign of this queue, if any: the pid in its file, still a campaign.sh.
+live_pid() {
+  local p
+  p=$(cat "$pidfile" 2>/dev/null || true)
+  [[ $p =~ ^[1-9][0-9]*$ ]] && grep -qa campaign.sh "/proc/$p/cmdline" 2>/dev/null && echo "$p"
+  return 0
+}
+if [ -n "$stop" ]; then
+  p=$(live_pid)
+  [ -n "$p" ] || { echo "campaign: no campaign of $queue is running (no live pid in $pidfile)" >&2; exit 1; }
+  kill -TERM "$p"
+  echo "campaign: asked $queue's campaign (pid $p) to stop; its runs snapshot and exit"
+  exit 0
+fi
 # runs/ lives beside the work tree (../runs, linked as runs): a session's checkout is laid anew
 # each time, and a machine that is kept then keeps the runs and their snapshots too.
 if [ ! -e runs ] && [ ! -L runs ]; then
@@ -43,6 +67,14 @@ if [ ! -e runs ] && [ ! -L runs ]; then
 fi
 root=runs/campaign
 mkdir -p "$root/configs"
+if [ -n "$(live_pid)" ]; then
+  echo "campaign: $queue is already running (pid $(live_pid)); stop it first: scripts/campaign.sh --stop $queue" >&2
+  exit 2
+fi
+echo $$ > "$pidfile"
+main_pid=$$
+# Only this shell removes the file (the lanes are subshells of it).
+trap '[ "$BASHPID" = "$main_pid" ] && rm -f "$pidfile"' EXIT
 # A private copy: rebuilding the workspace during the campaign does not touch running runs.
 # BIN=path runs that binary instead of building the checkout: a queue whose runs must be made by
 # an older build (say, before a change to a robot) names it in its header. Its copy is named after

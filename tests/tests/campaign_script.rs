@@ -1,0 +1,154 @@
+//! `scripts/campaign.sh`, the queue runner every archived run of docs/campaign/results went
+//! through, driven with a fake `coadapt` (a Python script that writes a run's files and waits
+//! for a hold file to vanish, or for SIGINT, as the real binary snapshots and exits): one pid
+//! file per queue, a second start of a running queue refused, `--stop` stops it and its run
+//! reports itself interrupted (not archived), the queue started again starts the run over (no
+//! snapshot) and archives it, and a third start skips what is done.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("the workspace root").to_path_buf()
+}
+
+const FAKE: &str = r#"#!/usr/bin/env python3
+import json, os, signal, sys, time
+args = sys.argv[1:]
+out = args[args.index("--out") + 1] if "--out" in args else args[args.index("--resume") + 1]
+os.makedirs(out, exist_ok=True)
+for f in ("config.toml", "designs.csv", "episodes.csv"):
+    open(os.path.join(out, f), "w").write(f + "\n")
+stopped = []
+signal.signal(signal.SIGINT, lambda *_: stopped.append(1))
+hold = os.environ.get("FAKE_HOLD", "")
+while hold and os.path.exists(hold) and not stopped:
+    time.sleep(0.05)
+print(json.dumps({"interrupted": bool(stopped), "out": out}))
+"#;
+
+struct Tree {
+    root: PathBuf,
+    hold: PathBuf,
+}
+
+impl Tree {
+    fn new() -> Self {
+        let base = std::env::temp_dir().join(format!("coadapt-campaign-script-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&base);
+        // campaign.sh works in its script's parent and keeps runs/ beside it (../runs).
+        let root = base.join("checkout");
+        std::fs::create_dir_all(root.join("scripts")).expect("temp tree");
+        std::fs::copy(repo().join("scripts/campaign.sh"), root.join("scripts/campaign.sh")).expect("copying campaign.sh");
+        std::fs::write(root.join("fake-coadapt"), FAKE).expect("the fake binary");
+        std::fs::write(root.join("q.queue"), "# two runs\nalpha cfg.toml 1\nbeta  cfg.toml 2\n").expect("the queue");
+        std::fs::write(root.join("cfg.toml"), "").expect("a config");
+        let chmod = Command::new("chmod").arg("+x").arg(root.join("fake-coadapt")).status().expect("chmod");
+        assert!(chmod.success());
+        let hold = base.join("hold");
+        Tree { root, hold }
+    }
+
+    fn campaign(&self, args: &[&str]) -> Command {
+        let mut c = Command::new("bash");
+        c.arg(self.root.join("scripts/campaign.sh"))
+            .args(args)
+            .current_dir(&self.root)
+            .env("BIN", self.root.join("fake-coadapt"))
+            .env("FAKE_HOLD", &self.hold);
+        c
+    }
+
+    fn run(&self, args: &[&str]) -> Output {
+        self.campaign(args).output().expect("running campaign.sh")
+    }
+
+    fn path(&self, p: &str) -> PathBuf {
+        self.root.join(p)
+    }
+}
+
+/// A failing assertion leaves no campaign behind: the hold goes (the fake run ends) and the
+/// campaign is asked to stop.
+struct Running(std::process::Child, PathBuf);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.1);
+        let _ = Command::new("kill").arg("-TERM").arg(self.0.id().to_string()).status();
+        let _ = self.0.wait();
+    }
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn wait_for(what: &str, mut done: impl FnMut() -> bool) {
+    let t = Instant::now();
+    while !done() {
+        assert!(t.elapsed() < Duration::from_secs(60), "waited a minute for {what}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
+    let t = Tree::new();
+    std::fs::write(&t.hold, "").expect("the hold file");
+    let mut first = Running(t.campaign(&["-j", "1", "q.queue"]).spawn().expect("starting the queue"), t.hold.clone());
+    let pidfile = t.path("runs/campaign/q.pid");
+    wait_for("the pid file", || std::fs::read_to_string(&pidfile).is_ok_and(|p| p.trim() == first.0.id().to_string()));
+    wait_for("the first run", || t.path("runs/campaign/alpha-seed1/episodes.csv").exists());
+
+    let again = t.run(&["q.queue"]);
+    assert_eq!(again.status.code(), Some(2), "{}", text(&again));
+    assert!(text(&again).contains("already running"), "{}", text(&again));
+
+    let stop = t.run(&["--stop", "q.queue"]);
+    assert!(stop.status.success(), "{}", text(&stop));
+    let mut status = None;
+    wait_for("the stopped campaign to end", || {
+        status = first.0.try_wait().expect("polling the campaign");
+        status.is_some()
+    });
+    let status = status.expect("ended");
+    assert_eq!(status.code(), Some(130), "a stopped queue exits 130");
+    assert!(!pidfile.exists(), "the pid file outlives its campaign");
+    let interrupted = std::fs::read_to_string(t.path("runs/campaign/alpha-seed1.interrupted.json")).expect("the interrupted summary");
+    assert!(interrupted.contains("\"interrupted\": true"), "{interrupted}");
+    assert!(!t.path("docs/campaign/results/alpha-seed1").exists(), "an interrupted run was archived");
+    assert!(!t.path("runs/campaign/beta-seed2").exists(), "the queue went on after the stop");
+
+    let none = t.run(&["--stop", "q.queue"]);
+    assert_eq!(none.status.code(), Some(1), "{}", text(&none));
+    assert!(text(&none).contains("no campaign of q.queue is running"), "{}", text(&none));
+
+    // Started again without the hold: alpha had no snapshot, so it is set aside and starts over;
+    // both runs finish and are archived.
+    std::fs::remove_file(&t.hold).expect("removing the hold");
+    let done = t.run(&["-j", "2", "q.queue"]);
+    assert!(done.status.success(), "{}", text(&done));
+    assert!(text(&done).contains("finished"), "{}", text(&done));
+    for run in ["alpha-seed1", "beta-seed2"] {
+        let summary = std::fs::read_to_string(t.path(&format!("docs/campaign/results/{run}/summary.json"))).expect("an archived summary");
+        assert!(summary.contains("\"interrupted\": false"), "{run}: {summary}");
+        for f in ["config.toml", "designs.csv", "episodes.csv"] {
+            assert!(t.path(&format!("docs/campaign/results/{run}/{f}")).exists(), "{run}/{f} not archived");
+        }
+    }
+    let aside = std::fs::read_dir(t.path("runs/campaign"))
+        .expect("runs")
+        .filter_map(|e| e.ok())
+        .any(|e| e.file_name().to_string_lossy().starts_with("alpha-seed1.partial-"));
+    assert!(aside, "the unfinished run without a snapshot was not set aside");
+
+    let skip = t.run(&["q.queue"]);
+    assert!(skip.status.success(), "{}", text(&skip));
+    assert_eq!(text(&skip).matches("done already, skipped").count(), 2, "{}", text(&skip));
+
+    let bad = t.run(&["-j", "two", "q.queue"]);
+    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad));
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
