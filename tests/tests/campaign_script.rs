@@ -3,7 +3,8 @@
 //! for a hold file to vanish, or for SIGINT, as the real binary snapshots and exits): one pid
 //! file per queue, a second start of a running queue refused, `--stop` stops it and its run
 //! reports itself interrupted (not archived), the queue started again starts the run over (no
-//! snapshot) and archives it, and a third start skips what is done.
+//! snapshot) and archives it, and a third start skips what is done; `scripts/campaign_status.py`
+//! says at each stage which lines run, stopped, wait or are archived, and the episodes left.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -18,8 +19,9 @@ import json, os, signal, sys, time
 args = sys.argv[1:]
 out = args[args.index("--out") + 1] if "--out" in args else args[args.index("--resume") + 1]
 os.makedirs(out, exist_ok=True)
-for f in ("config.toml", "designs.csv", "episodes.csv"):
+for f in ("config.toml", "designs.csv"):
     open(os.path.join(out, f), "w").write(f + "\n")
+open(os.path.join(out, "episodes.csv"), "w").write("design,episode\n0,0\n0,1\n")
 stopped = []
 signal.signal(signal.SIGINT, lambda *_: stopped.append(1))
 hold = os.environ.get("FAKE_HOLD", "")
@@ -40,10 +42,15 @@ impl Tree {
         // campaign.sh works in its script's parent and keeps runs/ beside it (../runs).
         let root = base.join("checkout");
         std::fs::create_dir_all(root.join("scripts")).expect("temp tree");
-        std::fs::copy(repo().join("scripts/campaign.sh"), root.join("scripts/campaign.sh")).expect("copying campaign.sh");
+        for script in ["campaign.sh", "campaign_status.py"] {
+            std::fs::copy(repo().join("scripts").join(script), root.join("scripts").join(script)).expect("copying the scripts");
+        }
         std::fs::write(root.join("fake-coadapt"), FAKE).expect("the fake binary");
         std::fs::write(root.join("q.queue"), "# two runs\nalpha cfg.toml 1\nbeta  cfg.toml 2\n").expect("the queue");
-        std::fs::write(root.join("cfg.toml"), "").expect("a config");
+        // Two designs: 3 episodes of the initial one, then 2 (5 in all; the fake writes 2 rows).
+        let cfg = "[schedule]\ndesigns = 2\ninitial-designs = [[1.0]]\ninitial-episodes = 3\nepisodes-per-design = 2\n";
+        std::fs::write(root.join("cfg.toml"), cfg).expect("a config");
+        std::fs::create_dir_all(root.join("docs/campaign")).expect("docs");
         let chmod = Command::new("chmod").arg("+x").arg(root.join("fake-coadapt")).status().expect("chmod");
         assert!(chmod.success());
         let hold = base.join("hold");
@@ -62,6 +69,18 @@ impl Tree {
 
     fn run(&self, args: &[&str]) -> Output {
         self.campaign(args).output().expect("running campaign.sh")
+    }
+
+    /// `scripts/campaign_status.py q.queue` run in the tree.
+    fn status(&self) -> String {
+        let o = Command::new("python3")
+            .arg("scripts/campaign_status.py")
+            .arg("q.queue")
+            .current_dir(&self.root)
+            .output()
+            .expect("running campaign_status.py");
+        assert!(o.status.success(), "{}", text(&o));
+        text(&o)
     }
 
     fn path(&self, p: &str) -> PathBuf {
@@ -102,6 +121,11 @@ fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
     wait_for("the pid file", || std::fs::read_to_string(&pidfile).is_ok_and(|p| p.trim() == first.0.id().to_string()));
     wait_for("the first run", || t.path("runs/campaign/alpha-seed1/episodes.csv").exists());
 
+    let status = t.status();
+    assert!(status.contains("running  alpha-seed1") && status.contains("2/5 episodes"), "{status}");
+    assert!(status.contains("pending  beta-seed2") && status.contains("0/5 episodes"), "{status}");
+    assert!(status.contains("1 pending, 1 running; 8 episodes left"), "{status}");
+
     let again = t.run(&["q.queue"]);
     assert_eq!(again.status.code(), Some(2), "{}", text(&again));
     assert!(text(&again).contains("already running"), "{}", text(&again));
@@ -120,6 +144,9 @@ fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
     assert!(interrupted.contains("\"interrupted\": true"), "{interrupted}");
     assert!(!t.path("docs/campaign/results/alpha-seed1").exists(), "an interrupted run was archived");
     assert!(!t.path("runs/campaign/beta-seed2").exists(), "the queue went on after the stop");
+
+    let status = t.status();
+    assert!(status.contains("stopped  alpha-seed1") && status.contains("1 pending, 1 stopped; 8 episodes left"), "{status}");
 
     let none = t.run(&["--stop", "q.queue"]);
     assert_eq!(none.status.code(), Some(1), "{}", text(&none));
@@ -143,6 +170,9 @@ fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
         .filter_map(|e| e.ok())
         .any(|e| e.file_name().to_string_lossy().starts_with("alpha-seed1.partial-"));
     assert!(aside, "the unfinished run without a snapshot was not set aside");
+
+    let status = t.status();
+    assert!(status.contains("2 archived; 0 episodes left"), "{status}");
 
     let skip = t.run(&["q.queue"]);
     assert!(skip.status.success(), "{}", text(&skip));
