@@ -23,7 +23,10 @@
 # and continues the fork: the prefix two methods share is not run twice. The copy is taken by a
 # watcher started when the queue starts (it waits for the source's snapshot at design K and
 # uses no core while it waits); the line itself takes a lane only when its turn comes. Put a
-# fork line after its source and far enough behind it that the source has reached design K. CONFIG may carry overrides, `CONFIG+key.path=value+...` (TOML values, e.g.
+# fork line after its source and far enough behind it that the source has reached design K.
+# A source archived in docs/campaign/results whose run directory is gone (its snapshots were on
+# another machine) has its first K designs run again by the fork's lane, checked row for row
+# against the archive (a binary that does not reproduce them is refused), then forked. CONFIG may carry overrides, `CONFIG+key.path=value+...` (TOML values, e.g.
 # `configs/half-cheetah-reduced.toml+learner.population-only=true+optimizer.q="pessimistic"`),
 # applied by scripts/config_with.py. `random-only:CONFIG` is CONFIG with `alternate = false`
 # (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
@@ -73,8 +76,9 @@ if [ -n "$(live_pid)" ]; then
 fi
 echo $$ > "$pidfile"
 main_pid=$$
-# Only this shell removes the file (the lanes are subshells of it).
-trap '[ "$BASHPID" = "$main_pid" ] && rm -f "$pidfile"' EXIT
+stopflag=${pidfile%.pid}.stopping
+# Only this shell removes the files (the lanes are subshells of it).
+trap '[ "$BASHPID" = "$main_pid" ] && rm -f "$pidfile" "$stopflag"' EXIT
 # A private copy: rebuilding the workspace during the campaign does not touch running runs.
 # BIN=path runs that binary instead of building the checkout: a queue whose runs must be made by
 # an older build (say, before a change to a robot) names it in its header. Its copy is named after
@@ -118,7 +122,10 @@ retrain_one() {
   local dir=$root/$name-seed$seed archive=docs/campaign/results/$name-seed$seed
   local srcdir=docs/campaign/results/$src-seed$seed
   [ -s "$srcdir/summary.json" ] || srcdir=$root/$src-seed$seed
-  until [ -s "$srcdir/summary.json" ]; do sleep 30; done
+  until [ -s "$srcdir/summary.json" ]; do
+    if [ -e "$stopflag" ]; then echo "campaign: stopped waiting for $srcdir" >&2; return 0; fi
+    sleep 30
+  done
   local design env
   design=$(python3 scripts/pick_design.py "$srcdir" "$which") || { echo "campaign: FAILED $dir: no design to retrain" >&2; return 1; }
   env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb"))["env"])' "$srcdir/config.toml")
@@ -157,6 +164,53 @@ PY
   echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
 }
 
+# A fork's source that is archived but whose run directory is gone (runs/ of another machine,
+# or cleared): its first K designs are run again from the archived config into SRC.prefix, the
+# rows checked against the archive's, and only then moved to SRC's place for the watchers to
+# fork. A binary that does not reproduce the archived rows would give forks that do not share
+# the archived run's prefix, and the paired comparisons would be void: refused. One lane runs
+# it (a lock directory); the others wait for it as for any source.
+regenerate_prefix() {
+  local src=$1 seed=$2 k=$3
+  local srcdir=$root/$src-seed$seed srcarch=docs/campaign/results/$src-seed$seed
+  local tmp=$srcdir.prefix
+  mkdir "$srcdir.prefix.lock" 2> /dev/null || return 0
+  local mode=(--config "$srcarch/config.toml" --seed "$seed" --designs "$k" --out "$tmp")
+  if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then mode=(--resume "$tmp"); else rm -rf "$tmp"; fi
+  echo "campaign: $srcdir is archived but gone: running its first $k designs again for its forks, into $tmp ($(date -u +%H:%M:%S))"
+  if ! RAYON_NUM_THREADS=$threads "$bin" run "${mode[@]}" --transport in-process > "$tmp.summary" 2>> "$tmp.log"; then
+    rmdir "$srcdir.prefix.lock"
+    echo "campaign: FAILED $tmp (see $tmp.log)" >&2
+    return 1
+  fi
+  rmdir "$srcdir.prefix.lock"
+  if grep -Eq '"interrupted": *true' "$tmp.summary"; then
+    echo "campaign: stopped $tmp before design $k (the queue started again resumes it)" >&2
+    return 0
+  fi
+  if ! python3 - "$tmp/episodes.csv" "$srcarch/episodes.csv" "$k" <<'PY'
+import csv, sys
+new, old, k = sys.argv[1], sys.argv[2], int(sys.argv[3])
+cols = ("design", "episode", "return", "eval_return")
+a = [tuple(r[c] for c in cols) for r in csv.DictReader(open(new))]
+b = [tuple(r[c] for c in cols) for r in csv.DictReader(open(old)) if int(r["design"]) < k]
+for i, (x, y) in enumerate(zip(a, b)):
+    if x != y:
+        sys.exit(f"row {i + 1}: {dict(zip(cols, x))} here, {dict(zip(cols, y))} archived")
+if len(a) != len(b):
+    sys.exit(f"{len(a)} rows here, {len(b)} archived before design {k}")
+PY
+  then
+    mv "$tmp" "$tmp-mismatch-$(date +%s)"
+    echo "campaign: FAILED $srcdir: this binary does not reproduce the archived first $k designs of $srcarch (above); its forks would not share that run's prefix" >&2
+    return 1
+  fi
+  # The archived config (its whole schedule) for the forks: schedule.designs may change on resume.
+  cp "$srcarch/config.toml" "$tmp/config.toml"
+  mv "$tmp" "$srcdir"
+  echo "campaign: $srcdir: its first $k designs again, row for row the archived ones; forking"
+}
+
 # Starts the watchers that take the copies for the queue's fork lines.
 start_fork_watchers() {
   local name config seed rest
@@ -189,8 +243,15 @@ run_one() {
   esac
   case $config in
     fork:*)
-      # The watcher started below copies the fork into $dir; wait for it (or its failure).
+      local spec=${config#fork:}
+      local src=${spec%%:*} rest_k=${spec#*:}
+      if [ ! -d "$dir" ] && [ ! -d "$root/$src-seed$seed" ] && [ -s "docs/campaign/results/$src-seed$seed/summary.json" ]; then
+        regenerate_prefix "$src" "$seed" "${rest_k%%+*}" || return 1
+      fi
+      # The watcher started below copies the fork into $dir; wait for it (or its failure, or
+      # the queue's stop: a lane is a subshell, so it learns of that from the flag file).
       until [ -d "$dir" ]; do
+        if [ -e "$stopflag" ]; then echo "campaign: stopped waiting for the fork $dir" >&2; return 0; fi
         # (No pid file counts as a dead watcher: `kill -0 0` would ask about our own group.)
         local wpid
         wpid=$(cat "$dir.fork.pid" 2>/dev/null || true)
@@ -243,7 +304,8 @@ run_one() {
 # line and die of a TERM, leaving their runs going.
 descendants() { local c; for c in $(pgrep -P "$1"); do echo "$c"; descendants "$c"; done; }
 stopping=0
-trap 'stopping=1; for p in $(descendants $$); do kill -INT "$p" 2>/dev/null || true; done' INT TERM
+rm -f "$stopflag"
+trap 'stopping=1; touch "$stopflag"; for p in $(descendants $$); do kill -INT "$p" 2>/dev/null || true; done' INT TERM
 start_fork_watchers
 running=0
 while read -r name config seed rest; do
@@ -262,4 +324,8 @@ if [ "$stopping" = 1 ]; then
   echo "campaign: stopped; start the queue again to resume"
   exit 130
 fi
+# Watchers whose fork never came (a source that failed) would wait for ever.
+for f in "$root"/*.fork.pid; do
+  if [ -s "$f" ] && [ ! -d "${f%.fork.pid}" ]; then kill "$(cat "$f")" 2>/dev/null || true; fi
+done
 echo "campaign: queue $queue finished"

@@ -15,13 +15,24 @@ fn repo() -> PathBuf {
 }
 
 const FAKE: &str = r#"#!/usr/bin/env python3
+# `run --config C --seed S [--designs K] --out D` writes 2 episodes per design (return 10 d + e,
+# or FAKE_SHIFT more), the files a run leaves and, given --designs, a snapshot at its end;
+# `run --resume D` goes on; both wait while FAKE_HOLD exists and stop on SIGINT, as a run does.
 import json, os, signal, sys, time
 args = sys.argv[1:]
 out = args[args.index("--out") + 1] if "--out" in args else args[args.index("--resume") + 1]
+designs = int(args[args.index("--designs") + 1]) if "--designs" in args else 1
 os.makedirs(out, exist_ok=True)
-for f in ("config.toml", "designs.csv"):
-    open(os.path.join(out, f), "w").write(f + "\n")
-open(os.path.join(out, "episodes.csv"), "w").write("design,episode\n0,0\n0,1\n")
+if "--config" in args:
+    open(os.path.join(out, "config.toml"), "w").write(open(args[args.index("--config") + 1]).read())
+    open(os.path.join(out, "designs.csv"), "w").write("designs.csv\n")
+    shift = int(os.environ.get("FAKE_SHIFT", "0"))
+    rows = [f"{d},{e},{10 * d + e + shift},{10 * d + e}" for d in range(designs) for e in range(2)]
+    open(os.path.join(out, "episodes.csv"), "w").write("design,episode,return,eval_return\n" + "\n".join(rows) + "\n")
+    if "--designs" in args:
+        snap = os.path.join(out, "snapshots", f"snap-{designs:08}")
+        os.makedirs(snap, exist_ok=True)
+        json.dump({"values": {"progress": {"design": designs, "in_design": None}}}, open(os.path.join(snap, "state.json"), "w"))
 stopped = []
 signal.signal(signal.SIGINT, lambda *_: stopped.append(1))
 hold = os.environ.get("FAKE_HOLD", "")
@@ -36,13 +47,14 @@ struct Tree {
 }
 
 impl Tree {
-    fn new() -> Self {
-        let base = std::env::temp_dir().join(format!("coadapt-campaign-script-{}", std::process::id()));
+    /// A tree of its own per test (the tests of this file run at once, in one process).
+    fn new(test: &str) -> Self {
+        let base = std::env::temp_dir().join(format!("coadapt-campaign-script-{test}-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&base);
         // campaign.sh works in its script's parent and keeps runs/ beside it (../runs).
         let root = base.join("checkout");
         std::fs::create_dir_all(root.join("scripts")).expect("temp tree");
-        for script in ["campaign.sh", "campaign_status.py"] {
+        for script in ["campaign.sh", "campaign_status.py", "fork_run.sh", "config_with.py"] {
             std::fs::copy(repo().join("scripts").join(script), root.join("scripts").join(script)).expect("copying the scripts");
         }
         std::fs::write(root.join("fake-coadapt"), FAKE).expect("the fake binary");
@@ -114,7 +126,7 @@ fn wait_for(what: &str, mut done: impl FnMut() -> bool) {
 
 #[test]
 fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
-    let t = Tree::new();
+    let t = Tree::new("stop");
     std::fs::write(&t.hold, "").expect("the hold file");
     let mut first = Running(t.campaign(&["-j", "1", "q.queue"]).spawn().expect("starting the queue"), t.hold.clone());
     let pidfile = t.path("runs/campaign/q.pid");
@@ -180,5 +192,54 @@ fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
 
     let bad = t.run(&["-j", "two", "q.queue"]);
     assert_eq!(bad.status.code(), Some(2), "{}", text(&bad));
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// A fork line whose source is archived but whose run directory is gone (runs/ of another
+/// machine): its first K designs are run again, checked row for row against the archive, and
+/// forked; a binary that does not reproduce them is refused, and the queue still ends.
+#[test]
+fn a_fork_of_an_archived_source_runs_its_prefix_again_and_checks_it() {
+    let t = Tree::new("fork");
+    // The archived source: 4 designs of 2 episodes, the rows the fake writes.
+    let arch = t.path("docs/campaign/results/src-seed1");
+    std::fs::create_dir_all(&arch).expect("archive");
+    let rows: String = (0..4).flat_map(|d| (0..2).map(move |e| format!("{d},{e},{},{}\n", 10 * d + e, 10 * d + e))).collect();
+    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return\n{rows}")).expect("rows");
+    std::fs::write(arch.join("config.toml"), "[schedule]\ndesigns = 4\n").expect("config");
+    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false}").expect("summary");
+    std::fs::write(t.path("q.queue"), "frk fork:src:2+optimizer.exploit=\"x\" 1\n").expect("queue");
+
+    let done = t.run(&["-j", "1", "q.queue"]);
+    assert!(done.status.success(), "{}", text(&done));
+    assert!(text(&done).contains("row for row the archived ones"), "{}", text(&done));
+    let fork = t.path("runs/campaign/frk-seed1");
+    let config = std::fs::read_to_string(fork.join("config.toml")).expect("the fork's config");
+    assert!(config.contains("designs = 4") && config.contains("exploit = \"x\""), "the fork's config: {config}");
+    assert!(std::fs::read_to_string(fork.join("forked-from.txt")).expect("forked-from").contains("start of design 2"));
+    assert!(t.path("docs/campaign/results/frk-seed1/summary.json").exists(), "the fork was not archived");
+    assert!(t.path("runs/campaign/src-seed1/snapshots").exists(), "the prefix is not in the source's place");
+
+    // Another archived source whose rows this binary does not reproduce: refused, and the queue
+    // ends (its fork's watcher is not left waiting).
+    std::fs::remove_dir_all(t.path("runs/campaign/src-seed1")).expect("clearing the source");
+    std::fs::remove_dir_all(t.path("docs/campaign/results/frk-seed1")).expect("clearing the fork");
+    std::fs::remove_dir_all(&fork).expect("clearing the fork");
+    let bad = Command::new("bash")
+        .arg(t.path("scripts/campaign.sh"))
+        .args(["-j", "1", "q.queue"])
+        .current_dir(&t.root)
+        .env("BIN", t.path("fake-coadapt"))
+        .env("FAKE_SHIFT", "1")
+        .output()
+        .expect("running campaign.sh");
+    let out = text(&bad);
+    assert!(out.contains("does not reproduce the archived first 2 designs") && out.contains("row 1"), "{out}");
+    assert!(!fork.exists() && !t.path("runs/campaign/src-seed1").exists(), "a fork from a prefix that differs: {out}");
+    let watcher = std::fs::read_to_string(t.path("runs/campaign/frk-seed1.fork.pid")).expect("the watcher's pid");
+    // Gone, or a zombie left to a container's init that does not reap.
+    let stat = std::fs::read_to_string(format!("/proc/{}/stat", watcher.trim())).unwrap_or_default();
+    let state = stat.rsplit(')').next().and_then(|rest| rest.split_whitespace().next()).unwrap_or("gone");
+    assert!(state == "gone" || state == "Z", "the fork's watcher outlived its queue: {stat}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
