@@ -58,17 +58,20 @@ def rows(path):
 
 
 def live_dirs():
-    """Run directories named on the command line of a live process."""
+    """Run directories (real paths) named on the command line of a live process that is not a
+    fork's watcher (scripts/fork_run.sh names the fork it waits to make)."""
     out = set()
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
-            args = open(f"/proc/{pid}/cmdline", "rb").read().split(b"\0")
+            args = [a.decode(errors="replace") for a in open(f"/proc/{pid}/cmdline", "rb").read().split(b"\0")]
+            cwd = os.readlink(f"/proc/{pid}/cwd")
         except OSError:
             continue
+        if any(a.endswith("fork_run.sh") for a in args):
+            continue
         for a in args:
-            a = a.decode(errors="replace").rstrip("/")
-            if a.startswith(RUNS + "/"):
-                out.add(a)
+            if "runs/campaign/" in a:
+                out.add(os.path.realpath(os.path.join(cwd, a.rstrip("/"))))
     return out
 
 
@@ -140,7 +143,7 @@ def main():
                         paces.append(total / (s["seconds"] / 3600))
                 except (OSError, ValueError):
                     pass
-            elif d in live:
+            elif os.path.realpath(d) in live:
                 state = "running"
             elif os.path.exists(d):
                 state = "stopped"

@@ -243,3 +243,25 @@ fn a_fork_of_an_archived_source_runs_its_prefix_again_and_checks_it() {
     assert!(state == "gone" || state == "Z", "the fork's watcher outlived its queue: {stat}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// A stop reaches a lane that waits for its fork (the source still before design K): the queue
+/// ends instead of waiting for ever for a fork that will not come.
+#[test]
+fn a_stop_reaches_a_lane_waiting_for_its_fork() {
+    let t = Tree::new("wait");
+    std::fs::write(&t.hold, "").expect("the hold file");
+    std::fs::write(t.path("q.queue"), "src cfg.toml 1\nfrk fork:src:1 1\n").expect("queue");
+    let mut first = Running(t.campaign(&["-j", "2", "q.queue"]).spawn().expect("starting the queue"), t.hold.clone());
+    wait_for("the source to start", || t.path("runs/campaign/src-seed1/episodes.csv").exists());
+    wait_for("the fork's lane", || t.status().contains("pending  frk-seed1"));
+    std::thread::sleep(Duration::from_secs(1));
+    let stop = t.run(&["--stop", "q.queue"]);
+    assert!(stop.status.success(), "{}", text(&stop));
+    let mut status = None;
+    wait_for("the stopped campaign to end", || {
+        status = first.0.try_wait().expect("polling the campaign");
+        status.is_some()
+    });
+    assert_eq!(status.and_then(|s| s.code()), Some(130));
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
