@@ -26,7 +26,8 @@
 # fork line after its source and far enough behind it that the source has reached design K.
 # A source archived in docs/campaign/results whose run directory is gone (its snapshots were on
 # another machine) has its first K designs run again by the fork's lane, checked row for row
-# against the archive (a binary that does not reproduce them is refused), then forked. CONFIG may carry overrides, `CONFIG+key.path=value+...` (TOML values, e.g.
+# against the archive (a binary that does not reproduce them is refused), then forked; so is the
+# whole of a run named by a line's `--init-population runs/campaign/NAME-seedS`. CONFIG may carry overrides, `CONFIG+key.path=value+...` (TOML values, e.g.
 # `configs/half-cheetah-reduced.toml+learner.population-only=true+optimizer.q="pessimistic"`),
 # applied by scripts/config_with.py. `random-only:CONFIG` is CONFIG with `alternate = false`
 # (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
@@ -173,17 +174,26 @@ PY
 regenerate_prefix() {
   local src=$1 seed=$2 k=$3
   local srcdir=$root/$src-seed$seed srcarch=docs/campaign/results/$src-seed$seed
+  if [ -d "$srcdir" ]; then return 0; fi
   local tmp=$srcdir.prefix
-  mkdir "$srcdir.prefix.lock" 2> /dev/null || return 0
+  local lock=$srcdir.prefix.lock holder
+  if ! mkdir "$lock" 2> /dev/null; then
+    # Held by a lane that is gone (a campaign killed outright): taken over.
+    holder=$(cat "$lock/pid" 2> /dev/null || true)
+    if [[ $holder =~ ^[1-9][0-9]*$ ]] && kill -0 "$holder" 2> /dev/null; then return 0; fi
+    rm -rf "$lock"
+    mkdir "$lock" 2> /dev/null || return 0
+  fi
+  echo "$BASHPID" > "$lock/pid"
   local mode=(--config "$srcarch/config.toml" --seed "$seed" --designs "$k" --out "$tmp")
   if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then mode=(--resume "$tmp"); else rm -rf "$tmp"; fi
   echo "campaign: $srcdir is archived but gone: running its first $k designs again for its forks, into $tmp ($(date -u +%H:%M:%S))"
   if ! RAYON_NUM_THREADS=$threads "$bin" run "${mode[@]}" --transport in-process > "$tmp.summary" 2>> "$tmp.log"; then
-    rmdir "$srcdir.prefix.lock"
+    rm -rf "$lock"
     echo "campaign: FAILED $tmp (see $tmp.log)" >&2
     return 1
   fi
-  rmdir "$srcdir.prefix.lock"
+  rm -rf "$lock"
   if grep -Eq '"interrupted": *true' "$tmp.summary"; then
     echo "campaign: stopped $tmp before design $k (the queue started again resumes it)" >&2
     return 0
@@ -209,6 +219,34 @@ PY
   cp "$srcarch/config.toml" "$tmp/config.toml"
   mv "$tmp" "$srcdir"
   echo "campaign: $srcdir: its first $k designs again, row for row the archived ones; forking"
+}
+
+# A line that starts from another run's population networks (`--init-population
+# runs/campaign/SRC-seedS`) whose run directory is gone but archived: the whole source is run
+# again (all its designs, checked row for row as above) before the line starts. Returns 1 when it
+# cannot be had.
+ensure_init_population() {
+  local prev="" a src
+  for a in "$@"; do
+    if [ "$prev" = --init-population ]; then
+      src=${a%/}
+      if [ ! -d "$src" ] && [[ $src == "$root"/*-seed* ]]; then
+        local run=${src#"$root"/}
+        local name=${run%-seed*} s=${run##*-seed}
+        local arch=docs/campaign/results/$run
+        [ -s "$arch/summary.json" ] || { echo "campaign: --init-population $src: no such run, archived or not" >&2; return 1; }
+        local n
+        n=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["designs"])' "$arch/summary.json") || return 1
+        until [ -d "$src" ]; do
+          [ -e "$stopflag" ] && return 1
+          regenerate_prefix "$name" "$s" "$n" || return 1
+          # Another lane holds the lock and runs it: wait for it.
+          [ -d "$src" ] || sleep 10
+        done
+      fi
+    fi
+    prev=$a
+  done
 }
 
 # Starts the watchers that take the copies for the queue's fork lines.
@@ -275,6 +313,11 @@ run_one() {
       echo "campaign: FAILED $dir after $((SECONDS - t0)) s (see $dir.log)" >&2
     fi
     return 0
+  fi
+  if ! ensure_init_population "$@"; then
+    if [ -e "$stopflag" ]; then return 0; fi
+    echo "campaign: FAILED $dir: its --init-population source cannot be had" >&2
+    return 1
   fi
   case $config in
     random-only:*) config="${config#random-only:}+schedule.alternate=false" ;;

@@ -265,3 +265,35 @@ fn a_stop_reaches_a_lane_waiting_for_its_fork() {
     assert_eq!(status.and_then(|s| s.code()), Some(130));
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// A line that starts from an archived run's population networks whose run directory is gone:
+/// the whole source is run again and checked before the line starts; a stale lock of a killed
+/// campaign does not stop it.
+#[test]
+fn an_init_population_source_that_is_gone_is_run_again() {
+    let t = Tree::new("init");
+    let arch = t.path("docs/campaign/results/src-seed1");
+    std::fs::create_dir_all(&arch).expect("archive");
+    let rows: String = (0..3).flat_map(|d| (0..2).map(move |e| format!("{d},{e},{},{}\n", 10 * d + e, 10 * d + e))).collect();
+    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return\n{rows}")).expect("rows");
+    std::fs::write(arch.join("config.toml"), "[schedule]\ndesigns = 3\n").expect("config");
+    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false, \"designs\": 3}").expect("summary");
+    std::fs::write(t.path("q.queue"), "tgt cfg.toml 1 --init-population runs/campaign/src-seed1\n").expect("queue");
+    // The lock of a lane that died with its campaign.
+    std::fs::create_dir_all(t.path("runs/campaign/src-seed1.prefix.lock")).expect("a stale lock");
+    std::fs::write(t.path("runs/campaign/src-seed1.prefix.lock/pid"), "999999999").expect("its pid");
+
+    let done = t.run(&["-j", "1", "q.queue"]);
+    let out = text(&done);
+    assert!(done.status.success(), "{out}");
+    assert!(out.contains("first 3 designs again, row for row the archived ones"), "{out}");
+    let regenerated = std::fs::read_to_string(t.path("runs/campaign/src-seed1/episodes.csv")).expect("the source again");
+    assert_eq!(regenerated.lines().count(), 7, "{regenerated}");
+    assert!(t.path("docs/campaign/results/tgt-seed1/summary.json").exists(), "the line did not run: {out}");
+
+    // A source neither here nor archived: the line fails with a reason, the queue goes on.
+    std::fs::write(t.path("q.queue"), "tgt2 cfg.toml 1 --init-population runs/campaign/nowhere-seed1\n").expect("queue");
+    let out = text(&t.run(&["-j", "1", "q.queue"]));
+    assert!(out.contains("no such run, archived or not") && out.contains("FAILED"), "{out}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
