@@ -187,7 +187,7 @@ regenerate_prefix() {
   echo "$BASHPID" > "$lock/pid"
   local mode=(--config "$srcarch/config.toml" --seed "$seed" --designs "$k" --out "$tmp")
   if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then mode=(--resume "$tmp"); else rm -rf "$tmp"; fi
-  echo "campaign: $srcdir is archived but gone: running its first $k designs again for its forks, into $tmp ($(date -u +%H:%M:%S))"
+  echo "campaign: $srcdir is archived but gone: running its first $k designs again for the runs that start from it, into $tmp ($(date -u +%H:%M:%S))"
   if ! RAYON_NUM_THREADS=$threads "$bin" run "${mode[@]}" --transport in-process > "$tmp.summary" 2>> "$tmp.log"; then
     rm -rf "$lock"
     echo "campaign: FAILED $tmp (see $tmp.log)" >&2
@@ -218,7 +218,7 @@ PY
   # The archived config (its whole schedule) for the forks: schedule.designs may change on resume.
   cp "$srcarch/config.toml" "$tmp/config.toml"
   mv "$tmp" "$srcdir"
-  echo "campaign: $srcdir: its first $k designs again, row for row the archived ones; forking"
+  echo "campaign: $srcdir: its first $k designs again, row for row the archived ones"
 }
 
 # A line that starts from another run's population networks (`--init-population
