@@ -33,7 +33,8 @@
 # (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
 # Each run's stdout (the JSON summary line) goes to RUN/summary.json, stderr to RUN.log.
 # A finished run's small files (summary.json, config.toml, designs.csv, episodes.csv, and the
-# optimiser's calibration.csv and a fork's forked-from.txt where there are some) are also
+# optimiser's calibration.csv, a fork's forked-from.txt and the conservative term's
+# conservative.csv (from TensorBoard, scripts/tb_scalars.py) where there are some) are also
 # copied to docs/campaign/results/NAME-seedSEED/ to be committed: runs/ does not survive a new
 # checkout, and a line whose results are archived there is skipped too.
 set -euo pipefail
@@ -108,6 +109,13 @@ archive_run() {
   cp "$dir"/{summary.json,config.toml,designs.csv,episodes.csv} "$archive/"
   if [ -f "$dir/forked-from.txt" ]; then cp "$dir/forked-from.txt" "$archive/"; fi
   if [ -f "$dir/optimizer/calibration.csv" ]; then cp "$dir/optimizer/calibration.csv" "$archive/"; fi
+  # The conservative term's gap and weight, logged only to TensorBoard (EXPERIMENTS 5.13).
+  if python3 scripts/tb_scalars.py "$dir" train/conservative_ > "$archive/conservative.csv.tmp" 2> /dev/null \
+      && [ "$(wc -l < "$archive/conservative.csv.tmp")" -gt 1 ]; then
+    mv "$archive/conservative.csv.tmp" "$archive/conservative.csv"
+  else
+    rm -f "$archive/conservative.csv.tmp"
+  fi
   echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
 }
 
