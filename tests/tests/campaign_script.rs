@@ -95,6 +95,17 @@ impl Tree {
         text(&o)
     }
 
+    /// An archived run `src-seed1` of `designs` designs, 2 episodes each, with the rows the
+    /// fake writes (its run directory is not there).
+    fn archive_source(&self, designs: usize) {
+        let arch = self.path("docs/campaign/results/src-seed1");
+        std::fs::create_dir_all(&arch).expect("archive");
+        let rows: String = (0..designs).flat_map(|d| (0..2).map(move |e| format!("{d},{e},{},{}\n", 10 * d + e, 10 * d + e))).collect();
+        std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return\n{rows}")).expect("rows");
+        std::fs::write(arch.join("config.toml"), format!("[schedule]\ndesigns = {designs}\n")).expect("config");
+        std::fs::write(arch.join("summary.json"), format!("{{\"interrupted\": false, \"designs\": {designs}}}")).expect("summary");
+    }
+
     fn path(&self, p: &str) -> PathBuf {
         self.root.join(p)
     }
@@ -202,12 +213,7 @@ fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
 fn a_fork_of_an_archived_source_runs_its_prefix_again_and_checks_it() {
     let t = Tree::new("fork");
     // The archived source: 4 designs of 2 episodes, the rows the fake writes.
-    let arch = t.path("docs/campaign/results/src-seed1");
-    std::fs::create_dir_all(&arch).expect("archive");
-    let rows: String = (0..4).flat_map(|d| (0..2).map(move |e| format!("{d},{e},{},{}\n", 10 * d + e, 10 * d + e))).collect();
-    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return\n{rows}")).expect("rows");
-    std::fs::write(arch.join("config.toml"), "[schedule]\ndesigns = 4\n").expect("config");
-    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false}").expect("summary");
+    t.archive_source(4);
     std::fs::write(t.path("q.queue"), "frk fork:src:2+optimizer.exploit=\"x\" 1\n").expect("queue");
 
     let done = t.run(&["-j", "1", "q.queue"]);
@@ -272,12 +278,7 @@ fn a_stop_reaches_a_lane_waiting_for_its_fork() {
 #[test]
 fn an_init_population_source_that_is_gone_is_run_again() {
     let t = Tree::new("init");
-    let arch = t.path("docs/campaign/results/src-seed1");
-    std::fs::create_dir_all(&arch).expect("archive");
-    let rows: String = (0..3).flat_map(|d| (0..2).map(move |e| format!("{d},{e},{},{}\n", 10 * d + e, 10 * d + e))).collect();
-    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return\n{rows}")).expect("rows");
-    std::fs::write(arch.join("config.toml"), "[schedule]\ndesigns = 3\n").expect("config");
-    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false, \"designs\": 3}").expect("summary");
+    t.archive_source(3);
     std::fs::write(t.path("q.queue"), "tgt cfg.toml 1 --init-population runs/campaign/src-seed1\n").expect("queue");
     // The lock of a lane that died with its campaign.
     std::fs::create_dir_all(t.path("runs/campaign/src-seed1.prefix.lock")).expect("a stale lock");
