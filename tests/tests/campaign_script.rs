@@ -115,6 +115,18 @@ impl Tree {
 /// campaign is asked to stop.
 struct Running(std::process::Child, PathBuf);
 
+impl Running {
+    /// The campaign's exit code, once it has ended (a minute at the most).
+    fn exit_code(&mut self) -> Option<i32> {
+        let mut status = None;
+        wait_for("the stopped campaign to end", || {
+            status = self.0.try_wait().expect("polling the campaign");
+            status.is_some()
+        });
+        status.and_then(|s| s.code())
+    }
+}
+
 impl Drop for Running {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.1);
@@ -155,13 +167,7 @@ fn a_queue_runs_stops_resumes_and_is_not_started_twice() {
 
     let stop = t.run(&["--stop", "q.queue"]);
     assert!(stop.status.success(), "{}", text(&stop));
-    let mut status = None;
-    wait_for("the stopped campaign to end", || {
-        status = first.0.try_wait().expect("polling the campaign");
-        status.is_some()
-    });
-    let status = status.expect("ended");
-    assert_eq!(status.code(), Some(130), "a stopped queue exits 130");
+    assert_eq!(first.exit_code(), Some(130), "a stopped queue exits 130");
     assert!(!pidfile.exists(), "the pid file outlives its campaign");
     let interrupted = std::fs::read_to_string(t.path("runs/campaign/alpha-seed1.interrupted.json")).expect("the interrupted summary");
     assert!(interrupted.contains("\"interrupted\": true"), "{interrupted}");
@@ -263,12 +269,7 @@ fn a_stop_reaches_a_lane_waiting_for_its_fork() {
     std::thread::sleep(Duration::from_secs(1));
     let stop = t.run(&["--stop", "q.queue"]);
     assert!(stop.status.success(), "{}", text(&stop));
-    let mut status = None;
-    wait_for("the stopped campaign to end", || {
-        status = first.0.try_wait().expect("polling the campaign");
-        status.is_some()
-    });
-    assert_eq!(status.and_then(|s| s.code()), Some(130));
+    assert_eq!(first.exit_code(), Some(130), "a stopped queue exits 130");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
