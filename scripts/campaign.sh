@@ -31,6 +31,8 @@
 # `configs/half-cheetah-reduced.toml+learner.population-only=true+optimizer.q="pessimistic"`),
 # applied by scripts/config_with.py. `random-only:CONFIG` is CONFIG with `alternate = false`
 # (every later design uniform random, the thesis's random-designs baseline; pass --exploit random).
+# A line being run by another campaign (queues share lines) is skipped: RUN.lock holds the
+# lane's pid while a lane has the line.
 # Each run's stdout (the JSON summary line) goes to RUN/summary.json, stderr to RUN.log.
 # A finished run's small files (summary.json, config.toml, designs.csv, episodes.csv, and the
 # optimiser's calibration.csv, a fork's forked-from.txt and the conservative term's
@@ -283,6 +285,23 @@ run_one() {
   local dir=$root/$name-seed$seed
   local archive=docs/campaign/results/$name-seed$seed
   if [ -s "$dir/summary.json" ] || [ -s "$archive/summary.json" ]; then echo "campaign: $name-seed$seed done already, skipped"; return 0; fi
+  # Queues share lines (seed3.queue's are design-bench's and design-choice's): one run
+  # directory, one writer. The lock holds this lane's pid; a lock whose lane is gone is taken
+  # over unless a live process still names the directory (a run orphaned by a killed campaign).
+  local lock=$dir.lock holder
+  if ! mkdir "$lock" 2> /dev/null; then
+    holder=$(cat "$lock/pid" 2> /dev/null || true)
+    if { [[ $holder =~ ^[1-9][0-9]*$ ]] && kill -0 "$holder" 2> /dev/null; } || pgrep -f -- "(run|resume|out) $dir( |\$)" > /dev/null; then
+      echo "campaign: $name-seed$seed is being run by another campaign (pid ${holder:-?}), skipped"
+      return 0
+    fi
+    rm -rf "$lock"
+    mkdir "$lock" 2> /dev/null || { echo "campaign: $name-seed$seed: cannot lock $lock, skipped" >&2; return 0; }
+  fi
+  echo "$BASHPID" > "$lock/pid"
+  # The lane is a subshell that ends with this line: its exit frees the lock.
+  # shellcheck disable=SC2064 # the path now: $lock is local and gone when the trap runs
+  trap "rm -rf $(printf %q "$lock")" EXIT
   local resume=""
   case $config in
     retrain:*) retrain_one "$name" "$config" "$seed" "$@"; return 0 ;;

@@ -299,3 +299,40 @@ fn an_init_population_source_that_is_gone_is_run_again() {
     assert!(out.contains("no such run, archived or not") && out.contains("FAILED"), "{out}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// Two queues that share a line (as seed3.queue shares design-bench's): while one runs it, the
+/// other skips it, and once it is done, nobody runs it again; the lock goes with the lane.
+#[test]
+fn a_line_two_queues_share_runs_once() {
+    let t = Tree::new("share");
+    std::fs::write(&t.hold, "").expect("the hold file");
+    std::fs::write(t.path("other.queue"), "alpha cfg.toml 1\n").expect("queue");
+    let mut first = Running(t.campaign(&["-j", "1", "q.queue"]).spawn().expect("starting the queue"), t.hold.clone());
+    wait_for("the first run", || t.path("runs/campaign/alpha-seed1/episodes.csv").exists());
+    let second = t.run(&["-j", "1", "other.queue"]);
+    assert!(second.status.success(), "{}", text(&second));
+    assert!(text(&second).contains("alpha-seed1 is being run by another campaign"), "{}", text(&second));
+    std::fs::remove_file(&t.hold).expect("removing the hold");
+    assert_eq!(first.exit_code(), Some(0));
+    assert!(!t.path("runs/campaign/alpha-seed1.lock").exists(), "the lock outlived its lane");
+    let third = t.run(&["other.queue"]);
+    assert!(text(&third).contains("alpha-seed1 done already, skipped"), "{}", text(&third));
+
+    // A lock whose lane is gone while its run lives on (a campaign killed outright leaves the
+    // run orphaned): not taken over.
+    std::fs::create_dir_all(t.path("runs/campaign/gamma-seed2.lock")).expect("a lock");
+    std::fs::write(t.path("runs/campaign/gamma-seed2.lock/pid"), "999999999").expect("a dead lane");
+    let mut orphan = Command::new("bash")
+        .args(["-c", "exec -a 'coadapt run --out runs/campaign/gamma-seed2 --transport in-process' sleep 60"])
+        .spawn()
+        .expect("an orphaned run");
+    std::fs::write(t.path("other.queue"), "gamma cfg.toml 2\n").expect("queue");
+    let fourth = t.run(&["other.queue"]);
+    let _ = orphan.kill();
+    let _ = orphan.wait();
+    assert!(text(&fourth).contains("gamma-seed2 is being run by another campaign"), "{}", text(&fourth));
+    // Once it has gone, the stale lock is taken over and the line runs.
+    let fifth = t.run(&["other.queue"]);
+    assert!(text(&fifth).contains("done  runs/campaign/gamma-seed2"), "{}", text(&fifth));
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
