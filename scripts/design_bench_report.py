@@ -2,7 +2,7 @@
 random one?
 
 usage: python3 scripts/design_bench_report.py [RUNS_ROOT, default docs/campaign/results]
-           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict]
+           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict,everywhere]
 
 Runs are RUNS_ROOT/PREFIX-METHOD-seedN (docs/campaign/design-bench.queue and
 design-choice.queue): PREFIX names the robot (hc = HalfCheetah, walker-bench, hopper-bench,
@@ -35,7 +35,15 @@ count. Per robot:
    Daisy) without losing on HalfCheetah: per method and robot the quality of the chosen designs
    minus FEAR's, paired by seed (mean ± sd, n, exact sign-flip p); a robot counts only with 3
    paired seeds or more; the verdict is yes, no, or open (naming what is missing);
-8. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
+8. everywhere (after the robots, with --tables everywhere): the issue's bar for a design choice,
+   that its chosen designs beat random designs on every robot, paired and pooled over seeds:
+   per method and robot, each exploitation design minus the random design trained right after
+   it in the same run (the within table; the random body trains one design later, so the test
+   leans against the method), pooled over the robot's seeds, with the exact sign-flip p. A
+   robot is decided at the grid's seeds (HalfCheetah 5, the others 3): shown when the mean is
+   above 0 and p <= 0.05. The answer is yes (all five shown), no (naming the robots decided and
+   not shown) or open (naming the seeds missing);
+9. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
    the simulation baselines ordered by the simulation they spend on choosing designs: design
    rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
    episodes: an upper bound where an episode can end early), against the quality of the chosen
@@ -66,22 +74,30 @@ def option(name, default):
     return sys.argv[sys.argv.index(name) + 1] if name in sys.argv else default
 
 
-def sign_flip_p(diffs):
+def sign_flip(diffs):
     """Exact two-sided p of the sign-flip (paired permutation) test of mean(diffs) = 0: the share
     of the 2^n sign patterns whose |mean| is at least the observed one (Monte Carlo with 2^18
-    draws and a fixed seed past n = 20, marked with ~)."""
+    draws and a fixed seed past n = 20). (p, exact?), or None without differences."""
     d = [x for x in diffs if not math.isnan(x)]
     n = len(d)
     if n == 0:
-        return "-"
+        return None
     obs = abs(sum(d)) - 1e-9 * max(1.0, max(abs(x) for x in d))
     if n <= 20:
         hits = sum(abs(sum(s * x for s, x in zip(signs, d))) >= obs for signs in itertools.product((1, -1), repeat=n))
-        return cr.p_value(hits / 2 ** n)
+        return hits / 2 ** n, True
     rng = random.Random(1)
     draws = 1 << 18
     hits = sum(abs(sum(x if rng.random() < 0.5 else -x for x in d)) >= obs for _ in range(draws))
-    return "~" + cr.p_value(hits / draws)
+    return hits / draws, False
+
+
+def sign_flip_p(diffs):
+    """sign_flip's p as the tables print it (Monte Carlo ones marked with ~), or -."""
+    r = sign_flip(diffs)
+    if r is None:
+        return "-"
+    return cr.p_value(r[0]) if r[1] else "~" + cr.p_value(r[0])
 
 
 def runs_of(root, prefix):
@@ -312,17 +328,55 @@ def verdict(root):
     print()
 
 
+# The issue's grid: HalfCheetah 5 seeds, the other robots 3.
+GRID_SEEDS = {"hc": 5}
+ALPHA = 0.05
+
+
+def everywhere(root):
+    """Does a method's chosen design beat the random one after it on every robot (table 8)?"""
+    runs = {prefix: runs_of(root, prefix) for _, prefix in ROBOTS}
+    methods = ordered({m for r in runs.values() for m in r if m != "random"})
+    if not methods:
+        return
+    print("#### Do the chosen designs beat random designs on every robot? (pooled over seeds, p <= 0.05)\n")
+    print("| method | " + " | ".join(f"{t}: chosen minus the random design after it (seeds, pairs, p)" for t, _ in ROBOTS) + " | beats random designs everywhere? |")
+    print("|---|" + "---|" * len(ROBOTS) + "---|")
+    for m in methods:
+        cells, failed, open_ = [], [], []
+        for title, prefix in ROBOTS:
+            r = runs[prefix].get(m, {})
+            d = [x for f, _ in r.values() for x in f["next"]]
+            cells.append(f"{cr.signed_sd(d)} ({len(r)}, {len(d)}, {sign_flip_p(d)})" if d else "-")
+            need = GRID_SEEDS.get(prefix, 3)
+            if len(r) < need:
+                open_.append(f"{title} {len(r)}/{need}")
+            # Decided on the p itself, not on its printed rounding.
+            elif not (d and statistics.mean(d) > 0 and sign_flip(d)[0] <= ALPHA):
+                failed.append(title)
+        if failed:
+            v = "no (not shown on " + ", ".join(failed) + ")"
+        elif open_:
+            v = "open: seeds " + ", ".join(open_)
+        else:
+            v = "yes"
+        print(f"| {m} | " + " | ".join(cells) + f" | {v} |")
+    print()
+
+
 def main():
     args = [a for i, a in enumerate(sys.argv[1:], 1) if not a.startswith("--") and sys.argv[i - 1] not in {"--robots", "--tables"}]
     root = args[0] if args else "docs/campaign/results"
     keep = option("--robots", None)
     tables = option("--tables", "methods,random,within,trend,bodies,calibration").split(",")
     robots = [r for r in ROBOTS if keep is None or r[1] in keep.split(",")]
-    per_robot = [t for t in tables if t != "verdict"]
+    per_robot = [t for t in tables if t not in ("verdict", "everywhere")]
     if per_robot and not any([report(root, title, prefix, per_robot) for title, prefix in robots]):
         sys.exit(f"design_bench_report: no finished benchmark run under {root}")
     if "verdict" in tables:
         verdict(root)
+    if "everywhere" in tables:
+        everywhere(root)
 
 
 if __name__ == "__main__":
