@@ -175,6 +175,21 @@ PY
   echo "campaign: done  $dir in $((SECONDS - t0)) s: $(cat "$dir/summary.json")"
 }
 
+# Takes the lock directory LOCK for this lane (its pid inside), or returns 1 while another holds
+# it: a lane still alive, or, given PATTERN, a live process whose command line matches it (a run
+# orphaned by a campaign killed outright). A lock left by neither is taken over.
+take_lock() {
+  local lock=$1 pattern=${2:-} holder
+  if ! mkdir "$lock" 2> /dev/null; then
+    holder=$(cat "$lock/pid" 2> /dev/null || true)
+    if [[ $holder =~ ^[1-9][0-9]*$ ]] && kill -0 "$holder" 2> /dev/null; then return 1; fi
+    if [ -n "$pattern" ] && pgrep -f -- "$pattern" > /dev/null; then return 1; fi
+    rm -rf "$lock"
+    mkdir "$lock" 2> /dev/null || return 1
+  fi
+  echo "$BASHPID" > "$lock/pid"
+}
+
 # A fork's source that is archived but whose run directory is gone (runs/ of another machine,
 # or cleared): its first K designs are run again from the archived config into SRC.prefix, the
 # rows checked against the archive's, and only then moved to SRC's place for the watchers to
@@ -186,15 +201,8 @@ regenerate_prefix() {
   local srcdir=$root/$src-seed$seed srcarch=docs/campaign/results/$src-seed$seed
   if [ -d "$srcdir" ]; then return 0; fi
   local tmp=$srcdir.prefix
-  local lock=$srcdir.prefix.lock holder
-  if ! mkdir "$lock" 2> /dev/null; then
-    # Held by a lane that is gone (a campaign killed outright): taken over.
-    holder=$(cat "$lock/pid" 2> /dev/null || true)
-    if [[ $holder =~ ^[1-9][0-9]*$ ]] && kill -0 "$holder" 2> /dev/null; then return 0; fi
-    rm -rf "$lock"
-    mkdir "$lock" 2> /dev/null || return 0
-  fi
-  echo "$BASHPID" > "$lock/pid"
+  local lock=$srcdir.prefix.lock
+  take_lock "$lock" || return 0
   local mode=(--config "$srcarch/config.toml" --seed "$seed" --designs "$k" --out "$tmp")
   if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then mode=(--resume "$tmp"); else rm -rf "$tmp"; fi
   echo "campaign: $srcdir is archived but gone: running its first $k designs again for the runs that start from it, into $tmp ($(date -u +%H:%M:%S))"
@@ -259,6 +267,15 @@ ensure_init_population() {
   done
 }
 
+# The pid files of this queue's fork watchers (other queues running beside it have their own).
+fork_pidfiles() {
+  local name config seed rest
+  while read -r name config seed rest; do
+    case $name in ''|'#'*) continue ;; esac
+    case $config in fork:*) echo "$root/$name-seed$seed.fork.pid" ;; esac
+  done < "$queue"
+}
+
 # Starts the watchers that take the copies for the queue's fork lines.
 start_fork_watchers() {
   local name config seed rest
@@ -288,17 +305,11 @@ run_one() {
   # Queues share lines (seed3.queue's are design-bench's and design-choice's): one run
   # directory, one writer. The lock holds this lane's pid; a lock whose lane is gone is taken
   # over unless a live process still names the directory (a run orphaned by a killed campaign).
-  local lock=$dir.lock holder
-  if ! mkdir "$lock" 2> /dev/null; then
-    holder=$(cat "$lock/pid" 2> /dev/null || true)
-    if { [[ $holder =~ ^[1-9][0-9]*$ ]] && kill -0 "$holder" 2> /dev/null; } || pgrep -f -- "(run|resume|out) $dir( |\$)" > /dev/null; then
-      echo "campaign: $name-seed$seed is being run by another campaign (pid ${holder:-?}), skipped"
-      return 0
-    fi
-    rm -rf "$lock"
-    mkdir "$lock" 2> /dev/null || { echo "campaign: $name-seed$seed: cannot lock $lock, skipped" >&2; return 0; }
+  local lock=$dir.lock
+  if ! take_lock "$lock" "(run|resume|out) $dir( |\$)"; then
+    echo "campaign: $name-seed$seed is being run by another campaign (pid $(cat "$lock/pid" 2> /dev/null || echo ?)), skipped"
+    return 0
   fi
-  echo "$BASHPID" > "$lock/pid"
   # The lane is a subshell that ends with this line: its exit frees the lock.
   # shellcheck disable=SC2064 # the path now: $lock is local and gone when the trap runs
   trap "rm -rf $(printf %q "$lock")" EXIT
@@ -388,14 +399,14 @@ while read -r name config seed rest; do
 done < "$queue"
 while [ "$(jobs -pr | wc -l)" -gt 0 ]; do wait || true; done
 if [ "$stopping" = 1 ]; then
-  for f in "$root"/*.fork.pid; do
+  for f in $(fork_pidfiles); do
     if [ -s "$f" ]; then kill "$(cat "$f")" 2>/dev/null || true; fi
   done
   echo "campaign: stopped; start the queue again to resume"
   exit 130
 fi
 # Watchers whose fork never came (a source that failed) would wait for ever.
-for f in "$root"/*.fork.pid; do
+for f in $(fork_pidfiles); do
   if [ -s "$f" ] && [ ! -d "${f%.fork.pid}" ]; then kill "$(cat "$f")" 2>/dev/null || true; fi
 done
 echo "campaign: queue $queue finished"

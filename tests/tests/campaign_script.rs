@@ -336,3 +336,32 @@ fn a_line_two_queues_share_runs_once() {
     assert!(text(&fifth).contains("done  runs/campaign/gamma-seed2"), "{}", text(&fifth));
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// A queue that ends (or stops) ends only its own fork watchers: another queue running beside
+/// it keeps the watcher its fork line waits on.
+#[test]
+fn a_queue_ends_only_its_own_fork_watchers() {
+    let t = Tree::new("watchers");
+    // Queue x waits for a fork whose source nobody runs (its watcher waits too).
+    std::fs::write(t.path("x.queue"), "frk fork:src:1 1\n").expect("queue");
+    let mut x = Running(t.campaign(&["-j", "1", "x.queue"]).spawn().expect("starting x"), t.hold.clone());
+    let pidfile = t.path("runs/campaign/frk-seed1.fork.pid");
+    wait_for("x's watcher", || std::fs::read_to_string(&pidfile).is_ok_and(|p| !p.trim().is_empty()));
+    let watcher = std::fs::read_to_string(&pidfile).expect("the watcher's pid").trim().to_string();
+    let alive = |pid: &str| {
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        stat.rsplit(')').next().and_then(|rest| rest.split_whitespace().next()).is_some_and(|s| s != "Z")
+    };
+    assert!(alive(&watcher), "x's watcher did not start");
+    // Queue y runs one line to its end, and is stopped once too.
+    std::fs::write(t.path("y.queue"), "alpha cfg.toml 1\n").expect("queue");
+    let y = t.run(&["-j", "1", "y.queue"]);
+    assert!(text(&y).contains("finished"), "{}", text(&y));
+    assert!(alive(&watcher), "y's end killed x's watcher");
+    // x stopped: its own watcher goes.
+    let stop = t.run(&["--stop", "x.queue"]);
+    assert!(stop.status.success(), "{}", text(&stop));
+    assert_eq!(x.exit_code(), Some(130));
+    wait_for("x's watcher to end", || !alive(&watcher));
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
