@@ -9,11 +9,12 @@ runs/campaign, not archived yet), `running` (a live process names its run direct
 `pending`. Episodes left: the run's schedule (its config.toml, or the queue's CONFIG with its
 overrides and `--designs`) minus the rows of its episodes.csv; a fork line counts from its
 design K; a retrain line counts two trainings of 30 episodes. The last line per queue sums them
-with the hours they take at the pace of the queue's finished runs (episodes per hour of one
-lane, from their summary.json), when there are some. --all lists the finished lines too.
+with the hours they take at the pace of the queue's finished co-adaptation runs, when there are
+some: episodes per hour of one lane, from the learner's clock in the last rows of episodes.csv
+(every start of a resumed run; a fork's own rows only; summary.json's seconds count the last
+start alone). --all lists the finished lines too.
 """
 import csv
-import json
 import os
 import sys
 import tomllib
@@ -55,6 +56,21 @@ def rows(path):
             return sum(1 for _ in csv.DictReader(f))
     except OSError:
         return 0
+
+
+def pace_of(run_dir, skip):
+    """Episodes per hour of the rows of run_dir/episodes.csv after the first `skip` (a fork's
+    copied prefix), by the learner's clock (the seconds column, which goes on across resumes),
+    or None."""
+    try:
+        with open(f"{run_dir}/episodes.csv") as f:
+            secs = [float(r["seconds"]) for r in csv.DictReader(f)]
+    except (OSError, KeyError, ValueError, TypeError):
+        return None
+    start = secs[skip - 1] if 0 < skip <= len(secs) else 0.0
+    if len(secs) <= skip or secs[-1] <= start:
+        return None
+    return (len(secs) - skip) / ((secs[-1] - start) / 3600)
 
 
 def live_dirs():
@@ -137,12 +153,11 @@ def main():
             summary = next((p for p in (f"{a}/summary.json", f"{d}/summary.json") if os.path.exists(p)), None)
             if summary:
                 state = "archived" if summary.startswith(RESULTS) else "done"
-                try:
-                    s = json.load(open(summary))
-                    if s.get("seconds") and total:
-                        paces.append(total / (s["seconds"] / 3600))
-                except (OSError, ValueError):
-                    pass
+                if not spec.startswith("retrain:"):
+                    # Retrains (plain SAC, updates per step) keep another pace: not mixed in.
+                    p = pace_of(os.path.dirname(summary), sum(eps[:k]) if eps and k else 0)
+                    if p:
+                        paces.append(p)
             elif os.path.realpath(d) in live:
                 state = "running"
             elif os.path.exists(d):

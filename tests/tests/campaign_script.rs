@@ -365,3 +365,42 @@ fn a_queue_ends_only_its_own_fork_watchers() {
     wait_for("x's watcher to end", || !alive(&watcher));
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// The hours left are priced at the pace of the finished runs by the learner's own clock (the
+/// seconds column of episodes.csv, which goes on across resumes), not by summary.json's seconds
+/// (the last start only), and a fork's pace counts its own rows only.
+#[test]
+fn hours_left_follow_the_learners_clock_of_finished_runs() {
+    let t = Tree::new("pace");
+    std::fs::write(t.root.join("q.queue"), "alpha cfg.toml 1\nfrk fork:alpha:1 1\nbeta cfg.toml 2\ngamma cfg.toml 3\n").expect("the queue");
+    // alpha: 5 episodes over 3,600 s in two starts (summary.json: 60 s, the last start).
+    let alpha = t.path("docs/campaign/results/alpha-seed1");
+    std::fs::create_dir_all(&alpha).expect("archive");
+    let rows: String = [(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 3000.0), (1, 1, 3600.0)]
+        .iter()
+        .map(|(d, e, s)| format!("{d},{e},1.0,1.0,{s}\n"))
+        .collect();
+    std::fs::write(alpha.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    std::fs::write(alpha.join("summary.json"), "{\"interrupted\": false, \"seconds\": 60.0}").expect("summary");
+    // frk: alpha's first design copied (3 rows), then its own 2 episodes in 720 s (10 per hour).
+    let frk = t.path("docs/campaign/results/frk-seed1");
+    std::fs::create_dir_all(&frk).expect("archive");
+    let rows: String = [(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 2160.0), (1, 1, 2520.0)]
+        .iter()
+        .map(|(d, e, s)| format!("{d},{e},1.0,1.0,{s}\n"))
+        .collect();
+    std::fs::write(frk.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    std::fs::write(frk.join("summary.json"), "{\"interrupted\": false, \"seconds\": 1.0}").expect("summary");
+    // beta archived at 20 per hour: the median of 5, 10 and 20 is 10 per hour, so gamma's 5
+    // episodes left are half a lane-hour.
+    let beta = t.path("docs/campaign/results/beta-seed2");
+    std::fs::create_dir_all(&beta).expect("archive");
+    let rows: String = (0..5).map(|i| format!("0,{i},1.0,1.0,{}\n", 180 * (i + 1))).collect();
+    std::fs::write(beta.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    std::fs::write(beta.join("summary.json"), "{\"interrupted\": false, \"seconds\": 2.0}").expect("summary");
+
+    let status = t.status();
+    assert!(status.contains("3 archived, 1 pending; 5 episodes left, about 0.5 lane-hours"), "{status}");
+    assert!(status.contains("(10 episodes/h)"), "{status}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
