@@ -2,7 +2,7 @@
 random one?
 
 usage: python3 scripts/design_bench_report.py [RUNS_ROOT, default docs/campaign/results]
-           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict,everywhere]
+           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict,everywhere,edges]
 
 Runs are RUNS_ROOT/PREFIX-METHOD-seedN (docs/campaign/design-bench.queue and
 design-choice.queue): PREFIX names the robot (hc = HalfCheetah, walker-bench, hopper-bench,
@@ -43,6 +43,10 @@ count. Per robot:
    robot is decided at the grid's seeds (HalfCheetah 5, the others 3): shown when the mean is
    above 0 and p <= 0.05. The answer is yes (all five shown), no (naming the robots decided and
    not shown) or open (naming the seeds missing);
+10. edges (not in the default tables): per robot, every within-run pair (table 3's), pooled
+   over methods and seeds, grouped by how many coordinates of the chosen design sit within 2 %
+   of a bound (0, 1, 2, 3 or more): pairs (and methods), mean ± sd, wins, exact sign-flip p.
+   Are the bodies at the box's edges, where a critic trained on few bodies extrapolates, worse?
 9. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
    the simulation baselines ordered by the simulation they spend on choosing designs: design
    rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
@@ -124,7 +128,7 @@ def runs_of(root, prefix):
         summary = dict(summary, wall_seconds=float(last["seconds"]) if last and last.get("seconds") else float("nan"))
         env, rows = cr.read_run(path)
         n_init = sum(r["kind"] == "initial" for r in rows)
-        f = dict(cr.facts(env, rows, summary, n_init, None), by_index={r["index"]: r for r in rows})
+        f = dict(cr.facts(env, rows, summary, n_init, None), by_index={r["index"]: r for r in rows}, env=env)
         out.setdefault(method, {})[int(seed)] = (f, summary)
     return out
 
@@ -364,19 +368,48 @@ def everywhere(root):
     print()
 
 
+def edges(root, title, prefix):
+    """Table 10: are the bodies at the box's edges worse? Every within-run pair of the robot
+    (each exploitation design minus the random design after it), pooled over methods and seeds,
+    grouped by how many of the chosen design's coordinates sit within 2 % of a bound."""
+    groups = {}
+    for m, by_seed in runs_of(root, prefix).items():
+        for f, _ in by_seed.values():
+            low, high = cr.BOUNDS.get(f["env"], (None, None))
+            if low is None:
+                continue
+            for i, d in slot_pairs(f):
+                k = min(cr.near_bound(f["by_index"][i]["design"], low, high, 2e-2), 3)
+                groups.setdefault(k, []).append((m, d))
+    if not groups:
+        return
+    print(f"#### {title} (`{prefix}-*`): chosen bodies by how many coordinates sit at the box's edge\n")
+    print("| coordinates of the chosen design within 2 % of a bound | pairs (methods) | chosen minus the random design after it | wins | p |")
+    print("|---|---|---|---|---|")
+    for k in sorted(groups):
+        d = [x for _, x in groups[k]]
+        label = "3 or more" if k == 3 else str(k)
+        print(f"| {label} | {len(d)} ({len({m for m, _ in groups[k]})}) | {cr.signed_sd(d)} | "
+              f"{sum(x > 0 for x in d)}/{len(d)} | {sign_flip_p(d)} |")
+    print()
+
+
 def main():
     args = [a for i, a in enumerate(sys.argv[1:], 1) if not a.startswith("--") and sys.argv[i - 1] not in {"--robots", "--tables"}]
     root = args[0] if args else "docs/campaign/results"
     keep = option("--robots", None)
     tables = option("--tables", "methods,random,within,trend,bodies,calibration").split(",")
     robots = [r for r in ROBOTS if keep is None or r[1] in keep.split(",")]
-    per_robot = [t for t in tables if t not in ("verdict", "everywhere")]
+    per_robot = [t for t in tables if t not in ("verdict", "everywhere", "edges")]
     if per_robot and not any([report(root, title, prefix, per_robot) for title, prefix in robots]):
         sys.exit(f"design_bench_report: no finished benchmark run under {root}")
     if "verdict" in tables:
         verdict(root)
     if "everywhere" in tables:
         everywhere(root)
+    if "edges" in tables:
+        for title, prefix in robots:
+            edges(root, title, prefix)
 
 
 if __name__ == "__main__":

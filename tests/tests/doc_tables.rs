@@ -212,3 +212,36 @@ fn the_everywhere_table_asks_for_every_robot_at_the_grids_seeds() {
         "thin row:\n{text}"
     );
 }
+
+/// `--tables edges`: every within-run pair of a robot, pooled over methods, grouped by how many
+/// coordinates of the chosen design sit within 2 % of a bound (HalfCheetah's box: 0.8-2.0, so
+/// 0.024). FEAR's chosen bodies: three coordinates at 2.0 (then -30 against the random body
+/// after it) and one at 0.8 (-60); trust's: none at an edge (+20) and one at 1.99 (+40). So
+/// the group of 0 is +20 (1 pair), of 1 is -60 and +40 (-10.0 ± 70.7, 2 pairs of 2 methods), of
+/// 3 or more -30; no design has exactly 2.
+#[test]
+fn the_edges_table_groups_pairs_by_coordinates_at_a_bound() {
+    let dir = std::env::temp_dir().join(format!("coadapt-edges-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let k = ["initial", "initial", "exploit", "explore", "exploit", "explore"];
+    let run = |name: &str, designs: [&str; 6], best: [f64; 6]| {
+        synthetic_run(&dir, name, &k, &best);
+        let mut csv = String::from(
+            "index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts,method,prototype\n",
+        );
+        for (i, ((kind, d), b)) in k.iter().zip(designs).zip(best).enumerate() {
+            csv += &format!("{i},{kind},{d},16,{b},{b},,0,x,\n");
+        }
+        std::fs::write(dir.join(name).join("designs.csv"), csv).expect("designs.csv");
+    };
+    let mid = "1;1;1;1;1;1";
+    run("hc-fear-seed1", [mid, mid, "2.0;2.0;2.0;1;1;1", mid, "0.8;1;1;1;1;1", mid], [50.0, 60.0, 100.0, 130.0, 90.0, 150.0]);
+    run("hc-trust-seed1", [mid, mid, mid, mid, "1.99;1;1;1;1;1", mid], [50.0, 60.0, 120.0, 100.0, 140.0, 100.0]);
+    let text =
+        script("design_bench_report.py", &[dir.as_os_str(), "--robots".as_ref(), "hc".as_ref(), "--tables".as_ref(), "edges".as_ref()]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(text.contains("| 0 | 1 (1) | +20.0 | 1/1 | 1.00 |"), "group 0:\n{text}");
+    assert!(text.contains("| 1 | 2 (2) | -10.0 ± 70.7 | 1/2 | 1.00 |"), "group 1:\n{text}");
+    assert!(text.contains("| 3 or more | 1 (1) | -30.0 | 0/1 | 1.00 |"), "group 3+:\n{text}");
+    assert!(!text.contains("| 2 |"), "a group of 2 from nowhere:\n{text}");
+}
