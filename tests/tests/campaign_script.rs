@@ -373,31 +373,23 @@ fn a_queue_ends_only_its_own_fork_watchers() {
 fn hours_left_follow_the_learners_clock_of_finished_runs() {
     let t = Tree::new("pace");
     std::fs::write(t.root.join("q.queue"), "alpha cfg.toml 1\nfrk fork:alpha:1 1\nbeta cfg.toml 2\ngamma cfg.toml 3\n").expect("the queue");
+    // A finished run in the archive: one episode row per (design, episode, learner's seconds),
+    // and summary.json's seconds (the last start's, which the pricing must not read).
+    let archive = |run: &str, episodes: &[(u32, u32, f64)], summary_seconds: f64| {
+        let dir = t.path(&format!("docs/campaign/results/{run}"));
+        std::fs::create_dir_all(&dir).expect("archive");
+        let rows: String = episodes.iter().map(|(d, e, s)| format!("{d},{e},1.0,1.0,{s}\n")).collect();
+        std::fs::write(dir.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+        std::fs::write(dir.join("summary.json"), format!("{{\"interrupted\": false, \"seconds\": {summary_seconds}}}")).expect("summary");
+    };
     // alpha: 5 episodes over 3,600 s in two starts (summary.json: 60 s, the last start).
-    let alpha = t.path("docs/campaign/results/alpha-seed1");
-    std::fs::create_dir_all(&alpha).expect("archive");
-    let rows: String = [(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 3000.0), (1, 1, 3600.0)]
-        .iter()
-        .map(|(d, e, s)| format!("{d},{e},1.0,1.0,{s}\n"))
-        .collect();
-    std::fs::write(alpha.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
-    std::fs::write(alpha.join("summary.json"), "{\"interrupted\": false, \"seconds\": 60.0}").expect("summary");
+    archive("alpha-seed1", &[(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 3000.0), (1, 1, 3600.0)], 60.0);
     // frk: alpha's first design copied (3 rows), then its own 2 episodes in 720 s (10 per hour).
-    let frk = t.path("docs/campaign/results/frk-seed1");
-    std::fs::create_dir_all(&frk).expect("archive");
-    let rows: String = [(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 2160.0), (1, 1, 2520.0)]
-        .iter()
-        .map(|(d, e, s)| format!("{d},{e},1.0,1.0,{s}\n"))
-        .collect();
-    std::fs::write(frk.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
-    std::fs::write(frk.join("summary.json"), "{\"interrupted\": false, \"seconds\": 1.0}").expect("summary");
-    // beta archived at 20 per hour: the median of 5, 10 and 20 is 10 per hour, so gamma's 5
-    // episodes left are half a lane-hour.
-    let beta = t.path("docs/campaign/results/beta-seed2");
-    std::fs::create_dir_all(&beta).expect("archive");
-    let rows: String = (0..5).map(|i| format!("0,{i},1.0,1.0,{}\n", 180 * (i + 1))).collect();
-    std::fs::write(beta.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
-    std::fs::write(beta.join("summary.json"), "{\"interrupted\": false, \"seconds\": 2.0}").expect("summary");
+    archive("frk-seed1", &[(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 2160.0), (1, 1, 2520.0)], 1.0);
+    // beta at 20 per hour: the median of 5, 10 and 20 is 10 per hour, so gamma's 5 episodes
+    // left are half a lane-hour.
+    let beta: Vec<(u32, u32, f64)> = (0..5).map(|i| (0, i, 180.0 * f64::from(i + 1))).collect();
+    archive("beta-seed2", &beta, 2.0);
 
     let status = t.status();
     assert!(status.contains("3 archived, 1 pending; 5 episodes left, about 0.5 lane-hours"), "{status}");
