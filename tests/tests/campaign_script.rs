@@ -139,6 +139,13 @@ fn text(o: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
+/// Whether process PID runs: not gone, and not a zombie (left to a container's init that does
+/// not reap).
+fn alive(pid: &str) -> bool {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    stat.rsplit(')').next().and_then(|rest| rest.split_whitespace().next()).is_some_and(|s| s != "Z")
+}
+
 fn wait_for(what: &str, mut done: impl FnMut() -> bool) {
     let t = Instant::now();
     while !done() {
@@ -249,10 +256,7 @@ fn a_fork_of_an_archived_source_runs_its_prefix_again_and_checks_it() {
     assert!(out.contains("does not reproduce the archived first 2 designs") && out.contains("row 1"), "{out}");
     assert!(!fork.exists() && !t.path("runs/campaign/src-seed1").exists(), "a fork from a prefix that differs: {out}");
     let watcher = std::fs::read_to_string(t.path("runs/campaign/frk-seed1.fork.pid")).expect("the watcher's pid");
-    // Gone, or a zombie left to a container's init that does not reap.
-    let stat = std::fs::read_to_string(format!("/proc/{}/stat", watcher.trim())).unwrap_or_default();
-    let state = stat.rsplit(')').next().and_then(|rest| rest.split_whitespace().next()).unwrap_or("gone");
-    assert!(state == "gone" || state == "Z", "the fork's watcher outlived its queue: {stat}");
+    assert!(!alive(watcher.trim()), "the fork's watcher outlived its queue (pid {})", watcher.trim());
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
@@ -348,10 +352,6 @@ fn a_queue_ends_only_its_own_fork_watchers() {
     let pidfile = t.path("runs/campaign/frk-seed1.fork.pid");
     wait_for("x's watcher", || std::fs::read_to_string(&pidfile).is_ok_and(|p| !p.trim().is_empty()));
     let watcher = std::fs::read_to_string(&pidfile).expect("the watcher's pid").trim().to_string();
-    let alive = |pid: &str| {
-        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
-        stat.rsplit(')').next().and_then(|rest| rest.split_whitespace().next()).is_some_and(|s| s != "Z")
-    };
     assert!(alive(&watcher), "x's watcher did not start");
     // Queue y runs one line to its end, and is stopped once too.
     std::fs::write(t.path("y.queue"), "alpha cfg.toml 1\n").expect("queue");
