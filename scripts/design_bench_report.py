@@ -43,15 +43,15 @@ count. Per robot:
    robot is decided at the grid's seeds (HalfCheetah 5, the others 3): shown when the mean is
    above 0 and p <= 0.05. The answer is yes (all five shown), no (naming the robots decided and
    not shown) or open (naming the seeds missing);
-10. edges (not in the default tables): per robot, every within-run pair (table 3's), pooled
-   over methods and seeds, grouped by how many coordinates of the chosen design sit within 2 %
-   of a bound (0, 1, 2, 3 or more): pairs (and methods), mean ± sd, wins, exact sign-flip p.
-   Are the bodies at the box's edges, where a critic trained on few bodies extrapolates, worse?
 9. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
    the simulation baselines ordered by the simulation they spend on choosing designs: design
    rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
    episodes: an upper bound where an episode can end early), against the quality of the chosen
-   designs and its difference from random designs, paired by seed (section 3's dial).
+   designs and its difference from random designs, paired by seed (section 3's dial);
+10. edges (not in the default tables): per robot, every within-run pair (table 3's), pooled
+   over methods and seeds, grouped by how many coordinates of the chosen design sit within 2 %
+   of a bound (0, 1, 2, 3 or more): pairs (and methods), mean ± sd, wins, exact sign-flip p.
+   Are the bodies at the box's edges, where a critic trained on few bodies extrapolates, worse?
 
 Pure Python (no numpy), so it runs with the system python3.
 """
