@@ -6,9 +6,12 @@
 #                                                      [-u UPDATES] [-p f32|bf16] SRC_RUN NAME
 #
 # SRC_RUN: a finished co-adaptation (the action space learns from its population replay, e.g.
-# runs/campaign/as-hc-50-seed1). Steps, each skipped when its output is already there, so the
-# script resumes where it stopped:
-# 1. `coadapt action-space SRC_RUN --out SRC_RUN/action-space` (UPDATES Adam updates, 20000);
+# runs/campaign/as-hc-50x8-seed1); not needed once NAME's action space is archived. Steps, each
+# skipped when its output is already there, so the script resumes where it stopped, on this
+# machine or another:
+# 1. `coadapt action-space SRC_RUN --out SRC_RUN/action-space` (UPDATES Adam updates, 20000),
+#    its weights, figures, summary and loss and SRC_RUN's config.toml archived in
+#    docs/campaign/results/latent-exploration/NAME/action-space/;
 # 2. DESIGNS new designs (3), uniform in the robot's box from a fixed seed (none is one of the
 #    run's: the run chose from a continuum);
 # 3. per design and seed (1..SEEDS, 3): `coadapt train --algo sac` on that body for STEPS steps
@@ -35,20 +38,25 @@ src=${1:?usage: scripts/latent_exploration.sh [options] SRC_RUN NAME}
 name=${2:?usage: scripts/latent_exploration.sh [options] SRC_RUN NAME}
 bin=${BIN:-target/release/coadapt}
 [ -x "$bin" ] || { echo "latent_exploration: no coadapt binary at $bin (cargo build --release, or BIN=...)" >&2; exit 2; }
-[ -s "$src/config.toml" ] || { echo "latent_exploration: $src has no config.toml: not a run directory" >&2; exit 2; }
 out=runs/latent-exploration/$name
 archive=docs/campaign/results/latent-exploration/$name
-mkdir -p "$out" "$archive"
-
-space=$src/action-space/action_space.safetensors
+space=$archive/action-space/action_space.safetensors
+# The learned action space is archived with the comparison (about 100 KB): a later session, on a
+# machine without SRC_RUN's replay, goes on from it (run directories do not outlive a machine).
 if [ ! -s "$space" ]; then
-  echo "latent_exploration: learning the action space of $src ($updates updates)" >&2
-  RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1} "$bin" action-space "$src" --out "$src/action-space" --updates "$updates" > /dev/null
+  [ -s "$src/config.toml" ] || { echo "latent_exploration: $src has no config.toml: not a run directory (and $space is not archived yet)" >&2; exit 2; }
+  if [ ! -s "$src/action-space/action_space.safetensors" ]; then
+    echo "latent_exploration: learning the action space of $src ($updates updates)" >&2
+    RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1} "$bin" action-space "$src" --out "$src/action-space" --updates "$updates" > /dev/null
+  fi
+  mkdir -p "$archive/action-space"
+  cp "$src/config.toml" "$archive/action-space/source-config.toml"
+  cp "$src/action-space"/{summary.json,loss.csv,latent_plane.svg,decoded_grid.svg} "$archive/action-space/"
+  cp "$src/action-space/action_space.safetensors" "$space.new" && mv "$space.new" "$space"
 fi
-mkdir -p "$archive/action-space"
-cp "$src/action-space/summary.json" "$src/action-space/loss.csv" "$archive/action-space/"
+mkdir -p "$out"
 
-env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb"))["env"])' "$src/config.toml")
+env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb"))["env"])' "$archive/action-space/source-config.toml")
 if [ ! -s "$archive/designs.json" ]; then
   python3 - "$env" "$designs" > "$archive/designs.json" <<'PY'
 import json, random, sys
