@@ -1,5 +1,5 @@
 """The state the dm_env_rpc service keeps: worlds, connections (sessions) and the watchdog
-that enforces a robot driver's step deadline (``server.py`` holds the service that uses them)."""
+that enforces a robot driver's step deadline (``service.py`` holds the service that uses them)."""
 
 from __future__ import annotations
 
