@@ -67,6 +67,15 @@ if [ -n "$stop" ]; then
   echo "campaign: asked $queue's campaign (pid $p) to stop; its runs snapshot and exit"
   exit 0
 fi
+# `nice -n 19 scripts/campaign.sh` is meant to yield the cores to a build or CI. Under the
+# kernel's autogroup scheduling (on here: /proc/sys/kernel/sched_autogroup_enabled) a process's
+# nice weighs only within its session's group, and `setsid` makes the lane a group of its own,
+# so the lane took two thirds of the machine from a CI run of nice 0 (seen 2026-11-28). When
+# this script leads its session, its nice goes to the group too; a lane started from a
+# terminal's session leaves that session's group alone.
+if [ "$(ps -o sid= -p $$ | tr -d ' ')" = "$$" ] && [ -w /proc/self/autogroup ]; then
+  echo "$(ps -o ni= -p $$ | tr -d ' ')" > /proc/self/autogroup 2> /dev/null || true
+fi
 # runs/ lives beside the work tree (../runs, linked as runs): a session's checkout is laid anew
 # each time, and a machine that is kept then keeps the runs and their snapshots too.
 if [ ! -e runs ] && [ ! -L runs ]; then
