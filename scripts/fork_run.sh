@@ -12,7 +12,7 @@
 # designs are fixed, the networks and streams seeded alike). Forking the first run at that
 # design instead of running the shared prefix twice saves its episodes (100 of 260 on the
 # reduced protocols), and `--resume` goes on to the rows a fresh run would write (the resume
-# tests in cli/tests/resume.rs check that, row for row).
+# tests in cli/tests/resume/ check that, row for row).
 #
 # Waits (polling every 5 s) until SRC_RUN holds the snapshot taken at the end of design K-1
 # (its learner state says design K is next and no design is in progress), then copies into NEW_RUN:
