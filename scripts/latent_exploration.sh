@@ -3,7 +3,7 @@
 # 6.2) make SAC more sample-efficient on bodies the action space never saw?
 #
 #   usage: [BIN=coadapt] scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA]
-#                                                      [-u UPDATES] [-p f32|bf16] SRC_RUN NAME
+#                                                      [-u UPDATES] [-p f32|bf16] [-d K] SRC_RUN NAME
 #
 # SRC_RUN: a finished co-adaptation (the action space learns from its population replay, e.g.
 # runs/campaign/as-hc-50x8-seed1); not needed once NAME's action space is archived. Steps, each
@@ -21,16 +21,18 @@
 #    on a CPU with AVX-512 BF16, f32 products elsewhere; BENCHMARKS.md "Mixed precision");
 # 4. each finished pair's small files (summary.json, config.toml, episodes.csv) copied to
 #    docs/campaign/results/latent-exploration/NAME/ to be committed, with designs.json.
+# -d K runs design K's pairs only: two lanes on two cores take designs of their own (after the
+# action space is archived: let one lane learn it first).
 # Then `python3 scripts/latent_exploration_report.py docs/campaign/results/latent-exploration/NAME`
 # prints episodes to a return, paired by design and seed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-designs=3 seeds=3 steps=30000 beta=0.5 updates=20000 precision=bf16
-while getopts "n:s:t:b:u:p:" o; do
+designs=3 seeds=3 steps=30000 beta=0.5 updates=20000 precision=bf16 only=""
+while getopts "n:s:t:b:u:p:d:" o; do
   case $o in
     n) designs=$OPTARG ;; s) seeds=$OPTARG ;; t) steps=$OPTARG ;; b) beta=$OPTARG ;; u) updates=$OPTARG ;;
-    p) precision=$OPTARG ;;
-    *) echo "usage: scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA] [-u UPDATES] [-p f32|bf16] SRC_RUN NAME" >&2; exit 2 ;;
+    p) precision=$OPTARG ;; d) only=$OPTARG ;;
+    *) echo "usage: scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA] [-u UPDATES] [-p f32|bf16] [-d K] SRC_RUN NAME" >&2; exit 2 ;;
   esac
 done
 shift $((OPTIND - 1))
@@ -72,6 +74,7 @@ PY
 fi
 
 for k in $(seq 1 "$designs"); do
+  if [ -n "$only" ] && [ "$k" != "$only" ]; then continue; fi
   design=$(python3 -c 'import json, sys; print(",".join(map(str, json.load(open(sys.argv[1]))["designs"][int(sys.argv[2]) - 1])))' "$archive/designs.json" "$k")
   for s in $(seq 1 "$seeds"); do
     for arm in latent sac; do
