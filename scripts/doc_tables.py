@@ -25,7 +25,7 @@ import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCRIPTS = {"campaign_report.py", "calibration_report.py", "design_bench_report.py", "reference_report.py", "transfer_report.py"}
+SCRIPTS = {"campaign_report.py", "calibration_report.py", "design_bench_report.py", "reference_report.py", "transfer_report.py", "latent_exploration_report.py"}
 BLOCK = re.compile(r"^<!-- generated: (.+?) -->\n(.*?)^<!-- end generated -->$", re.M | re.S)
 
 
