@@ -3,7 +3,8 @@
 # 6.2) make SAC more sample-efficient on bodies the action space never saw?
 #
 #   usage: [BIN=coadapt] scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA]
-#                                                      [-u UPDATES] [-p f32|bf16] [-d K] SRC_RUN NAME
+#                                                      [-u UPDATES] [-p f32|bf16] [-d K] [-S SEED]
+#                                                      SRC_RUN NAME
 #
 # SRC_RUN: a finished co-adaptation (the action space learns from its population replay, e.g.
 # runs/campaign/as-hc-50x8-seed1); not needed once NAME's action space is archived. Steps, each
@@ -21,21 +22,31 @@
 #    on a CPU with AVX-512 BF16, f32 products elsewhere; BENCHMARKS.md "Mixed precision");
 # 4. each finished pair's small files (summary.json, config.toml, episodes.csv) copied to
 #    docs/campaign/results/latent-exploration/NAME/ to be committed, with designs.json.
-# -d K runs design K's pairs only: two lanes on two cores take designs of their own (after the
-# action space is archived: let one lane learn it first).
+# -d K runs design K's pairs only, -S SEED seed SEED's only: two lanes on two cores take pairs
+# of their own (after the action space and designs.json are archived: let one lane write them
+# first).
 # Then `python3 scripts/latent_exploration_report.py docs/campaign/results/latent-exploration/NAME`
 # prints episodes to a return, paired by design and seed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-designs=3 seeds=3 steps=30000 beta=0.5 updates=20000 precision=bf16 only=""
-while getopts "n:s:t:b:u:p:d:" o; do
+designs=3 seeds=3 steps=30000 beta=0.5 updates=20000 precision=bf16 only="" only_seed=""
+while getopts "n:s:t:b:u:p:d:S:" o; do
   case $o in
     n) designs=$OPTARG ;; s) seeds=$OPTARG ;; t) steps=$OPTARG ;; b) beta=$OPTARG ;; u) updates=$OPTARG ;;
-    p) precision=$OPTARG ;; d) only=$OPTARG ;;
-    *) echo "usage: scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA] [-u UPDATES] [-p f32|bf16] [-d K] SRC_RUN NAME" >&2; exit 2 ;;
+    p) precision=$OPTARG ;; d) only=$OPTARG ;; S) only_seed=$OPTARG ;;
+    *) echo "usage: scripts/latent_exploration.sh [-n DESIGNS] [-s SEEDS] [-t STEPS] [-b BETA] [-u UPDATES] [-p f32|bf16] [-d K] [-S SEED] SRC_RUN NAME" >&2; exit 2 ;;
   esac
 done
 shift $((OPTIND - 1))
+for v in designs seeds steps updates; do
+  [[ ${!v} =~ ^[1-9][0-9]*$ ]] || { echo "latent_exploration: $v must be a positive whole number, not '${!v}'" >&2; exit 2; }
+done
+if [ -n "$only" ] && ! { [[ $only =~ ^[1-9][0-9]*$ ]] && [ "$only" -le "$designs" ]; }; then
+  echo "latent_exploration: -d takes a design number from 1 to $designs, not '$only'" >&2; exit 2
+fi
+if [ -n "$only_seed" ] && ! { [[ $only_seed =~ ^[1-9][0-9]*$ ]] && [ "$only_seed" -le "$seeds" ]; }; then
+  echo "latent_exploration: -S takes a seed from 1 to $seeds, not '$only_seed'" >&2; exit 2
+fi
 src=${1:?usage: scripts/latent_exploration.sh [options] SRC_RUN NAME}
 name=${2:?usage: scripts/latent_exploration.sh [options] SRC_RUN NAME}
 bin=${BIN:-target/release/coadapt}
@@ -43,7 +54,7 @@ bin=${BIN:-target/release/coadapt}
 out=runs/latent-exploration/$name
 archive=docs/campaign/results/latent-exploration/$name
 space=$archive/action-space/action_space.safetensors
-# The learned action space is archived with the comparison (about 100 KB): a later session, on a
+# The learned action space is archived with the comparison (about 50 KB): a later session, on a
 # machine without SRC_RUN's replay, goes on from it (run directories do not outlive a machine).
 if [ ! -s "$space" ]; then
   [ -s "$src/config.toml" ] || { echo "latent_exploration: $src has no config.toml: not a run directory (and $space is not archived yet)" >&2; exit 2; }
@@ -77,6 +88,7 @@ for k in $(seq 1 "$designs"); do
   if [ -n "$only" ] && [ "$k" != "$only" ]; then continue; fi
   design=$(python3 -c 'import json, sys; print(",".join(map(str, json.load(open(sys.argv[1]))["designs"][int(sys.argv[2]) - 1])))' "$archive/designs.json" "$k")
   for s in $(seq 1 "$seeds"); do
+    if [ -n "$only_seed" ] && [ "$s" != "$only_seed" ]; then continue; fi
     for arm in latent sac; do
       dir=$out/$arm-d$k-seed$s
       if [ -s "$archive/$arm-d$k-seed$s/summary.json" ]; then continue; fi
