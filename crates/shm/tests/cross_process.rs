@@ -18,6 +18,16 @@ const LONG: Duration = Duration::from_secs(20);
 /// 1 MiB of f32 policy parameters.
 const MIB: usize = 1 << 18;
 
+/// The two parent tests take turns. iceoryx2 removes the machine's dead nodes whenever a node
+/// is created or dropped (`cleanup-dead-nodes-on-creation`, its default), so a neighbour test
+/// starting or ending its nodes may clean the killed child before `cleanup_stale` is called and
+/// leave it nothing to count (CI failed that way once).
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 fn cfg(fleet: String) -> ShmConfig {
     ShmConfig { fleet, ..ShmConfig::default() }
 }
@@ -72,6 +82,7 @@ fn closes<T: std::fmt::Debug>(mut f: impl FnMut() -> Result<Option<T>, Transport
 
 #[test]
 fn a_child_process_publishes_weights_and_sends_experience() {
+    let _turn = one_at_a_time();
     let fleet = format!("coadapt-test-{}-xproc", std::process::id());
     let cfg = cfg(fleet.clone());
     let mut rx = queue_receiver::<ExperienceChunk>(&cfg, "exp").expect("receiver");
@@ -89,6 +100,7 @@ fn a_child_process_publishes_weights_and_sends_experience() {
 
 #[test]
 fn a_killed_child_is_cleaned_up_and_a_new_publisher_takes_over() {
+    let _turn = one_at_a_time();
     let fleet = format!("coadapt-test-{}-killed", std::process::id());
     let cfg = cfg(fleet.clone());
     let mut rx = queue_receiver::<ExperienceChunk>(&cfg, "exp").expect("receiver");
@@ -110,9 +122,9 @@ fn a_killed_child_is_cleaned_up_and_a_new_publisher_takes_over() {
     let mut successor = topic_publisher::<Weights>(&cfg, "w").expect("a new publisher after cleanup");
     successor.publish(weights(5, 10)).expect("publish");
     assert_eq!(sub.wait_for(5, LONG).expect("wait").expect("weights").version, 5);
-    // The child had two nodes (a sender's and a publisher's). Another cleaner (a receiver's
-    // janitor, a test running beside this one) may be part-way through one of them when
-    // `cleanup_stale` passes it over, so give the machine's cleaners a moment to finish.
+    // The child had two nodes (a sender's and a publisher's). Another cleaner (the receiver's
+    // janitor in `closes`, the successor's node creation) may be part-way through one of them
+    // when `cleanup_stale` passes it over, so give the cleaners a moment to finish.
     let child_nodes = || {
         let mut left = 0;
         let listed = Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
