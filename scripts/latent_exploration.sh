@@ -20,7 +20,8 @@
 #    and with SAC's own Gaussian, into runs/latent-exploration/NAME/{latent,sac}-d<k>-seed<s>;
 #    both arms with the products of -p (bf16 by default: about 1.6-1.9x the f32 update rate
 #    on a CPU with AVX-512 BF16, f32 products elsewhere; BENCHMARKS.md "Mixed precision");
-# 4. each finished pair's small files (summary.json, config.toml, episodes.csv) copied to
+# 4. each finished pair's small files (summary.json, config.toml, episodes.csv; both arms at once,
+#    when the second ends) copied to
 #    docs/campaign/results/latent-exploration/NAME/ to be committed, with designs.json.
 # -d K runs design K's pairs only, -S SEED seed SEED's only: two lanes on two cores take pairs
 # of their own (after the action space and designs.json are archived: let one lane write them
@@ -91,7 +92,7 @@ for k in $(seq 1 "$designs"); do
     if [ -n "$only_seed" ] && [ "$s" != "$only_seed" ]; then continue; fi
     for arm in latent sac; do
       dir=$out/$arm-d$k-seed$s
-      if [ -s "$archive/$arm-d$k-seed$s/summary.json" ]; then continue; fi
+      if [ -s "$archive/$arm-d$k-seed$s/summary.json" ] || [ -s "$dir/summary.json" ]; then continue; fi
       flags=()
       if [ "$arm" = latent ]; then flags=(--latent-exploration "$space" --latent-beta "$beta"); fi
       rm -rf "$dir"
@@ -103,9 +104,16 @@ for k in $(seq 1 "$designs"); do
         echo "latent_exploration: stopped during $arm, design $k, seed $s (not archived; run again to go on)" >&2
         exit 130
       fi
-      mkdir -p "$archive/$arm-d$k-seed$s"
       mv "$dir.summary" "$dir/summary.json"
-      cp "$dir"/{summary.json,config.toml,episodes.csv} "$archive/$arm-d$k-seed$s/"
+    done
+    # The pair is archived whole, when both arms have ended, so that the archive (and a commit
+    # made meanwhile) never holds half a pair.
+    for arm in latent sac; do
+      dir=$out/$arm-d$k-seed$s
+      if [ -s "$archive/$arm-d$k-seed$s/summary.json" ]; then continue; fi
+      mkdir -p "$archive/$arm-d$k-seed$s"
+      cp "$dir"/{config.toml,episodes.csv} "$archive/$arm-d$k-seed$s/"
+      cp "$dir/summary.json" "$archive/$arm-d$k-seed$s/summary.json"
     done
   done
 done
