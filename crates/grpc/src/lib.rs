@@ -13,7 +13,8 @@
 //!   queues (an inbox that drops duplicates by sender and sequence number, an outbox that hands
 //!   each item to one consumer and redelivers a lost answer), `server::episodes` the gate that
 //!   ties each assignment's experience to the session it was handed to, `server::topic` the
-//!   weight topics, `server::service` the RPC handlers. `server` documents the trust model:
+//!   weight topics, `server::service` the RPC handlers, `server::router` the server that carries
+//!   them beside health and reflection behind the role gate. `server` documents the trust model:
 //!   sessions are capability tokens, and what the learner refuses is counted in [`Refusals`].
 //! - `client`: [`actor_links`] and [`optimizer_links`]: a shared tokio runtime drives every
 //!   connection, and the sync channel ends wait on it (`client::upstream`: the pipelined

@@ -10,13 +10,14 @@
 //! session is refused with FAILED_PRECONDITION "register first". Sender ids, assignments and
 //! deliveries are bound to the session that first used or received them. A session silent
 //! for `GrpcConfig::session_idle_timeout` is forgotten. This keeps clients from taking or
-//! completing each other's work by guessing ids; it is not authentication: real
-//! authentication (TLS, tokens) is a later issue, and until then the port should only be
-//! reachable by the fleet.
+//! completing each other's work by guessing ids. It is not authentication: that is TLS and
+//! the role tokens (`coadapt_auth`), checked by the gate in front of every call (`router`),
+//! and which the binaries require off loopback unless told `--insecure`.
 
 mod episodes;
 use coadapt_auth::peers;
 mod queues;
+mod router;
 mod service;
 mod topic;
 
@@ -256,7 +257,7 @@ pub fn serve_learner(addr: SocketAddr, cfg: &GrpcConfig) -> Result<(LearnerLinks
         design_replies: Box::new(InboxReceiver(hub.replies.clone())),
     };
 
-    let (router, health) = service::router(hub.clone(), &rt).map_err(|e| TransportError::Io(format!("building the services: {e}")))?;
+    let (router, health) = router::router(hub.clone(), &rt).map_err(|e| TransportError::Io(format!("building the services: {e}")))?;
     let handle = rt.handle().clone();
     let (force, force_rx) = tokio::sync::oneshot::channel::<()>();
     rt.spawn(prune_sessions(hub.clone(), shutdown_rx.clone()));
