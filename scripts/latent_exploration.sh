@@ -112,6 +112,8 @@ for k in $(seq 1 "$designs"); do
       dir=$out/$arm-d$k-seed$s
       if [ -s "$archive/$arm-d$k-seed$s/summary.json" ]; then continue; fi
       mkdir -p "$archive/$arm-d$k-seed$s"
+      # summary.json last: it is what marks an arm archived (the skips above), so a copy cut
+      # short leaves the arm to be copied again.
       cp "$dir"/{config.toml,episodes.csv} "$archive/$arm-d$k-seed$s/"
       cp "$dir/summary.json" "$archive/$arm-d$k-seed$s/summary.json"
     done
