@@ -7,9 +7,11 @@ use coadapt_learner::render::{RenderOptions, render};
 
 /// Render an episode of a robot as an animated GIF.
 ///
-/// With `--weights` (a checkpoint.safetensors written by `coadapt train`) the robot acts with the
-/// trained policy's deterministic action; without, it takes zero actions (or random ones with
-/// `--random`).
+/// With `--weights` (a checkpoint.safetensors written by `coadapt train`, or a co-adaptation's
+/// `checkpoints/design-<k>/individual.safetensors` or `population.safetensors`) the robot acts
+/// with the trained policy's deterministic action; without, it takes zero actions (or random
+/// ones with `--random`). `--friction`, `--actuator-scale` and `--torso-mass-scale` put the robot
+/// in the world a run was trained in (its config.toml's `[world]`).
 #[derive(Debug, Args)]
 pub struct RenderArgs {
     /// Environment to render (see `coadapt train --help` for the names).
@@ -18,6 +20,16 @@ pub struct RenderArgs {
     /// Design vector, comma-separated (default: the environment's original design).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub design: Option<Vec<f32>>,
+    /// Friction of the ground and of every part of the robot (world.friction; default the
+    /// robot's own: half-cheetah 0.4, walker 0.9, hopper 1.0, daisy 0.8).
+    #[arg(long, value_name = "F", allow_negative_numbers = true)]
+    pub friction: Option<f32>,
+    /// Every joint's torque at full action, times this (world.actuator-scale).
+    #[arg(long, value_name = "X", default_value_t = 1.0, allow_negative_numbers = true)]
+    pub actuator_scale: f32,
+    /// The torso's mass, times this (world.torso-mass-scale).
+    #[arg(long, value_name = "X", default_value_t = 1.0, allow_negative_numbers = true)]
+    pub torso_mass_scale: f32,
     /// Checkpoint with a SAC `policy` or a DDPG `actor` network.
     #[arg(long)]
     pub weights: Option<PathBuf>,
@@ -46,6 +58,11 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let opts = RenderOptions {
         env: args.env,
         design: args.design,
+        world: coadapt_robots::World {
+            friction: args.friction,
+            actuator_scale: args.actuator_scale,
+            torso_mass_scale: args.torso_mass_scale,
+        },
         weights: args.weights,
         random: args.random,
         steps: args.steps,

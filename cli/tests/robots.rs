@@ -60,6 +60,8 @@ fn render_refuses_bad_input_clearly() {
             "cannot read weights file",
         ),
         (&["render", "--env", "pendulum", "--every", "0", "--out", gif.to_str().unwrap()], "--every"),
+        (&["render", "--env", "half-cheetah", "--friction", "-1", "--out", gif.to_str().unwrap()], "world.friction: -1"),
+        (&["render", "--env", "pendulum", "--friction", "0.5", "--out", gif.to_str().unwrap()], "world.friction: pendulum has no"),
     ];
     for (args, needle) in cases {
         let o = coadapt(args);
@@ -68,4 +70,26 @@ fn render_refuses_bad_input_clearly() {
         assert!(err.contains(needle), "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
+}
+
+/// `render --friction` (thesis 6.1's worlds): the same random actions from the same start meet
+/// another ground, and the robot's own friction is the default world.
+#[test]
+fn render_puts_the_robot_in_the_world_asked_for() {
+    let dir = std::env::temp_dir().join(format!("coadapt-render-world-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let gif = dir.join("x.gif");
+    let ret = |extra: &[&str]| -> String {
+        let mut args = vec!["render", "--env", "half-cheetah", "--random", "--seed", "3", "--steps", "200", "--every", "50"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", gif.to_str().unwrap()]);
+        let o = coadapt(&args);
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{args:?}: {err}");
+        err.rsplit_once("return ").map(|(_, r)| r.trim().trim_end_matches(')').to_string()).unwrap_or_else(|| panic!("no return in {err}"))
+    };
+    let own = ret(&[]);
+    assert_eq!(ret(&["--friction", "0.4"]), own, "half-cheetah's own friction is 0.4");
+    assert_ne!(ret(&["--friction", "0.05"]), own, "an icy floor changes the episode");
+    assert_ne!(ret(&["--actuator-scale", "0.5"]), own, "weaker motors change the episode");
 }

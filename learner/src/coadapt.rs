@@ -16,8 +16,10 @@
 //! has been reset by hand; [`crate::prototype`] has the files they answer through.
 //!
 //! # Layout
-//! - this file: the schedule's config, errors, events and [`run`], the loop over designs and
-//!   their episodes;
+//! - this file: the schedule's config and [`run`], the loop over designs and their episodes;
+//! - `error`: [`CoadaptError`], why a run stopped, and its exit code;
+//! - `events`: what the learner reports as it goes ([`RunEvent`], [`Stats`]) and what a run
+//!   leaves ([`RunOutcome`]);
 //! - `driver`: the learner's side of the fleet (weights out, episodes out, experience in,
 //!   design requests);
 //! - `operator`: choosing a design with the operator's verdict on its prototype, and the
@@ -25,9 +27,13 @@
 //! - `resume`: snapshots of the schedule's position and resuming from one.
 
 mod driver;
+mod error;
+mod events;
 mod operator;
 mod resume;
 
+pub use error::CoadaptError;
+pub use events::{RunEvent, RunOutcome, Stats};
 pub use resume::{Snapshots, Transfer};
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -36,14 +42,14 @@ use std::time::{Duration, Instant};
 use coadapt_core::EnvSpec;
 use coadapt_fleet::{DispatchConfig, Dispatcher};
 use coadapt_transport::messages::Dims;
-use coadapt_transport::{DesignKind, EpisodeMode, LearnerLinks, TransportError};
+use coadapt_transport::{DesignKind, EpisodeMode, LearnerLinks};
 use serde::{Deserialize, Serialize};
 
 use crate::ConfigError;
 use crate::fear::{FearLearner, FearLearnerConfig};
 use crate::flow::{Completed, FlowConfig, LearnerTime};
-use crate::prototype::{Outcome, ResetMode};
-use crate::run_dir::{DesignRow, EpisodeRow, RunWriter, WrittenSoFar};
+use crate::prototype::ResetMode;
+use crate::run_dir::{EpisodeRow, RunWriter, WrittenSoFar};
 use crate::snapshot::{SnapshotError, StateIn};
 use driver::Learner;
 
@@ -149,162 +155,6 @@ impl ScheduleConfig {
             Some(DesignKind::Exploit)
         }
     }
-}
-
-/// Why a run stopped. The wrapped errors are part of the message and deliberately not
-/// `source()`s: an error chain printed with `{:#}` would otherwise say every cause twice
-/// ("No space left on device (os error 28): No space left on device (os error 28)").
-#[derive(Debug, thiserror::Error)]
-pub enum CoadaptError {
-    #[error("config: {0}")]
-    Config(String),
-    #[error("transport: {0}")]
-    Transport(TransportError),
-    #[error("{0}")]
-    Protocol(String),
-    #[error("replay: {0}")]
-    Replay(coadapt_core::ReplayError),
-    /// A non-finite update (the message names the pair, the update, the design and episode).
-    #[error(transparent)]
-    Train(#[from] crate::fear::TrainError),
-    /// Reading or writing the run directory; the message names the file and what was done.
-    #[error("run directory: {0}")]
-    Io(std::io::Error),
-    #[error("saving a checkpoint: {0}")]
-    Checkpoint(coadapt_nn::NnError),
-    #[error("snapshot: {0}")]
-    Snapshot(SnapshotError),
-}
-
-macro_rules! from_without_source {
-    ($($variant:ident($t:ty)),*) => {$(
-        impl From<$t> for CoadaptError {
-            fn from(e: $t) -> Self {
-                Self::$variant(e)
-            }
-        }
-    )*};
-}
-from_without_source!(
-    Transport(TransportError),
-    Replay(coadapt_core::ReplayError),
-    Io(std::io::Error),
-    Checkpoint(coadapt_nn::NnError),
-    Snapshot(SnapshotError)
-);
-
-impl From<ConfigError> for CoadaptError {
-    fn from(e: ConfigError) -> Self {
-        Self::Config(e.to_string())
-    }
-}
-
-impl CoadaptError {
-    /// The I/O error underneath, if any (a full disk is told apart by its kind).
-    pub fn io_kind(&self) -> Option<std::io::ErrorKind> {
-        match self {
-            Self::Io(e) | Self::Snapshot(SnapshotError::Io(e)) => Some(e.kind()),
-            Self::Checkpoint(coadapt_nn::NnError::Write { cause, .. } | coadapt_nn::NnError::Read { cause, .. }) => Some(cause.kind()),
-            _ => None,
-        }
-    }
-}
-
-impl coadapt_fleet::supervise::exit::ExitCode for CoadaptError {
-    fn exit_code(&self) -> Option<u8> {
-        use coadapt_fleet::supervise::exit::{CONFIG, DISK, is_disk_full};
-        match self {
-            Self::Config(_) => Some(CONFIG),
-            e if e.io_kind().is_some_and(is_disk_full) => Some(DISK),
-            _ => None,
-        }
-    }
-}
-
-/// What the learner reports as it goes (for progress lines).
-#[derive(Clone, Debug)]
-pub enum RunEvent<'a> {
-    DesignStart {
-        index: usize,
-        row: &'a DesignRow,
-    },
-    Episode {
-        row: &'a EpisodeRow,
-        episodes_in_design: usize,
-    },
-    DesignEnd {
-        row: &'a DesignRow,
-    },
-    /// `row` waits for its prototype (`prototype.json` is written); `names` name the entries
-    /// of `row.design`.
-    AwaitingPrototype {
-        index: usize,
-        row: &'a DesignRow,
-        names: &'a [String],
-    },
-    /// The operator's verdict on `row`'s prototype; `requested` is the design asked for (as
-    /// built, `row.design` is the measured one).
-    PrototypeDecided {
-        row: &'a DesignRow,
-        outcome: &'a Outcome,
-        requested: &'a [f32],
-    },
-    /// An episode waits for the robot to be reset by hand (`reset.json` is written).
-    AwaitingReset {
-        design_index: usize,
-        episode: usize,
-        episodes_in_design: usize,
-        mode: ResetMode,
-    },
-    ResetConfirmed {
-        design_index: usize,
-        episode: usize,
-        mode: ResetMode,
-    },
-    /// The learner's counters, after every episode and snapshot (for `/metrics`).
-    Stats(&'a Stats),
-}
-
-/// What `/metrics` shows of the learner.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Stats {
-    /// The design being trained (0-based).
-    pub design: usize,
-    /// Episodes finished in the run (all starts of the learner).
-    pub episodes: u64,
-    /// Environment steps of training episodes.
-    pub steps: u64,
-    pub time: LearnerTime,
-    pub replay_population: usize,
-    pub replay_species: usize,
-    pub start_states: usize,
-    pub updates_population: u64,
-    pub updates_individual: u64,
-    /// The last episode's policy lag.
-    pub policy_lag: u64,
-    /// Snapshots taken by this start, their total seconds, the last one's size and time
-    /// (seconds since the Unix epoch; 0: none yet).
-    pub snapshots: u64,
-    pub snapshot_seconds: f64,
-    pub snapshot_bytes: u64,
-    pub snapshot_unix: f64,
-    /// Starts of the learner that resumed this run.
-    pub resumes: u64,
-    /// Seconds the last design request took.
-    pub design_request_seconds: f64,
-}
-
-/// What a finished (or interrupted) run leaves.
-#[derive(Debug)]
-pub struct RunOutcome {
-    pub learner: FearLearner,
-    /// The designs trained on (as built), in order.
-    pub designs: Vec<DesignRow>,
-    /// Proposals the operator rejected, in order (each also a row of `designs.csv`).
-    pub rejected: Vec<DesignRow>,
-    pub interrupted: bool,
-    /// Where the learner's time went.
-    pub time: LearnerTime,
 }
 
 /// Where the CSV files stood at the snapshot `inp`, to open the run directory with

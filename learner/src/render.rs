@@ -35,6 +35,9 @@ pub struct RenderOptions {
     pub env: String,
     /// `None`: the robot's original design.
     pub design: Option<Vec<f32>>,
+    /// The world the robot meets (friction, actuator strength, torso mass; thesis 6.1): a
+    /// policy trained in another world is seen in its own.
+    pub world: coadapt_robots::World,
     /// A checkpoint with a SAC `policy` or a DDPG `actor` network.
     pub weights: Option<PathBuf>,
     /// Uniform random actions instead of zeros when no weights are given.
@@ -109,7 +112,7 @@ pub fn render(args: &RenderOptions) -> Result<(usize, f32), RenderError> {
     if args.every == 0 || args.steps == 0 || args.width < 16 || args.height < 16 {
         return Err(RenderError::Config("--steps and --every must be positive and the picture at least 16 x 16 pixels".into()));
     }
-    let mut env = coadapt_robots::make(&args.env).map_err(|e| RenderError::Config(e.to_string()))?;
+    let mut env = coadapt_robots::make_in(&args.env, &args.world).map_err(|e| RenderError::Config(e.to_string()))?;
     let spec = env.spec().clone();
     let design = args.design.clone().unwrap_or_else(|| spec.default_design.clone());
     let mut policy = match &args.weights {
