@@ -5,7 +5,8 @@ usage: python3 scripts/campaign_status.py QUEUE_FILE [QUEUE_FILE ...] [--all]
 
 A line is `archived` (docs/campaign/results/NAME-seedS/summary.json), `done` (finished in
 runs/campaign, not archived yet), `running` (a live process names its run directory),
-`stopped` (a run directory without a summary: started again it resumes or starts over) or
+`stopped` (a run directory without a summary: started again it resumes or starts over),
+`copied` (a fork's directory made from its source at design K, its own episodes not begun) or
 `pending`. Episodes left: the run's schedule (its config.toml, or the queue's CONFIG with its
 overrides and `--designs`) minus the rows of its episodes.csv; a fork line counts from its
 design K; a retrain line counts two trainings of 30 episodes. The last line per queue sums them
@@ -161,7 +162,10 @@ def main():
             elif os.path.realpath(d) in live:
                 state = "running"
             elif os.path.exists(d):
-                state = "stopped"
+                # A fork's watcher copies it when its source reaches design K; until its lane
+                # starts it, it holds the source's rows only.
+                own = rows(f"{d}/episodes.csv") - (sum(eps[:k]) if eps and k else 0)
+                state = "copied" if k and own <= 0 else "stopped"
             else:
                 state = "pending"
             counts[state] = counts.get(state, 0) + 1

@@ -20,7 +20,8 @@
 //! - [`search`]: `coadapt search` and `search-actor` (`coadapt_policy_search::app`).
 //! - [`latent`]: `coadapt latent` and `latent-actor` (`coadapt_latent::app`).
 //! - [`actor_procs`]: how an actor process joins its learner's fleet (`JoinArgs`).
-//! - [`security`]: the TLS and token flags of the commands without a run config.
+//! - [`security`]: the TLS and token flags of the commands without a run config;
+//!   [`world_args`]: the `[world]` flags of `train` and `render`.
 //! - [`credentials`]: `coadapt token new` and `coadapt tls new`.
 //! - [`exit`]: exit codes from the libraries' errors; [`progress`]: the shutdown flag set by
 //!   Ctrl-C and SIGTERM.
@@ -43,6 +44,7 @@ pub mod search;
 pub mod security;
 pub mod serve;
 pub mod train;
+pub mod world_args;
 
 use clap::{Parser, Subcommand};
 

@@ -20,16 +20,9 @@ pub struct RenderArgs {
     /// Design vector, comma-separated (default: the environment's original design).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub design: Option<Vec<f32>>,
-    /// Friction of the ground and of every part of the robot (world.friction; default the
-    /// robot's own: half-cheetah 0.4, walker 0.9, hopper 1.0, daisy 0.8).
-    #[arg(long, value_name = "F", allow_negative_numbers = true)]
-    pub friction: Option<f32>,
-    /// Every joint's torque at full action, times this (world.actuator-scale).
-    #[arg(long, value_name = "X", default_value_t = 1.0, allow_negative_numbers = true)]
-    pub actuator_scale: f32,
-    /// The torso's mass, times this (world.torso-mass-scale).
-    #[arg(long, value_name = "X", default_value_t = 1.0, allow_negative_numbers = true)]
-    pub torso_mass_scale: f32,
+    /// The world the robot meets (its run's config.toml `[world]`).
+    #[command(flatten)]
+    pub world: crate::world_args::WorldArgs,
     /// Checkpoint with a SAC `policy` or a DDPG `actor` network.
     #[arg(long)]
     pub weights: Option<PathBuf>,
@@ -58,10 +51,10 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     let opts = RenderOptions {
         env: args.env,
         design: args.design,
-        world: coadapt_robots::World {
-            friction: args.friction,
-            actuator_scale: args.actuator_scale,
-            torso_mass_scale: args.torso_mass_scale,
+        world: {
+            let mut w = coadapt_robots::World::default();
+            args.world.apply(&mut w);
+            w
         },
         weights: args.weights,
         random: args.random,

@@ -33,6 +33,9 @@ pub enum AlgoArg {
 /// Writes a run directory with the resolved `config.toml`, `episodes.csv` (one row per episode,
 /// flushed as it goes) and `checkpoint.safetensors`; prints progress to stderr and one JSON
 /// summary line to stdout. Settings come from the defaults, then `--config`, then the flags.
+/// `--friction`, `--actuator-scale` and `--torso-mass-scale` (the config's `[world]`) put the
+/// robot in another world (thesis 6.1), e.g. to train plain SAC on the floor a transfer run
+/// targets.
 #[derive(Debug, Args)]
 pub struct TrainArgs {
     /// TOML settings file: top-level keys (steps, seed, learning-starts, ...) plus [sac] and
@@ -103,6 +106,10 @@ pub struct TrainArgs {
     /// operands with f32 accumulation where the CPU has AVX-512 BF16 or AMX).
     #[arg(long, value_name = "f32|bf16")]
     pub precision: Option<coadapt_nn::Precision>,
+    /// The world the robot trains in (sets world.friction, world.actuator-scale,
+    /// world.torso-mass-scale; thesis 6.1): plain RL on a body in another world.
+    #[command(flatten)]
+    pub world: crate::world_args::WorldArgs,
     /// Run directory (default: runs/<env>-<algo>-seed<seed>-<unix time>).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -178,6 +185,7 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             UpdateScheduleArg::PerEpisode => UpdateSchedule::PerEpisode,
         };
     }
+    args.world.apply(&mut cfg.world);
     if let Some(t) = args.target_return {
         cfg.target_return = Some(t);
     }
@@ -204,8 +212,7 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let cfg = resolve(&args)?;
     let security = crate::security::from_args(&args.security);
-    let mut env =
-        coadapt_fleet::make_env_with(&cfg.env, &coadapt_robots::World::default(), &coadapt_fleet::RemoteEnvConfig::default(), &security)?;
+    let mut env = coadapt_fleet::make_env_with(&cfg.env, &cfg.world, &coadapt_fleet::RemoteEnvConfig::default(), &security)?;
     // Refuse what the run would refuse (a bad design, network sizes, weights) before anything
     // is written: a refused command leaves no run directory behind.
     train::check(&cfg, env.spec()).with_context(|| format!("training {} on {}", cfg.algo, cfg.env))?;

@@ -93,3 +93,57 @@ fn render_puts_the_robot_in_the_world_asked_for() {
     assert_ne!(ret(&["--friction", "0.05"]), own, "an icy floor changes the episode");
     assert_ne!(ret(&["--actuator-scale", "0.5"]), own, "weaker motors change the episode");
 }
+
+/// `train --friction` and the config's `[world]`: plain RL in another world (thesis 6.1). The
+/// same seed's random-action episodes meet another ground, the robot's own friction is the
+/// default, the resolved config.toml records the world, and a world the robot cannot have is
+/// refused before a run directory exists.
+#[test]
+fn train_puts_the_robot_in_the_world_asked_for() {
+    let dir = std::env::temp_dir().join(format!("coadapt-train-world-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let train = |name: &str, extra: &[&str]| -> (f64, String) {
+        let out = dir.join(name);
+        let mut args = vec![
+            "train",
+            "--env",
+            "half-cheetah",
+            "--steps",
+            "1000",
+            "--learning-starts",
+            "1000",
+            "--hidden",
+            "8,8",
+            "--seed",
+            "5",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let o = coadapt(&args);
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (v["mean_return_last_10"].as_f64().unwrap(), std::fs::read_to_string(out.join("config.toml")).unwrap())
+    };
+    let (own, own_cfg) = train("own", &[]);
+    assert!(!own_cfg.contains("friction"), "the default world leaves friction unset:\n{own_cfg}");
+    let (same, _) = train("own-explicit", &["--friction", "0.4"]);
+    assert_eq!(same, own, "half-cheetah's own friction is 0.4");
+    let (icy, icy_cfg) = train("icy", &["--friction", "0.05", "--actuator-scale", "0.5"]);
+    assert_ne!(icy, own, "an icy floor and weak motors change the episode");
+    let world: toml::Table = toml::from_str::<toml::Table>(&icy_cfg).unwrap()["world"].as_table().unwrap().clone();
+    assert_eq!(world["friction"].as_float(), Some(0.05), "{icy_cfg}");
+    assert_eq!(world["actuator-scale"].as_float(), Some(0.5), "{icy_cfg}");
+
+    // The resolved config is a valid config: it trains in the same world again.
+    let cfg_path = dir.join("icy").join("config.toml");
+    let (again, _) = train("icy-again", &["--config", cfg_path.to_str().unwrap()]);
+    assert_eq!(again, icy, "the config's [world] is the world trained in");
+
+    let refused = dir.join("refused");
+    let o = coadapt(&["train", "--env", "pendulum", "--friction", "0.5", "--steps", "10", "--out", refused.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("world.friction: pendulum has no"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!refused.exists(), "a refused command leaves no run directory");
+}

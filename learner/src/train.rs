@@ -35,6 +35,9 @@ pub struct TrainConfig {
     pub seed: u64,
     /// The body to train on; the environment's original design when absent.
     pub design: Option<Vec<f32>>,
+    /// `[world]`: the dynamics the robot meets (friction, actuator strength, torso mass; thesis
+    /// 6.1), each the robot's own by default. The caller builds the environment in it.
+    pub world: coadapt_robots::World,
     /// Steps of uniform random actions before learning starts.
     pub learning_starts: u64,
     /// Gradient steps per environment step once learning has started.
@@ -88,6 +91,7 @@ impl Default for TrainConfig {
             steps: 20_000,
             seed: 1,
             design: None,
+            world: coadapt_robots::World::default(),
             learning_starts: 100,
             updates_per_step: 1,
             update_schedule: UpdateSchedule::PerStep,

@@ -4,7 +4,7 @@
 //! file per queue, a second start of a running queue refused, `--stop` stops it and its run
 //! reports itself interrupted (not archived), the queue started again starts the run over (no
 //! snapshot) and archives it, and a third start skips what is done; `scripts/campaign_status.py`
-//! says at each stage which lines run, stopped, wait or are archived, and the episodes left.
+//! says at each stage which lines run, stopped, wait, are copied or are archived, and the episodes left.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -274,6 +274,25 @@ fn a_stop_reaches_a_lane_waiting_for_its_fork() {
     let stop = t.run(&["--stop", "q.queue"]);
     assert!(stop.status.success(), "{}", text(&stop));
     assert_eq!(first.exit_code(), Some(130), "a stopped queue exits 130");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// A fork copied from its source at design K but not started holds the source's rows only: it
+/// is `copied` with all its own episodes left, and `stopped` once it has rows of its own.
+#[test]
+fn a_fork_copied_but_not_started_says_so() {
+    let t = Tree::new("copied");
+    std::fs::write(t.path("q.queue"), "src cfg.toml 1\nfrk fork:src:1 1\n").expect("queue");
+    let fork = t.path("runs/campaign/frk-seed1");
+    std::fs::create_dir_all(&fork).expect("the fork's directory");
+    // The source's first design: 3 episodes (cfg.toml's initial-episodes), then design 1's 2.
+    let prefix = "design,episode,return,eval_return\n0,0,1,1\n0,1,1,1\n0,2,1,1\n";
+    std::fs::write(fork.join("episodes.csv"), prefix).expect("the copied rows");
+    let status = t.status();
+    assert!(status.contains("copied   frk-seed1") && status.contains("0/2 episodes"), "{status}");
+    std::fs::write(fork.join("episodes.csv"), format!("{prefix}1,0,2,2\n")).expect("a row of its own");
+    let status = t.status();
+    assert!(status.contains("stopped  frk-seed1") && status.contains("1/2 episodes"), "{status}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
