@@ -82,10 +82,10 @@ pub struct RunArgs {
     /// init-population.replay = true in the config also takes its population replay.
     #[arg(long, value_name = "RUN_DIR")]
     pub init_population: Option<PathBuf>,
-    /// Friction of the ground and of every part of the robot (sets world.friction; default
-    /// the robot's own: half-cheetah 0.4, walker 0.9, hopper 1.0, daisy 0.8).
-    #[arg(long, value_name = "F")]
-    pub friction: Option<f32>,
+    /// The world the robot meets (sets world.friction, world.actuator-scale,
+    /// world.torso-mass-scale; thesis 6.1).
+    #[command(flatten)]
+    pub world: crate::world_args::WorldArgs,
     /// The networks' matrix products (sets learner.sac.precision): f32, or bf16 (bfloat16
     /// operands with f32 accumulation where the CPU has AVX-512 BF16 or AMX, f32 elsewhere;
     /// parameters, optimiser states and the rest stay f32). Learns as f32 does (EXPERIMENTS 12)
@@ -108,7 +108,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
         serve: args.serve,
         insecure: args.insecure,
         init_population: args.init_population,
-        friction: args.friction,
+        friction: args.world.friction,
+        actuator_scale: args.world.actuator_scale,
+        torso_mass_scale: args.world.torso_mass_scale,
         precision: args.precision,
     };
     let (cfg, name) = resolve(args.config.as_deref(), args.resume.as_deref(), &o)?;

@@ -71,6 +71,10 @@ fn a_run_in_another_world_starts_from_a_finished_runs_population_networks() {
         "in-process",
         "--friction",
         "0.8",
+        "--actuator-scale",
+        "0.75",
+        "--torso-mass-scale",
+        "1.5",
         "--out",
         world.to_str().unwrap(),
     ]);
@@ -78,11 +82,14 @@ fn a_run_in_another_world_starts_from_a_finished_runs_population_networks() {
     assert!((summary(&o)["world"]["friction"].as_f64().unwrap() - 0.8).abs() < 1e-6, "{}", summary(&o));
     let cfg: toml::Value = toml::from_str(&std::fs::read_to_string(world.join("config.toml")).unwrap()).unwrap();
     assert!((cfg["world"]["friction"].as_float().unwrap() - 0.8).abs() < 1e-6);
+    assert_eq!(cfg["world"]["actuator-scale"].as_float(), Some(0.75));
+    assert_eq!(cfg["world"]["torso-mass-scale"].as_float(), Some(1.5));
 
     // Refusals: nothing written, exit 78, the mismatch named.
     let cases: Vec<(String, Vec<String>, &str)> = vec![
         ("missing".into(), vec!["--init-population".into(), dir.join("nope").display().to_string()], "--init-population"),
         ("friction".into(), vec!["--friction=-1".into()], "world.friction"),
+        ("actuators".into(), vec!["--actuator-scale=0".into()], "world.actuator-scale: 0"),
         ("hidden".into(), vec!["--init-population".into(), full.clone()], "learner.sac.hidden"),
     ];
     let small = dir.join("small.toml");

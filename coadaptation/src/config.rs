@@ -127,6 +127,10 @@ pub struct Overrides {
     pub init_population: Option<PathBuf>,
     /// `world.friction`.
     pub friction: Option<f32>,
+    /// `world.actuator-scale`.
+    pub actuator_scale: Option<f32>,
+    /// `world.torso-mass-scale`.
+    pub torso_mass_scale: Option<f32>,
     /// `learner.sac.precision`.
     pub precision: Option<coadapt_nn::Precision>,
 }
@@ -180,6 +184,12 @@ pub fn resolve(config: Option<&Path>, resume: Option<&Path>, o: &Overrides) -> c
     }
     if let Some(f) = o.friction {
         cfg.world.friction = Some(f);
+    }
+    if let Some(x) = o.actuator_scale {
+        cfg.world.actuator_scale = x;
+    }
+    if let Some(x) = o.torso_mass_scale {
+        cfg.world.torso_mass_scale = x;
     }
     if let Some(p) = o.precision {
         cfg.learner.sac.precision = p;
