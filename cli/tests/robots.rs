@@ -102,7 +102,7 @@ fn render_puts_the_robot_in_the_world_asked_for() {
 fn train_puts_the_robot_in_the_world_asked_for() {
     let dir = std::env::temp_dir().join(format!("coadapt-train-world-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let train = |name: &str, extra: &[&str]| -> (f64, String) {
+    let train = |name: &str, extra: &[&str]| -> (f64, String, Option<serde_json::Value>) {
         let out = dir.join(name);
         let mut args = vec![
             "train",
@@ -123,13 +123,18 @@ fn train_puts_the_robot_in_the_world_asked_for() {
         let o = coadapt(&args);
         assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-        (v["mean_return_last_10"].as_f64().unwrap(), std::fs::read_to_string(out.join("config.toml")).unwrap())
+        let world = v.get("world").cloned();
+        (v["mean_return_last_10"].as_f64().unwrap(), std::fs::read_to_string(out.join("config.toml")).unwrap(), world)
     };
-    let (own, own_cfg) = train("own", &[]);
+    let (own, own_cfg, own_world) = train("own", &[]);
+    assert_eq!(own_world, None, "the robot's own world is left out of the summary");
     assert!(!own_cfg.contains("friction"), "the default world leaves friction unset:\n{own_cfg}");
-    let (same, _) = train("own-explicit", &["--friction", "0.4"]);
+    let (same, ..) = train("own-explicit", &["--friction", "0.4"]);
     assert_eq!(same, own, "half-cheetah's own friction is 0.4");
-    let (icy, icy_cfg) = train("icy", &["--friction", "0.05", "--actuator-scale", "0.5"]);
+    let (icy, icy_cfg, icy_summary) = train("icy", &["--friction", "0.05", "--actuator-scale", "0.5"]);
+    let icy_summary = icy_summary.unwrap();
+    assert_eq!(icy_summary["actuator-scale"], 0.5, "the summary names the world: {icy_summary}");
+    assert!((icy_summary["friction"].as_f64().unwrap() - 0.05).abs() < 1e-6, "{icy_summary}");
     assert_ne!(icy, own, "an icy floor and weak motors change the episode");
     let world: toml::Table = toml::from_str::<toml::Table>(&icy_cfg).unwrap()["world"].as_table().unwrap().clone();
     assert_eq!(world["friction"].as_float(), Some(0.05), "{icy_cfg}");
@@ -137,7 +142,7 @@ fn train_puts_the_robot_in_the_world_asked_for() {
 
     // The resolved config is a valid config: it trains in the same world again.
     let cfg_path = dir.join("icy").join("config.toml");
-    let (again, _) = train("icy-again", &["--config", cfg_path.to_str().unwrap()]);
+    let (again, ..) = train("icy-again", &["--config", cfg_path.to_str().unwrap()]);
     assert_eq!(again, icy, "the config's [world] is the world trained in");
 
     let refused = dir.join("refused");

@@ -217,6 +217,9 @@ pub struct TrainSummary {
     pub steps: u64,
     pub episodes: u64,
     pub mean_return_last_10: f32,
+    /// The world trained in, only when it is not the robot's own (as `coadapt run`'s summary).
+    #[serde(skip_serializing_if = "coadapt_robots::World::is_default")]
+    pub world: coadapt_robots::World,
     /// First step at which the mean of the last 10 returns exceeded `target-return`.
     pub first_step_reaching_target: Option<u64>,
     pub updates: u64,
@@ -430,6 +433,7 @@ pub fn run(
         steps: step,
         episodes: episode,
         mean_return_last_10: if last.is_empty() { f32::NAN } else { last.iter().sum::<f32>() / last.len() as f32 },
+        world: cfg.world.clone(),
         first_step_reaching_target: reached,
         updates,
         wall_s: start.elapsed().as_secs_f64(),
