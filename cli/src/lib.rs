@@ -21,7 +21,7 @@
 //! - [`latent`]: `coadapt latent` and `latent-actor` (`coadapt_latent::app`).
 //! - [`actor_procs`]: how an actor process joins its learner's fleet (`JoinArgs`).
 //! - [`security`]: the TLS and token flags of the commands without a run config;
-//!   [`world_args`]: the `[world]` flags of `train` and `render`.
+//!   [`world_args`]: the `[world]` flags of `run`, `train` and `render`.
 //! - [`credentials`]: `coadapt token new` and `coadapt tls new`.
 //! - [`exit`]: exit codes from the libraries' errors; [`progress`]: the shutdown flag set by
 //!   Ctrl-C and SIGTERM.

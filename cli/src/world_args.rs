@@ -1,5 +1,5 @@
 //! `--friction`, `--actuator-scale`, `--torso-mass-scale`: a `[world]` (thesis 6.1's dynamics)
-//! from the command line, for the commands that build one robot (`train`, `render`).
+//! from the command line, for the commands that build a robot (`run`, `train`, `render`).
 
 use clap::Args;
 use coadapt_robots::World;
