@@ -2,7 +2,7 @@
 random one?
 
 usage: python3 scripts/design_bench_report.py [RUNS_ROOT, default docs/campaign/results]
-           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict,everywhere,edges]
+           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict,everywhere,edges,samebody]
 
 Runs are RUNS_ROOT/PREFIX-METHOD-seedN (docs/campaign/design-bench.queue and
 design-choice.queue): PREFIX names the robot (hc = HalfCheetah, walker-bench, hopper-bench,
@@ -52,6 +52,17 @@ count. Per robot:
    over methods and seeds, grouped by how many coordinates of the chosen design sit within 2 %
    of a bound (0, 1, 2, 3 or more): pairs (and methods), mean ± sd, wins, exact sign-flip p.
    Are the bodies at the box's edges, where a critic trained on few bodies extrapolates, worse?
+11. samebody (after the robots, with --tables samebody): the same random body in two runs. The
+   random-designs run, forked from FEAR's at its first chosen design, draws its random bodies
+   from the same stream as FEAR's exploration designs, so FEAR's run trains some of the very
+   bodies the random run trains, in another history: after FEAR's chosen bodies, and a few
+   slots later. Per robot, pooled over seeds, each such body's best evaluation return in FEAR's
+   run minus in the random run (mean ± sd, bodies higher in FEAR's run, exact sign-flip p), how
+   many slots later FEAR's run trained it, the random run's own trend (the least-squares slope of
+   its designs' best returns over the slots after the fork, per seed) and the difference with
+   that trend times the slots removed. What it measures: how much of the gap between FEAR's
+   chosen designs and a random-designs run comes with the controller a run's history trained,
+   not with the bodies (the retrained bodies of table 5 take the controller out altogether).
 
 Pure Python (no numpy), so it runs with the system python3.
 """
@@ -368,6 +379,70 @@ def everywhere(root):
     print()
 
 
+def slope(points):
+    """Least-squares slope of y over x for [(x, y), ...] (None with fewer than two x values)."""
+    if len({x for x, _ in points}) < 2:
+        return None
+    mx = statistics.mean(x for x, _ in points)
+    my = statistics.mean(y for _, y in points)
+    return sum((x - mx) * (y - my) for x, y in points) / sum((x - mx) ** 2 for x, _ in points)
+
+
+def same_bodies(fear, rnd):
+    """[(FEAR's slot, the random run's slot, FEAR's best minus the random run's best)] for every
+    body trained both as an exploration design of FEAR's run and after the fork in the random run."""
+    at = {tuple(r["design"]): i for i, r in fear["by_index"].items() if r["kind"] == "explore"}
+    out = []
+    for j, r in sorted(rnd["by_index"].items()):
+        i = at.get(tuple(r["design"])) if r["kind"] != "initial" else None
+        if i is not None:
+            out.append((i, j, fear["by_index"][i]["best"] - r["best"]))
+    return out
+
+
+def samebody(root):
+    """Table 11: the same random body in FEAR's run and in the random-designs run."""
+    rows, pooled, pooled_adj = [], [], []
+    for title, prefix in ROBOTS:
+        runs = runs_of(root, prefix)
+        seeds = sorted(set(runs.get("fear", {})) & set(runs.get("random", {})))
+        d, adj, later, trends = [], [], [], []
+        for seed in seeds:
+            fear, rnd = runs["fear"][seed][0], runs["random"][seed][0]
+            pairs = same_bodies(fear, rnd)
+            if not pairs:
+                continue
+            t = slope([(j, r["best"]) for j, r in rnd["by_index"].items() if r["kind"] != "initial"])
+            trends.append(t)
+            for i, j, x in pairs:
+                d.append(x)
+                later.append(i - j)
+                if t is not None:
+                    adj.append(x - t * (i - j))
+        if d:
+            rows.append((title, len(trends), d, later, trends, adj))
+            pooled += d
+            pooled_adj += adj
+    if not rows:
+        return
+    print("#### The same random body in FEAR's run and in the random-designs run (pooled over seeds)\n")
+    print("| robot | seeds | bodies | slots later in FEAR's run (mean) | FEAR's run minus the random run | higher in FEAR's run | p | "
+          "random run's trend per slot (mean over seeds) | minus trend x slots later | higher | p |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for title, n, d, later, trends, adj in rows:
+        t = [x for x in trends if x is not None]
+        trend_cell = f"{statistics.mean(t):+.1f}" if t else "-"
+        adj_cell = f"{cr.signed_sd(adj)} | {sum(x > 0 for x in adj)}/{len(adj)} | {sign_flip_p(adj)}" if adj else "- | - | -"
+        print(f"| {title} | {n} | {len(d)} | {statistics.mean(later):.1f} | {cr.signed_sd(d)} | {sum(x > 0 for x in d)}/{len(d)} | "
+              f"{sign_flip_p(d)} | {trend_cell} | {adj_cell} |")
+    if len(rows) > 1:
+        adj_cell = (f"{cr.signed_sd(pooled_adj)} | {sum(x > 0 for x in pooled_adj)}/{len(pooled_adj)} | {sign_flip_p(pooled_adj)}"
+                    if pooled_adj else "- | - | -")
+        print(f"| all robots | {sum(r[1] for r in rows)} | {len(pooled)} | {statistics.mean(x for r in rows for x in r[3]):.1f} | "
+              f"{cr.signed_sd(pooled)} | {sum(x > 0 for x in pooled)}/{len(pooled)} | {sign_flip_p(pooled)} | - | {adj_cell} |")
+    print()
+
+
 def edges(root, title, prefix):
     """Table 10: are the bodies at the box's edges worse? Every within-run pair of the robot
     (each exploitation design minus the random design after it), pooled over methods and seeds,
@@ -400,7 +475,7 @@ def main():
     keep = option("--robots", None)
     tables = option("--tables", "methods,random,within,trend,bodies,calibration").split(",")
     robots = [r for r in ROBOTS if keep is None or r[1] in keep.split(",")]
-    per_robot = [t for t in tables if t not in ("verdict", "everywhere", "edges")]
+    per_robot = [t for t in tables if t not in ("verdict", "everywhere", "edges", "samebody")]
     if per_robot and not any([report(root, title, prefix, per_robot) for title, prefix in robots]):
         sys.exit(f"design_bench_report: no finished benchmark run under {root}")
     if "verdict" in tables:
@@ -410,6 +485,8 @@ def main():
     if "edges" in tables:
         for title, prefix in robots:
             edges(root, title, prefix)
+    if "samebody" in tables:
+        samebody(root)
 
 
 if __name__ == "__main__":

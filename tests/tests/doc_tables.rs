@@ -76,14 +76,19 @@ fn script(name: &str, args: &[&std::ffi::OsStr]) -> String {
 }
 
 /// Writes a finished benchmark run (designs.csv with the given best evaluation returns after two
-/// initial designs, summary.json, one episode row) under `root/name`.
+/// initial designs, summary.json, one episode row) under `root/name`, every design the same.
 fn synthetic_run(root: &Path, name: &str, kinds: &[&str], best: &[f64]) {
+    synthetic_run_with(root, name, kinds, &vec!["1;1;1;1;1;1"; kinds.len()], best);
+}
+
+/// `synthetic_run` with a design vector (`;`-separated) per row.
+fn synthetic_run_with(root: &Path, name: &str, kinds: &[&str], designs: &[&str], best: &[f64]) {
     let dir = root.join(name);
     std::fs::create_dir_all(&dir).expect("run dir");
     let mut csv =
         String::from("index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts,method,prototype\n");
-    for (i, (k, b)) in kinds.iter().zip(best).enumerate() {
-        csv += &format!("{i},{k},1;1;1;1;1;1,16,{b},{b},,0,x,\n");
+    for (i, ((k, d), b)) in kinds.iter().zip(designs).zip(best).enumerate() {
+        csv += &format!("{i},{k},{d},16,{b},{b},,0,x,\n");
     }
     std::fs::write(dir.join("designs.csv"), csv).expect("designs.csv");
     std::fs::write(dir.join("summary.json"), "{}").expect("summary.json");
@@ -224,16 +229,7 @@ fn the_edges_table_groups_pairs_by_coordinates_at_a_bound() {
     let dir = std::env::temp_dir().join(format!("coadapt-edges-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let k = ["initial", "initial", "exploit", "explore", "exploit", "explore"];
-    let run = |name: &str, designs: [&str; 6], best: [f64; 6]| {
-        synthetic_run(&dir, name, &k, &best);
-        let mut csv = String::from(
-            "index,kind,design,episodes,best_eval_return,last_eval_return,predicted_objective,design_rollouts,method,prototype\n",
-        );
-        for (i, ((kind, d), b)) in k.iter().zip(designs).zip(best).enumerate() {
-            csv += &format!("{i},{kind},{d},16,{b},{b},,0,x,\n");
-        }
-        std::fs::write(dir.join(name).join("designs.csv"), csv).expect("designs.csv");
-    };
+    let run = |name: &str, designs: [&str; 6], best: [f64; 6]| synthetic_run_with(&dir, name, &k, &designs, &best);
     let mid = "1;1;1;1;1;1";
     run("hc-fear-seed1", [mid, mid, "2.0;2.0;2.0;1;1;1", mid, "0.8;1;1;1;1;1", mid], [50.0, 60.0, 100.0, 130.0, 90.0, 150.0]);
     run("hc-trust-seed1", [mid, mid, mid, mid, "1.99;1;1;1;1;1", mid], [50.0, 60.0, 120.0, 100.0, 140.0, 100.0]);
@@ -244,4 +240,27 @@ fn the_edges_table_groups_pairs_by_coordinates_at_a_bound() {
     assert!(text.contains("| 1 | 2 (2) | -10.0 ± 70.7 | 1/2 | 1.00 |"), "group 1:\n{text}");
     assert!(text.contains("| 3 or more | 1 (1) | -30.0 | 0/1 | 1.00 |"), "group 3+:\n{text}");
     assert!(!text.contains("| 2 |"), "a group of 2 from nowhere:\n{text}");
+}
+
+/// `--tables samebody`: the random-designs run trains some of the very bodies FEAR's run trained
+/// as exploration designs, a few slots earlier. FEAR's run: bodies B (slot 3, 130) and D (slot 5,
+/// 150) as exploration designs; the random run: B at slot 2 (100), D at 3 (110), then E (120) and
+/// F (130), a trend of +10 per slot. So B is +30 one slot later and D +40 two slots later
+/// (+35.0 ± 7.1, 1.5 slots, 2 of 2, exact p 0.50); less the trend x slots, +20 and +20. A body
+/// FEAR's run chose (A, an exploitation design) that the random run also drew does not count.
+#[test]
+fn the_samebody_table_compares_one_body_trained_in_two_histories() {
+    let dir = std::env::temp_dir().join(format!("coadapt-samebody-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (a, b, c, d, e, f) = ("1;1;1;1;1;2", "1;1;1;1;2;1", "1;1;1;2;1;1", "1;1;2;1;1;1", "1;2;1;1;1;1", "2;1;1;1;1;1");
+    let init = "1;1;1;1;1;1";
+    let k = ["initial", "initial", "exploit", "explore", "exploit", "explore"];
+    synthetic_run_with(&dir, "hc-fear-seed1", &k, &[init, init, a, b, c, d], &[50.0, 60.0, 100.0, 130.0, 90.0, 150.0]);
+    let r = ["initial", "initial", "exploit", "exploit", "exploit", "exploit", "exploit"];
+    synthetic_run_with(&dir, "hc-random-seed1", &r, &[init, init, b, d, e, f, a], &[50.0, 60.0, 100.0, 110.0, 120.0, 130.0, 140.0]);
+    let text = script("design_bench_report.py", &[dir.as_os_str(), "--tables".as_ref(), "samebody".as_ref()]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(!text.contains("#### HalfCheetah (`hc-*`)"), "per-robot tables were not asked for:\n{text}");
+    assert!(text.contains("| HalfCheetah | 1 | 2 | 1.5 | +35.0 ± 7.1 | 2/2 | 0.50 | +10.0 | +20.0 ± 0.0 | 2/2 | 0.50 |"), "row:\n{text}");
+    assert!(!text.contains("| all robots |"), "one robot, no pooled row:\n{text}");
 }
