@@ -400,10 +400,10 @@ def same_bodies(fear, rnd):
     return out
 
 
-def samebody(root):
+def samebody(root, robots):
     """Table 11: the same random body in FEAR's run and in the random-designs run."""
     rows, pooled, pooled_adj = [], [], []
-    for title, prefix in ROBOTS:
+    for title, prefix in robots:
         runs = runs_of(root, prefix)
         seeds = sorted(set(runs.get("fear", {})) & set(runs.get("random", {})))
         d, adj, later, trends = [], [], [], []
@@ -486,7 +486,7 @@ def main():
         for title, prefix in robots:
             edges(root, title, prefix)
     if "samebody" in tables:
-        samebody(root)
+        samebody(root, robots)
 
 
 if __name__ == "__main__":
