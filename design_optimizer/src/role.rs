@@ -25,7 +25,7 @@
 //! infinity, `random` draws again, the ES baselines stop training on a rejected best, and
 //! novelty search counts them as chosen designs to move away from.
 
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use coadapt_core::{BoxSpace, Rng64, rng};
 use coadapt_nn::Mlp;
@@ -61,6 +61,10 @@ pub enum OptimizerError {
     Config(String),
     #[error("design {index}: {why}")]
     Design { index: u32, why: String },
+    /// A stop (Ctrl-C, SIGTERM, the learner's end) cut a search by simulation short: its
+    /// result is no answer and is neither sent nor stored.
+    #[error("design {index}: stopped during its rollouts")]
+    Stopped { index: u32 },
 }
 
 /// The optimiser's state across requests.
@@ -184,6 +188,15 @@ impl<'a> Optimizer<'a> {
 
     /// Chooses the design of `req` with population weights `w`.
     pub fn choose(&mut self, req: &DesignRequest, w: &Weights) -> Result<DesignReply, OptimizerError> {
+        self.choose_until(req, w, &AtomicBool::new(false))
+    }
+
+    /// [`Optimizer::choose`], with the searches by simulation (`sim-pso`, `sim-cmaes`, the ES
+    /// generations, `screened`'s rollouts) given up between batches of rollouts once `stop` is
+    /// set ([`OptimizerError::Stopped`]): a Daisy sim-PSO choice is minutes of rollouts, and a
+    /// stop should not wait for them. (An ES state told the cut generation is not to be used
+    /// again; the serve loop stops.)
+    pub fn choose_until(&mut self, req: &DesignRequest, w: &Weights, stop: &AtomicBool) -> Result<DesignReply, OptimizerError> {
         let err = |why: String| OptimizerError::Design { index: req.index, why };
         self.requests += 1;
         let seed = self.seed.wrapping_add(self.requests.wrapping_mul(0x9E37_79B9));
@@ -208,20 +221,23 @@ impl<'a> Optimizer<'a> {
                     ExploitMethod::PsoQ | ExploitMethod::CmaesQ | ExploitMethod::Screened if trust.is_some() => {
                         let region = trust.as_ref().expect("checked");
                         let mut inside = region.wrap(&mut q);
-                        self.over_q(m, &mut inside, &w.policy, &bounds, &rejected, seed).map(|mut r| {
+                        self.over_q(m, &mut inside, &w.policy, &bounds, &rejected, seed, stop).map(|mut r| {
                             region.project(&mut r.design);
                             r
                         })
                     }
                     ExploitMethod::PsoQ | ExploitMethod::CmaesQ | ExploitMethod::Screened => {
-                        self.over_q(m, &mut q, &w.policy, &bounds, &rejected, seed)
+                        self.over_q(m, &mut q, &w.policy, &bounds, &rejected, seed, stop)
                     }
                     ExploitMethod::Random => self.random(&rejected).map_err(|e| crate::SearchError::Config(e.to_string())),
                     ExploitMethod::SimPso | ExploitMethod::SimCmaes | ExploitMethod::OpenaiEs | ExploitMethod::CmaesEs => {
-                        self.by_simulation(m, &w.policy, &bounds, &rejected, seed)
+                        self.by_simulation(m, &w.policy, &bounds, &rejected, seed, stop)
                     }
+                };
+                if m.needs_rollouts() && stop.load(Ordering::Relaxed) {
+                    return Err(OptimizerError::Stopped { index: req.index });
                 }
-                .map_err(|e| err(e.to_string()))?;
+                let r = r.map_err(|e| err(e.to_string()))?;
                 if rejected.near(&r.design) {
                     return Err(err(format!(
                         "{} found nothing outside optimizer.reject-radius ({}) of the {} rejected design(s); lower the radius",
@@ -254,6 +270,7 @@ impl<'a> Optimizer<'a> {
 
     /// The searches over Q: PSO (`pso-q`), CMA-ES (`cmaes-q`), or PSO whose best diverse
     /// designs are screened by short rollouts (`screened`).
+    #[allow(clippy::too_many_arguments)] // the search's inputs, each used
     fn over_q(
         &mut self,
         m: ExploitMethod,
@@ -262,6 +279,7 @@ impl<'a> Optimizer<'a> {
         bounds: &BoxSpace,
         rejected: &Rejected,
         seed: u64,
+        stop: &AtomicBool,
     ) -> Result<SearchResult, crate::SearchError> {
         match m {
             ExploitMethod::CmaesQ => cmaes::maximise(&mut rejected.guard(q), bounds, &self.cfg.cmaes, seed),
@@ -274,6 +292,9 @@ impl<'a> Optimizer<'a> {
                 let sc = self.cfg.screen.clone();
                 let candidates =
                     crate::screen::diverse_best(&recorded.designs, &recorded.scores, bounds.dim(), &scale, sc.candidates, sc.separation);
+                if stop.load(Ordering::Relaxed) {
+                    return Ok(best);
+                }
                 self.screen(policy, candidates, best)
             }
             ExploitMethod::Screened => {
@@ -317,6 +338,7 @@ impl<'a> Optimizer<'a> {
         bounds: &BoxSpace,
         rejected: &Rejected,
         seed: u64,
+        stop: &AtomicBool,
     ) -> Result<SearchResult, crate::SearchError> {
         let Some(ev) = self.evaluator.as_deref_mut() else {
             return Err(crate::SearchError::Config(format!("{} needs simulation rollouts", m.name())));
@@ -325,6 +347,11 @@ impl<'a> Optimizer<'a> {
         let (mode, fixed, rng) = (self.cfg.sim_seed, self.seed, &mut self.rng);
         let mut seeds = Vec::new();
         let mut sim = |designs: &[f32], fitness: &mut [f32]| {
+            // Stopping: the search runs out its generations on no scores, at once.
+            if stop.load(Ordering::Relaxed) {
+                fitness.fill(f32::NAN);
+                return;
+            }
             seeds.clear();
             seeds.extend((0..fitness.len()).map(|_| match mode {
                 SimSeed::Fresh => rng.random::<u64>(),
@@ -415,7 +442,13 @@ pub fn run(
         }
         let Some(w) = newest_or_stop(links.weights.as_mut(), req.weights_version, shutdown)? else { break };
         let t = std::time::Instant::now();
-        let reply = opt.choose(&req, &w)?;
+        let reply = match opt.choose_until(&req, &w, shutdown) {
+            Err(OptimizerError::Stopped { index }) => {
+                coadapt_log::logln!("optimizer: design {index}: stopped during its rollouts (the learner asks again on resume)");
+                break;
+            }
+            r => r?,
+        };
         {
             use std::sync::atomic::Ordering::Relaxed;
             let (c, secs) = (&opt.counters, t.elapsed().as_secs_f64());

@@ -196,3 +196,53 @@ fn calibration_scores_the_chosen_the_next_random_and_the_trained_designs_without
     );
     assert!(lines[5].ends_with("0.85;1.7"), "{text}");
 }
+
+/// A fake that sets the stop flag during its `stop_after`-th batch of rollouts (as Ctrl-C
+/// landing mid-search would) and counts its batches.
+struct Stopping<'a> {
+    stop: &'a std::sync::atomic::AtomicBool,
+    stop_after: usize,
+    batches: usize,
+}
+
+impl RolloutEvaluator for Stopping<'_> {
+    fn evaluate(&mut self, _policy: &[f32], _designs: &[f32], _seeds: &[u64], fitness: &mut [f32]) -> Result<(), RolloutError> {
+        self.batches += 1;
+        if self.batches == self.stop_after {
+            self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        fitness.fill(1.0);
+        Ok(())
+    }
+}
+
+/// A stop during a search by simulation gives it up after the batch of rollouts under way
+/// (a Daisy sim-PSO choice is minutes of them: a stop used to wait for all 30 generations);
+/// the cut search is no answer (`Stopped`, not a design). Without the stop the same search
+/// runs all its generations and answers.
+#[test]
+fn a_stop_gives_up_a_search_by_simulation_between_batches_of_rollouts() {
+    use coadapt_design_optimizer::role::OptimizerError;
+    use std::sync::atomic::AtomicBool;
+    let mut cfg = OptimizerConfig { exploit: ExploitMethod::SimPso, ..OptimizerConfig::default() };
+    cfg.sim_pso.particles = 5;
+    cfg.sim_pso.iterations = 10;
+    let s = spec();
+    let w = weights(&s);
+    for (stop_after, want_batches) in [(3, 3), (usize::MAX, 10)] {
+        let stop = AtomicBool::new(false);
+        let mut fake = Stopping { stop: &stop, stop_after, batches: 0 };
+        let mut opt = Optimizer::new(cfg.clone(), spec(), Some(&mut fake), 7).unwrap();
+        let got = opt.choose_until(&request(3), &w, &stop);
+        drop(opt);
+        assert_eq!(fake.batches, want_batches, "batches of rollouts run (stop during batch {stop_after})");
+        match got {
+            Err(OptimizerError::Stopped { index: 3 }) => assert!(stop_after < usize::MAX, "stopped with no stop"),
+            Ok(reply) => {
+                assert_eq!(stop_after, usize::MAX, "a cut search answered: {reply:?}");
+                assert_eq!(reply.design_rollouts, 50);
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+}

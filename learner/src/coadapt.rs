@@ -290,19 +290,42 @@ pub fn run(
         // Training episodes back and trained on, waiting for their evaluation.
         let mut awaiting_eval: Vec<(Completed, u64)> = Vec::new();
         let mut interrupted = false;
+        // The learner's counters at the last point where nothing was out (here: nothing is out
+        // yet), for a stop that lands while an episode is out: see `snapshot_at_quiet`.
+        let mut quiet = Some(l.quiet_point());
+        // Stopping with an evaluation out (the training episode before it is learnt): until
+        // when the learner waits for what is out to come back, to snapshot with nothing out.
+        let mut draining: Option<Instant> = None;
         'episodes: while written < n {
-            while l.fleet.outstanding() < in_flight && issued < n {
+            while draining.is_none() && l.fleet.outstanding() < in_flight && issued < n {
                 if !l.reset_before(index, issued, n, ResetMode::Train, on_event)? {
                     interrupted = true;
+                    p.seconds = seconds_before + start.elapsed().as_secs_f64();
+                    snapshot_at_quiet(&mut l, quiet.take(), &mut p, &row, written, out, snaps)?;
                     break 'episodes;
                 }
                 l.issue(index, &design, issued, base + issued as u64, EpisodeMode::Train)?;
                 issued += 1;
             }
-            let Some(c) = l.next_completed()? else {
+            let Some(c) = l.next_completed(draining)? else {
+                if draining.is_none() && quiet.is_none() {
+                    draining = Some(Instant::now() + STOP_WAIT);
+                    coadapt_log::logln!(
+                        "learner: stopping: waiting up to {} s for the episodes out to come back, to snapshot (Ctrl-C again aborts)",
+                        STOP_WAIT.as_secs()
+                    );
+                    continue;
+                }
+                if draining.is_some() {
+                    coadapt_log::logln!("learner: stopping: the episodes out did not come back in time; the last snapshot stands");
+                }
                 interrupted = true;
+                p.seconds = seconds_before + start.elapsed().as_secs_f64();
+                snapshot_at_quiet(&mut l, quiet.take(), &mut p, &row, written, out, snaps)?;
                 break;
             };
+            // The learner changes from here on (it trains, rows are written).
+            quiet = None;
             let ((c, steps_then), eval_return) = match c.mode {
                 EpisodeMode::Train => {
                     l.learn_from(&c)?;
@@ -353,10 +376,13 @@ pub fn run(
             // Nothing out with an actor: the state is whole. A snapshot every `every-episodes`
             // (later while the last one's write time would exceed `max-share` of the time since
             // it) and, on shutdown, one now (the design's end takes its own).
-            let quiet = l.fleet.outstanding() == 0 && awaiting_eval.is_empty();
-            let stopping = shutdown.load(Ordering::Relaxed);
+            let is_quiet = l.fleet.outstanding() == 0 && awaiting_eval.is_empty();
+            let stopping = draining.is_some() || shutdown.load(Ordering::Relaxed);
             let due = snaps.cfg.periodic_due(since_snapshot, snaps.last_at.map(|t| t.elapsed()), snaps.last_write_seconds);
-            if quiet && written < n && (stopping || due) {
+            if is_quiet {
+                quiet = Some(l.quiet_point());
+            }
+            if is_quiet && written < n && (stopping || due) {
                 p.in_design = Some(resume::InDesign { row: row.clone(), episodes: written });
                 p.seconds = seconds_before + start.elapsed().as_secs_f64();
                 l.snapshot(&mut p, out, snaps, &format!("design {index} episode {written}"))?;
@@ -389,4 +415,41 @@ pub fn run(
     let interrupted = stopped || p.rows.len() < cfg.designs;
     let time = l.time();
     Ok(RunOutcome { learner: l.fear, designs: p.rows, rejected: l.rejected, interrupted, time })
+}
+
+/// How long a stop that lands while an evaluation is out waits for it (and anything else out)
+/// to come back, so the run can snapshot with nothing out: an episode of the robots here takes
+/// a second or two; the bound stays inside the grace the deploy scripts give before SIGTERM
+/// (30 s), and a second Ctrl-C aborts at once.
+pub const STOP_WAIT: Duration = Duration::from_secs(20);
+
+/// A stop (Ctrl-C, SIGTERM) that lands while an episode is out: the snapshot a stop at the
+/// last quiet point `at` would have taken, so a stop never costs more than the episodes out
+/// (before, a stop before a design's first periodic snapshot left none, and a stop in the
+/// first design lost the whole run so far). Nothing was learnt or written since `at` (the loop
+/// forgets it when an episode comes back), so the networks, the rows and `p` are as they were
+/// then; only the counters that handing out the episode moved are put back, so the resumed run
+/// hands it out again under the same weights version, to the rows of a run never stopped.
+/// `None` (an episode came back since, and no quiet point followed) takes no snapshot: the
+/// last one stands.
+/// (`p.seconds` is the caller's: the time now.)
+fn snapshot_at_quiet(
+    l: &mut Learner<'_>,
+    at: Option<resume::QuietPoint>,
+    p: &mut resume::Progress,
+    row: &crate::run_dir::DesignRow,
+    written: usize,
+    out: &mut RunWriter,
+    snaps: &mut Snapshots,
+) -> Result<(), CoadaptError> {
+    let Some(at) = at else { return Ok(()) };
+    if !l.shutdown.load(Ordering::Relaxed) {
+        return Ok(());
+    }
+    l.back_to(&at);
+    p.in_design = Some(resume::InDesign { row: row.clone(), episodes: written });
+    let label = format!("design {} episode {written} (stopped with an episode out)", row.index);
+    l.snapshot(p, out, snaps, &label)?;
+    p.in_design = None;
+    Ok(())
 }

@@ -1,5 +1,5 @@
-//! Ctrl-C: mid-design it stops the run with a snapshot to resume from; while the learner trains
-//! it stops the run cleanly.
+//! Ctrl-C: mid-design it stops the run with a snapshot to resume from, before the first
+//! periodic snapshot too; while the learner trains it stops the run cleanly.
 
 use crate::support::*;
 
@@ -28,19 +28,57 @@ fn a_run_stopped_with_ctrl_c_mid_design_resumes_to_the_rows_of_a_run_never_stopp
     assert_eq!(summary["interrupted"], true, "{summary}");
     let stopped_at = rows(&out.join("episodes.csv"));
     assert!(stopped_at < 14, "the run went on to the end after Ctrl-C: {stopped_at} episodes");
-    // Ctrl-C while an episode is out stops without waiting for it; before the run's first
-    // snapshot (CI drew a Ctrl-C after the first episode) there is nothing to resume from and
-    // the run starts over, which must give the same rows too.
+    // Ctrl-C after a row always leaves a snapshot, even before the run's first periodic one
+    // (CI once drew a Ctrl-C after the first episode, which then left none): see below.
     let snapshots = coadapt_learner::snapshot::list(&out.join("snapshots")).map(|s| s.len()).unwrap_or(0);
+    assert!(snapshots > 0, "stopped after {stopped_at} episodes with no snapshot: {log}");
     let stderr2 = dir.join("stderr-resume.txt");
     let o = coadapt(&["run", "--resume", out.to_str().unwrap(), "--transport", "in-process"], &stderr2).wait_with_output().unwrap();
     let log2 = std::fs::read_to_string(&stderr2).unwrap_or_default();
     assert!(o.status.success(), "{log2}");
-    if snapshots > 0 {
-        assert!(log2.contains("learner: resuming"), "{snapshots} snapshot(s), yet: {log2}");
-    } else {
-        assert!(log2.contains("has no snapshot yet: starting the run over"), "{log2}");
-    }
+    assert!(log2.contains("learner: resuming"), "{snapshots} snapshot(s), yet: {log2}");
+    let got = tables(&out);
+    assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
+    assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
+}
+
+/// Ctrl-C before the first periodic snapshot, with an episode out (most of the time is spent
+/// waiting for episodes): the stop used to leave no snapshot (a stop waited for no episode and
+/// snapshotted only when nothing was out), so a run stopped in its first design began again
+/// (9 episodes of a campaign run lost so). Now a training episode out is handed out again on
+/// resume (the snapshot is the one of the moment it was handed out) and an evaluation out is
+/// waited for; either way the run resumes where it stopped, to the rows of a run never stopped.
+#[test]
+fn ctrl_c_before_the_first_periodic_snapshot_leaves_one_to_resume_from() {
+    let dir = tmpdir("ctrl-c-first");
+    let mut c = config();
+    c.schedule.designs = 2;
+    c.schedule.initial_episodes = 12;
+    // No periodic snapshot in the whole run: what there is comes from the stop.
+    c.snapshot.every_episodes = 1000;
+    let want = reference(&dir, &c);
+    let mut rng = kill_seed();
+    let config = write_config(&dir, &c);
+    let out = dir.join("run");
+    let stderr = dir.join("stderr.txt");
+    let run = coadapt(&["run", "--config", config.to_str().unwrap(), "--out", out.to_str().unwrap(), "--transport", "in-process"], &stderr);
+    let at = 1 + draw(&mut rng, 6);
+    // Past the row, into the next episodes by a random part of one (rows take ~0.1-0.3 s).
+    wait_until("episode rows", &stderr, || rows(&out.join("episodes.csv")) >= at);
+    std::thread::sleep(Duration::from_millis(draw(&mut rng, 200) as u64));
+    assert!(Command::new("kill").args(["-INT", &run.id().to_string()]).status().unwrap().success());
+    let o = run.wait_with_output().unwrap();
+    let log = std::fs::read_to_string(&stderr).unwrap_or_default();
+    assert!(o.status.success(), "{log}");
+    let stopped_at = rows(&out.join("episodes.csv"));
+    assert!(stopped_at < 12, "the first design ran to its end after Ctrl-C ({stopped_at} episodes): nothing tested; {log}");
+    let snaps = coadapt_learner::snapshot::list(&out.join("snapshots")).unwrap_or_default();
+    assert_eq!(snaps.len(), 1, "one snapshot, the stop's, after {stopped_at} episodes: {snaps:?}; {log}");
+    let stderr2 = dir.join("stderr-resume.txt");
+    let o = coadapt(&["run", "--resume", out.to_str().unwrap(), "--transport", "in-process"], &stderr2).wait_with_output().unwrap();
+    let log2 = std::fs::read_to_string(&stderr2).unwrap_or_default();
+    assert!(o.status.success(), "{log2}");
+    assert!(log2.contains("learner: resuming") && log2.contains(&format!("design 0 episode {stopped_at}")), "{log}\n---\n{log2}");
     let got = tables(&out);
     assert_eq!(got.0, want.0, "designs.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");
     assert_eq!(got.1, want.1, "episodes.csv differs from the run never stopped (stopped after {stopped_at} episodes); {log2}");

@@ -281,9 +281,21 @@ impl<T: Display> Dispatcher<T> {
         shutdown: &AtomicBool,
         check: &mut dyn Check<T>,
     ) -> Result<Option<Done<T>>, DispatchError> {
+        self.next_done_while(links, &|| !shutdown.load(Ordering::Relaxed), check)
+    }
+
+    /// Waits for the next whole episode while `wait()` holds (asked every poll interval);
+    /// `None` once it does not. A learner stopping uses it to let the episodes already out
+    /// come back, up to a deadline, so it can snapshot with nothing out.
+    pub fn next_done_while(
+        &mut self,
+        links: &mut LearnerLinks,
+        wait: &dyn Fn() -> bool,
+        check: &mut dyn Check<T>,
+    ) -> Result<Option<Done<T>>, DispatchError> {
         let mut heard = Instant::now();
         loop {
-            if shutdown.load(Ordering::Relaxed) {
+            if !wait() {
                 return Ok(None);
             }
             if let Some(why) = self.abort.as_ref().and_then(|f| f()) {

@@ -190,8 +190,9 @@ impl Learner<'_> {
         Ok(())
     }
 
-    /// Waits for the next episode to come back; `None` on shutdown.
-    pub(super) fn next_completed(&mut self) -> Result<Option<Completed>, CoadaptError> {
+    /// Waits for the next episode to come back; `None` on shutdown, or with `until`, once that
+    /// time has passed (shutdown or not: a stopping learner lets what is out come back).
+    pub(super) fn next_completed(&mut self, until: Option<Instant>) -> Result<Option<Completed>, CoadaptError> {
         let mut check = EpisodeCheck {
             dims: &self.dims,
             max_obs: self.cfg.max_abs_observation,
@@ -199,7 +200,12 @@ impl Learner<'_> {
             rejected_in_a_row: &mut self.rejected_in_a_row,
             rejected: &mut self.time.episodes_rejected,
         };
-        let Some(d) = self.fleet.next_done(self.links, self.shutdown, &mut check)? else { return Ok(None) };
+        let shutdown = self.shutdown;
+        let wait = move || match until {
+            Some(t) => Instant::now() < t,
+            None => !shutdown.load(Ordering::Relaxed),
+        };
+        let Some(d) = self.fleet.next_done_while(self.links, &wait, &mut check)? else { return Ok(None) };
         let policy_lag = self.acting_version.saturating_sub(d.weights_version);
         self.time.max_policy_lag = self.time.max_policy_lag.max(policy_lag);
         Ok(Some(Completed {

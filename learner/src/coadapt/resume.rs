@@ -144,7 +144,36 @@ impl Progress {
     }
 }
 
+/// The counters that handing out an episode moves, as they were when nothing was out (see
+/// `snapshot_at_quiet` in the schedule's loop).
+#[derive(Clone, Debug)]
+pub(super) struct QuietPoint {
+    acting_version: u64,
+    acting_which: Option<ActingPolicy>,
+    acting_dirty: bool,
+    next_assignment: u64,
+}
+
 impl Learner<'_> {
+    /// The counters now, to go back to with [`Learner::back_to`].
+    pub(super) fn quiet_point(&self) -> QuietPoint {
+        QuietPoint {
+            acting_version: self.acting_version,
+            acting_which: self.acting_which,
+            acting_dirty: self.acting_dirty,
+            next_assignment: self.fleet.last_id(),
+        }
+    }
+
+    /// Puts back the counters of `at` and forgets the episodes handed out since.
+    pub(super) fn back_to(&mut self, at: &QuietPoint) {
+        self.fleet.forget_all();
+        self.acting_version = at.acting_version;
+        self.acting_which = at.acting_which;
+        self.acting_dirty = at.acting_dirty;
+        self.fleet.set_last_id(at.next_assignment);
+    }
+
     /// Fills in the counters this side keeps.
     pub(super) fn progress(&self, p: &mut Progress) {
         p.acting_version = self.acting_version;

@@ -45,7 +45,10 @@ pub struct SnapshotConfig {
     /// least the last one's write time over this share. A snapshot holds the whole replay, so
     /// its cost grows with the run (the reference protocol's reach 1-2 GB, seconds each to
     /// write, against about 4 s per episode); the wait bounds it, at the price of more episodes
-    /// to redo after a crash. The end of a design and a shutdown always snapshot.
+    /// to redo after a crash. The end of a design and a shutdown always snapshot (a shutdown
+    /// with a training episode out snapshots where it was handed out, and one with an
+    /// evaluation out waits up to 20 s for it first; a design search by simulation is
+    /// given up and asked again on resume).
     /// 1: no bound (`every-episodes` alone decides).
     pub max_share: f64,
 }
