@@ -407,15 +407,32 @@ while read -r name config seed rest; do
   if [ "$running" -ge "$jobs" ]; then wait -n || true; running=$((running - 1)); fi
 done < "$queue"
 while [ "$(jobs -pr | wc -l)" -gt 0 ]; do wait || true; done
+# Ends the watcher of pid file $1 and waits (up to 10 s) until it has gone: the queue's end
+# leaves nothing of it running (a SIGTERM is delivered when the process next runs, which on a
+# busy machine was after this script had exited).
+end_watcher() {
+  local pid
+  pid=$(cat "$1" 2> /dev/null) || return 0
+  [[ $pid =~ ^[1-9][0-9]*$ ]] || return 0
+  kill "$pid" 2> /dev/null || return 0
+  for _ in $(seq 50); do
+    # Gone, or a zombie (dead, not yet reaped by init): not running.
+    local state
+    state=$(sed -E 's/.*\) ([A-Za-z]).*/\1/' "/proc/$pid/stat" 2> /dev/null) || return 0
+    [ "$state" = Z ] && return 0
+    sleep 0.2
+  done
+  echo "campaign: the fork watcher $pid did not end within 10 s of SIGTERM" >&2
+}
 if [ "$stopping" = 1 ]; then
   for f in $(fork_pidfiles); do
-    if [ -s "$f" ]; then kill "$(cat "$f")" 2>/dev/null || true; fi
+    if [ -s "$f" ]; then end_watcher "$f"; fi
   done
   echo "campaign: stopped; start the queue again to resume"
   exit 130
 fi
 # Watchers whose fork never came (a source that failed) would wait for ever.
 for f in $(fork_pidfiles); do
-  if [ -s "$f" ] && [ ! -d "${f%.fork.pid}" ]; then kill "$(cat "$f")" 2>/dev/null || true; fi
+  if [ -s "$f" ] && [ ! -d "${f%.fork.pid}" ]; then end_watcher "$f"; fi
 done
 echo "campaign: queue $queue finished"
