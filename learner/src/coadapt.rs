@@ -225,6 +225,7 @@ pub fn run(
         fear,
         acting_version: 0,
         acting_dirty: true,
+        longest_episode: 0.0,
         republish: false,
         acting_which: None,
         population_version: 0,
@@ -309,10 +310,15 @@ pub fn run(
             }
             let Some(c) = l.next_completed(draining)? else {
                 if draining.is_none() && quiet.is_none() {
-                    draining = Some(Instant::now() + STOP_WAIT);
+                    // Three times the longest episode so far, at least 1 s, at most STOP_WAIT: an
+                    // actor that stopped too (a fleet's roles all get the signal) before taking
+                    // the evaluation never sends it, and the learner must not outwait that long.
+                    let wait =
+                        Duration::try_from_secs_f64(3.0 * l.longest_episode).unwrap_or(STOP_WAIT).clamp(Duration::from_secs(1), STOP_WAIT);
+                    draining = Some(Instant::now() + wait);
                     coadapt_log::logln!(
-                        "learner: stopping: waiting up to {} s for the episodes out to come back, to snapshot (Ctrl-C again aborts)",
-                        STOP_WAIT.as_secs()
+                        "learner: stopping: waiting up to {:.1} s for the episodes out to come back, to snapshot (Ctrl-C again aborts)",
+                        wait.as_secs_f64()
                     );
                     continue;
                 }
@@ -417,10 +423,11 @@ pub fn run(
     Ok(RunOutcome { learner: l.fear, designs: p.rows, rejected: l.rejected, interrupted, time })
 }
 
-/// How long a stop that lands while an evaluation is out waits for it (and anything else out)
-/// to come back, so the run can snapshot with nothing out: an episode of the robots here takes
-/// a second or two; the bound stays inside the grace the deploy scripts give before SIGTERM
-/// (30 s), and a second Ctrl-C aborts at once.
+/// The most a stop that lands while an evaluation is out waits for it (and anything else out)
+/// to come back, so the run can snapshot with nothing out (it waits three times the longest
+/// episode so far, at least 1 s): an episode of the robots here takes a second or two; the
+/// bound stays inside the grace the deploy scripts give before SIGTERM (30 s), and a second
+/// Ctrl-C aborts at once.
 pub const STOP_WAIT: Duration = Duration::from_secs(20);
 
 /// A stop (Ctrl-C, SIGTERM) that lands while an episode is out: the snapshot a stop at the

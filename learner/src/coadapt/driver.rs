@@ -108,6 +108,9 @@ pub(super) struct Learner<'a> {
     pub(super) acting_version: u64,
     /// The acting policy changed since it was last published.
     pub(super) acting_dirty: bool,
+    /// The longest time an episode took from its issue to its end (seconds), for how long a
+    /// stop waits for what is out.
+    pub(super) longest_episode: f64,
     /// Publish the acting policy again under its version (a resumed run's actors have none).
     pub(super) republish: bool,
     pub(super) acting_which: Option<ActingPolicy>,
@@ -206,6 +209,7 @@ impl Learner<'_> {
             None => !shutdown.load(Ordering::Relaxed),
         };
         let Some(d) = self.fleet.next_done_while(self.links, &wait, &mut check)? else { return Ok(None) };
+        self.longest_episode = self.longest_episode.max(d.seconds);
         let policy_lag = self.acting_version.saturating_sub(d.weights_version);
         self.time.max_policy_lag = self.time.max_policy_lag.max(policy_lag);
         Ok(Some(Completed {
