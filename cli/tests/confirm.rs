@@ -279,3 +279,92 @@ fn a_run_killed_while_a_prototype_is_awaited_resumes_and_asks_again_for_the_same
     assert_eq!(col("prototype"), ["confirmed", "confirmed", "rejected", "confirmed", "confirmed"]);
     assert_eq!(col("episodes"), ["2", "2", "0", "1", "1"]);
 }
+
+/// Confirms every reset the run in `dir` awaits until `until` is awaited (returned unanswered)
+/// or, with `None`, until the run ends.
+fn answer_resets(dir: &Path, child: &mut std::process::Child, until: Option<(usize, usize, ResetMode)>) {
+    let t = Instant::now();
+    let mut last = None;
+    loop {
+        if let Ok(Some(q)) = prototype::read_json::<ResetRequest>(&dir.join(RESET_FILE))
+            && q.status == Status::Awaiting
+            && last != Some((q.design_index, q.episode, q.mode))
+        {
+            let now = (q.design_index, q.episode, q.mode);
+            if Some(now) == until {
+                return;
+            }
+            let o = confirm(dir, &["--reset"]);
+            assert!(o.status.success(), "{}", text(&o.stderr));
+            last = Some(now);
+        }
+        if child.try_wait().unwrap().is_some() {
+            assert!(until.is_none(), "the run ended before the reset {until:?} was awaited");
+            return;
+        }
+        assert!(t.elapsed() < Duration::from_secs(600), "the resets never reached {until:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Ctrl-C during a reset wait in which the learner trained its population networks
+/// (`train-while-waiting`): the stop's snapshot is the quiet point before the wait with the
+/// acting weights marked stale, as the wait marked them, since the networks it holds were
+/// trained in it. (It restored the point's flag before: a resumed run whose acting policy is
+/// the population's would have handed out the trained networks under the weights version of
+/// the ones before, had its own wait not trained again.) The resume completes the run.
+#[test]
+fn ctrl_c_during_a_reset_wait_keeps_what_the_wait_trained_marked_for_publishing() {
+    let out = tmpdir("reset-ctrl-c");
+    let cfg = out.with_extension("toml");
+    let t = coadapt_test_support::confirming_tiny_config()
+        .replace("confirm-designs = true\n", "reset-needs-confirmation = true\ntrain-while-waiting = 200\n");
+    std::fs::write(&cfg, t).unwrap();
+    let spawn = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_coadapt"))
+            .args(args)
+            .args(["--transport", "in-process"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let mut child = spawn(&["run", "--config", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    // Episode 0 of design 0 and its evaluation, then the wait before episode 1: the population
+    // replay holds episode 0, so the wait trains.
+    answer_resets(&out, &mut child, Some((0, 1, ResetMode::Train)));
+    std::thread::sleep(Duration::from_millis(600));
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let stderr = text(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let summary: serde_json::Value = serde_json::from_str(text(&o.stdout).trim()).unwrap();
+    assert_eq!(summary["interrupted"].as_bool(), Some(true), "{summary}");
+    let made = summary["population_updates_while_waiting"].as_u64();
+    assert!(made.is_some_and(|m| m > 0), "the waits trained nothing: {summary}");
+
+    let snaps = out.join("snapshots");
+    let newest = std::fs::read_dir(&snaps).unwrap().map(|e| e.unwrap().path()).max().unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(newest.join("MANIFEST.json")).unwrap()).unwrap();
+    assert_eq!(manifest["label"].as_str(), Some("design 0 episode 1 (stopped)"), "{manifest}");
+    let state: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(newest.join("state.json")).unwrap()).unwrap();
+    let progress = &state["values"]["progress"];
+    assert_eq!(
+        progress["acting_dirty"].as_bool(),
+        Some(true),
+        "the networks trained in the wait are not marked for publishing: {progress}"
+    );
+
+    let mut child = spawn(&["run", "--resume", out.to_str().unwrap()]);
+    answer_resets(&out, &mut child, None);
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_str(text(&o.stdout).trim()).unwrap();
+    assert_eq!((summary["interrupted"].as_bool(), summary["designs"].as_u64()), (Some(false), Some(4)), "{summary}");
+    let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = episodes.lines().map(|l| l.split(',').collect()).collect();
+    let v = rows[0].iter().position(|h| *h == "weights_version").unwrap();
+    let versions: Vec<u64> = rows[1..].iter().map(|r| r[v].parse().unwrap()).collect();
+    assert_eq!(versions.len(), 2 + 2 + 1 + 1, "{episodes}");
+    assert!(versions.windows(2).all(|w| w[0] < w[1]), "weights versions must grow episode by episode: {versions:?}");
+}

@@ -453,9 +453,11 @@ fn snapshot_at_quiet(
     if !l.shutdown.load(Ordering::Relaxed) {
         return Ok(());
     }
+    // A stop during an operator's reset wait has nothing out.
+    let why = if l.fleet.outstanding() > 0 { "stopped with an episode out" } else { "stopped" };
     l.back_to(&at);
     p.in_design = Some(resume::InDesign { row: row.clone(), episodes: written });
-    let label = format!("design {} episode {written} (stopped with an episode out)", row.index);
+    let label = format!("design {} episode {written} ({why})", row.index);
     l.snapshot(p, out, snaps, &label)?;
     p.in_design = None;
     Ok(())

@@ -152,6 +152,9 @@ pub(super) struct QuietPoint {
     acting_which: Option<ActingPolicy>,
     acting_dirty: bool,
     next_assignment: u64,
+    /// Population updates made while waiting for an operator, by then: the one way the
+    /// networks change with nothing out (`train-while-waiting` during a reset wait).
+    updates_while_waiting: u64,
 }
 
 impl Learner<'_> {
@@ -162,15 +165,21 @@ impl Learner<'_> {
             acting_which: self.acting_which,
             acting_dirty: self.acting_dirty,
             next_assignment: self.fleet.last_id(),
+            updates_while_waiting: self.time.updates_while_waiting,
         }
     }
 
-    /// Puts back the counters of `at` and forgets the episodes handed out since.
+    /// Puts back the counters of `at` and forgets the episodes handed out since. Population
+    /// networks trained while waiting for an operator since `at` (a reset wait with
+    /// `train-while-waiting`) stay trained, so the acting weights stay marked stale, as the
+    /// wait marked them (the population policy may be the acting one): the resumed run
+    /// publishes them under a new version instead of handing out changed weights under the
+    /// version of the ones before.
     pub(super) fn back_to(&mut self, at: &QuietPoint) {
         self.fleet.forget_all();
         self.acting_version = at.acting_version;
         self.acting_which = at.acting_which;
-        self.acting_dirty = at.acting_dirty;
+        self.acting_dirty = at.acting_dirty || self.time.updates_while_waiting > at.updates_while_waiting;
         self.fleet.set_last_id(at.next_assignment);
     }
 
