@@ -9,6 +9,12 @@
 #          and stop; the queue started again resumes them. While a queue runs, its pid is in
 #          runs/campaign/QUEUE.pid, and a second start of the same queue is refused (two
 #          campaigns would write the same run directories).
+#   stop at a snapshot: scripts/campaign.sh --stop-at-snapshot QUEUE_FILE [DEADLINE]: waits
+#          until every run the queue has going has written a snapshot since the call (a retrain
+#          line: finished one of its seeds), then stops the queue as --stop does; at DEADLINE
+#          (what `date -d` reads: 07:05, 'now + 20 min') it stops it whatever. For a session's
+#          end with a binary older than 50b2f2a, which on a stop with an episode out takes no
+#          snapshot: the run then goes back to its newest one and does again what followed.
 #
 # QUEUE_FILE: one experiment per line, `NAME CONFIG SEED [coadapt run flags...]`; `#` starts a
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
@@ -48,9 +54,10 @@ case ${1:-} in
   -j) [[ ${2:-} =~ ^[1-9][0-9]*$ ]] || { echo "campaign: -j takes a number of lanes, not '${2:-}'" >&2; exit 2; }
       jobs=$2; shift 2 ;;
   --stop) stop=yes; shift ;;
+  --stop-at-snapshot) stop=at-snapshot; shift ;;
   -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
 esac
-queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE, or --stop QUEUE_FILE}
+queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE, or --stop QUEUE_FILE, or --stop-at-snapshot QUEUE_FILE [DEADLINE]}
 [ -f "$queue" ] || { echo "campaign: no queue file $queue" >&2; exit 2; }
 pidfile=runs/campaign/$(basename "$queue" .queue).pid
 # The live campaign of this queue, if any: the pid in its file, still a campaign.sh.
@@ -60,6 +67,51 @@ live_pid() {
   [[ $p =~ ^[1-9][0-9]*$ ]] && grep -qa campaign.sh "/proc/$p/cmdline" 2>/dev/null && echo "$p"
   return 0
 }
+# Whether pid $1 is pid $2 or runs below it.
+below() {
+  local p=$1
+  while [[ $p =~ ^[1-9][0-9]*$ ]] && [ "$p" != 1 ]; do
+    [ "$p" = "$2" ] && return 0
+    p=$(awk '{print $4}' "/proc/$p/stat" 2> /dev/null) || return 1
+  done
+  return 1
+}
+# The run directories queue pid $1's lanes hold (their lock directories name the lane's pid).
+held_runs() {
+  local lock
+  for lock in runs/campaign/*.lock; do
+    [ -d "$lock" ] && below "$(cat "$lock/pid" 2> /dev/null)" "$1" && echo "${lock%.lock}"
+  done
+  return 0
+}
+# Whether run directory $1 has written a snapshot (a retrain line: finished a seed) since
+# epoch second $2.
+saved_since() {
+  local f
+  for f in "$1"/snapshots/snap-* "$1"/train-seed*/summary.json; do
+    [ -e "$f" ] && [ "$(stat -c %Y "$f")" -ge "$2" ] && return 0
+  done
+  return 1
+}
+if [ "$stop" = at-snapshot ]; then
+  p=$(live_pid)
+  [ -n "$p" ] || { echo "campaign: no campaign of $queue is running (no live pid in $pidfile)" >&2; exit 1; }
+  deadline=""
+  if [ -n "${2:-}" ]; then
+    deadline=$(date -d "$2" +%s 2> /dev/null) || { echo "campaign: the deadline '$2' is not a time date -d reads (say 07:05)" >&2; exit 2; }
+  fi
+  since=$(date +%s)
+  echo "campaign: waiting for a snapshot of each run of $queue's campaign (pid $p)${deadline:+, at most until $(date -d "@$deadline" +%H:%M:%S)}"
+  while :; do
+    [ -n "$(live_pid)" ] || { echo "campaign: $queue's campaign ended by itself"; exit 0; }
+    waiting=()
+    for d in $(held_runs "$p"); do saved_since "$d" "$since" || waiting+=("$(basename "$d")"); done
+    if [ "${#waiting[@]}" = 0 ]; then echo "campaign: every run of $queue has snapshotted since $(date -d "@$since" +%H:%M:%S)"; break; fi
+    if [ -n "$deadline" ] && [ "$(date +%s)" -ge "$deadline" ]; then echo "campaign: deadline; no new snapshot yet of ${waiting[*]}"; break; fi
+    sleep "${CAMPAIGN_POLL:-5}"
+  done
+  stop=yes
+fi
 if [ -n "$stop" ]; then
   p=$(live_pid)
   [ -n "$p" ] || { echo "campaign: no campaign of $queue is running (no live pid in $pidfile)" >&2; exit 1; }

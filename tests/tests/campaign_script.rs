@@ -36,7 +36,12 @@ if "--config" in args:
 stopped = []
 signal.signal(signal.SIGINT, lambda *_: stopped.append(1))
 hold = os.environ.get("FAKE_HOLD", "")
+# While it holds, a file FAKE_HOLD.snap makes it write a snapshot (and delete the file).
 while hold and os.path.exists(hold) and not stopped:
+    if os.path.exists(hold + ".snap"):
+        snap = os.path.join(out, "snapshots", f"snap-{time.time_ns():020}")
+        os.makedirs(snap)
+        os.remove(hold + ".snap")
     time.sleep(0.05)
 print(json.dumps({"interrupted": bool(stopped), "out": out}))
 "#;
@@ -274,6 +279,43 @@ fn a_stop_reaches_a_lane_waiting_for_its_fork() {
     let stop = t.run(&["--stop", "q.queue"]);
     assert!(stop.status.success(), "{}", text(&stop));
     assert_eq!(first.exit_code(), Some(130), "a stopped queue exits 130");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// `--stop-at-snapshot` waits while the queue's run has written no snapshot since the call
+/// (an older one does not count), stops the queue once it has; with nothing snapshotted, the
+/// deadline stops it; a deadline `date` cannot read is refused.
+#[test]
+fn a_stop_at_snapshot_waits_for_a_new_one_or_the_deadline() {
+    let t = Tree::new("at-snapshot");
+    std::fs::write(&t.hold, "").expect("the hold file");
+    // --designs 1: the fake run starts with a snapshot, from before the call.
+    std::fs::write(t.path("q.queue"), "alpha cfg.toml 1 --designs 1\n").expect("queue");
+    let mut first = Running(t.campaign(&["q.queue"]).spawn().expect("starting the queue"), t.hold.clone());
+    wait_for("the run's first snapshot", || t.path("runs/campaign/alpha-seed1/snapshots").exists());
+    let bad = t.run(&["--stop-at-snapshot", "q.queue", "half past never"]);
+    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad));
+    assert!(text(&bad).contains("the deadline 'half past never' is not a time"), "{}", text(&bad));
+    std::thread::sleep(Duration::from_millis(1100));
+    let mut stopper = t.campaign(&["--stop-at-snapshot", "q.queue"]).env("CAMPAIGN_POLL", "0.2").spawn().expect("the stopper");
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(stopper.try_wait().expect("polling").is_none(), "it stopped the queue without a new snapshot");
+    assert!(first.0.try_wait().expect("polling").is_none(), "the queue ended before its run snapshotted");
+    let snap = t.hold.with_extension("snap");
+    std::fs::write(&snap, "").expect("asking for a snapshot");
+    wait_for("the stopper", || stopper.try_wait().expect("polling").is_some());
+    assert!(!snap.exists(), "the fake run did not snapshot");
+    assert_eq!(first.exit_code(), Some(130), "a stopped queue exits 130");
+    assert!(t.status().contains("stopped  alpha-seed1"), "{}", t.status());
+
+    // Started again: no new snapshot comes; the deadline stops the queue.
+    let mut second = Running(t.campaign(&["q.queue"]).spawn().expect("starting the queue again"), t.hold.clone());
+    wait_for("the resumed run", || t.status().contains("running  alpha-seed1"));
+    let stop = t.campaign(&["--stop-at-snapshot", "q.queue", "now + 2 seconds"]).env("CAMPAIGN_POLL", "0.2").output().expect("stopper");
+    assert!(stop.status.success() && text(&stop).contains("deadline; no new snapshot yet of alpha-seed1"), "{}", text(&stop));
+    assert_eq!(second.exit_code(), Some(130));
+    let none = t.run(&["--stop-at-snapshot", "q.queue"]);
+    assert!(!none.status.success() && text(&none).contains("no campaign of q.queue is running"), "{}", text(&none));
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
