@@ -17,6 +17,7 @@ start alone). --all lists the finished lines too.
 """
 import csv
 import os
+import re
 import sys
 import tomllib
 
@@ -88,7 +89,11 @@ def live_dirs():
             continue
         for a in args:
             if "runs/campaign/" in a:
-                out.add(os.path.realpath(os.path.join(cwd, a.rstrip("/"))))
+                path = os.path.realpath(os.path.join(cwd, a.rstrip("/")))
+                out.add(path)
+                # A retrain line's `coadapt train` names a seed's directory inside the run's.
+                if re.fullmatch(r"train-seed\d+", os.path.basename(path)):
+                    out.add(os.path.dirname(path))
     return out
 
 

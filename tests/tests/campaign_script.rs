@@ -319,6 +319,28 @@ fn a_stop_at_snapshot_waits_for_a_new_one_or_the_deadline() {
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
+/// A retrain line whose `coadapt train` runs (it names a seed's directory inside the line's)
+/// is `running`, not `stopped`.
+#[test]
+fn a_retrain_line_training_a_seed_is_running() {
+    let t = Tree::new("retrain");
+    t.archive_source(2);
+    std::fs::write(t.path("q.queue"), "body retrain:src:exploit 1\n").expect("queue");
+    let seed = t.path("runs/campaign/body-seed1/train-seed1");
+    std::fs::create_dir_all(&seed).expect("the seed's directory");
+    assert!(t.status().contains("stopped  body-seed1"), "{}", t.status());
+    let train = Command::new("python3")
+        .args(["-c", "import time; time.sleep(60)", "--out", "runs/campaign/body-seed1/train-seed1"])
+        .current_dir(&t.root)
+        .spawn()
+        .expect("a process naming the seed's directory");
+    let mut train = Running(train, t.hold.clone());
+    let status = t.status();
+    train.0.kill().expect("ending it");
+    assert!(status.contains("running  body-seed1"), "{status}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
 /// A fork copied from its source at design K but not started holds the source's rows only: it
 /// is `copied` with all its own episodes left, and `stopped` once it has rows of its own.
 #[test]
