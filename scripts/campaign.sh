@@ -106,7 +106,12 @@ if [ "$stop" = at-snapshot ]; then
     [ -n "$(live_pid)" ] || { echo "campaign: $queue's campaign ended by itself"; exit 0; }
     waiting=()
     for d in $(held_runs "$p"); do saved_since "$d" "$since" || waiting+=("$(basename "$d")"); done
-    if [ "${#waiting[@]}" = 0 ]; then echo "campaign: every run of $queue has snapshotted since $(date -d "@$since" +%H:%M:%S)"; break; fi
+    if [ "${#waiting[@]}" = 0 ]; then
+      echo "campaign: every run of $queue has snapshotted since $(date -d "@$since" +%H:%M:%S)"
+      # A retrain line archives itself in the moments after its second seed: let it.
+      sleep "${CAMPAIGN_GRACE:-3}"
+      break
+    fi
     if [ -n "$deadline" ] && [ "$(date +%s)" -ge "$deadline" ]; then echo "campaign: deadline; no new snapshot yet of ${waiting[*]}"; break; fi
     sleep "${CAMPAIGN_POLL:-5}"
   done
