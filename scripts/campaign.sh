@@ -72,7 +72,8 @@ below() {
   local p=$1
   while [[ $p =~ ^[1-9][0-9]*$ ]] && [ "$p" != 1 ]; do
     [ "$p" = "$2" ] && return 0
-    p=$(awk '{print $4}' "/proc/$p/stat" 2> /dev/null) || return 1
+    # The parent's pid: the second field after the command name, which may hold spaces.
+    p=$(sed -E 's/.*\) [A-Za-z] ([0-9]+) .*/\1/' "/proc/$p/stat" 2> /dev/null) || return 1
   done
   return 1
 }
