@@ -12,9 +12,11 @@
 #   stop at a snapshot: scripts/campaign.sh --stop-at-snapshot QUEUE_FILE [DEADLINE]: waits
 #          until every run the queue has going has written a snapshot since the call (a retrain
 #          line: finished one of its seeds), then stops the queue as --stop does; at DEADLINE
-#          (what `date -d` reads: 07:05, 'now + 20 min') it stops it whatever. For a session's
-#          end with a binary older than 50b2f2a, which on a stop with an episode out takes no
-#          snapshot: the run then goes back to its newest one and does again what followed.
+#          (what `date -d` reads: 07:05, 'now + 20 min') it stops it whatever. A run started
+#          since the call and less than CAMPAIGN_YOUNG seconds (10) ago has nothing to lose.
+#          For a session's end with a binary older than 50b2f2a, which on a stop with an
+#          episode out takes no snapshot: the run then goes back to its newest one and does
+#          again what followed.
 #
 # QUEUE_FILE: one experiment per line, `NAME CONFIG SEED [coadapt run flags...]`; `#` starts a
 # comment. NAME becomes runs/campaign/NAME-seedSEED. A line whose run directory already holds a
@@ -86,9 +88,16 @@ held_runs() {
   return 0
 }
 # Whether run directory $1 has written a snapshot (a retrain line: finished a seed) since
-# epoch second $2.
+# epoch second $2, or has nothing to lose: its lane took it after $2 and less than
+# CAMPAIGN_YOUNG seconds (10) ago (a line that started between two polls, as the one before it
+# ended: stopping it now loses seconds, waiting for its first snapshot may cost the deadline).
 saved_since() {
-  local f
+  local f lock=$1.lock
+  if [ -d "$lock" ]; then
+    local t
+    t=$(stat -c %Y "$lock" 2> /dev/null) || t=0
+    [ "$t" -ge "$2" ] && [ $(($(date +%s) - t)) -lt "${CAMPAIGN_YOUNG:-10}" ] && return 0
+  fi
   for f in "$1"/snapshots/snap-* "$1"/train-seed*/summary.json; do
     [ -e "$f" ] && [ "$(stat -c %Y "$f")" -ge "$2" ] && return 0
   done
@@ -108,7 +117,7 @@ if [ "$stop" = at-snapshot ]; then
     waiting=()
     for d in $(held_runs "$p"); do saved_since "$d" "$since" || waiting+=("$(basename "$d")"); done
     if [ "${#waiting[@]}" = 0 ]; then
-      echo "campaign: every run of $queue has snapshotted since $(date -d "@$since" +%H:%M:%S)"
+      echo "campaign: every run of $queue has snapshotted since $(date -d "@$since" +%H:%M:%S) or has just started"
       # A retrain line archives itself in the moments after its second seed: let it.
       sleep "${CAMPAIGN_GRACE:-3}"
       break

@@ -36,8 +36,10 @@ if "--config" in args:
 stopped = []
 signal.signal(signal.SIGINT, lambda *_: stopped.append(1))
 hold = os.environ.get("FAKE_HOLD", "")
-# While it holds, a file FAKE_HOLD.snap makes it write a snapshot (and delete the file).
-while hold and os.path.exists(hold) and not stopped:
+# While it holds, a file FAKE_HOLD.snap makes it write a snapshot (and delete the file), and a
+# file FAKE_HOLD.done-NAME (NAME: the run directory's) ends the run named.
+done = hold + ".done-" + os.path.basename(os.path.normpath(out))
+while hold and os.path.exists(hold) and not os.path.exists(done) and not stopped:
     if os.path.exists(hold + ".snap"):
         snap = os.path.join(out, "snapshots", f"snap-{time.time_ns():020}")
         os.makedirs(snap)
@@ -311,11 +313,44 @@ fn a_stop_at_snapshot_waits_for_a_new_one_or_the_deadline() {
     // Started again: no new snapshot comes; the deadline stops the queue.
     let mut second = Running(t.campaign(&["q.queue"]).spawn().expect("starting the queue again"), t.hold.clone());
     wait_for("the resumed run", || t.status().contains("running  alpha-seed1"));
+    // Past the second its lane took it in: a run started since the call counts as just started.
+    std::thread::sleep(Duration::from_millis(1100));
     let stop = t.campaign(&["--stop-at-snapshot", "q.queue", "now + 2 seconds"]).env("CAMPAIGN_POLL", "0.2").output().expect("stopper");
     assert!(stop.status.success() && text(&stop).contains("deadline; no new snapshot yet of alpha-seed1"), "{}", text(&stop));
     assert_eq!(second.exit_code(), Some(130));
     let none = t.run(&["--stop-at-snapshot", "q.queue"]);
     assert!(!none.status.success() && text(&none).contains("no campaign of q.queue is running"), "{}", text(&none));
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// A line that starts between two polls of `--stop-at-snapshot`, as the one before it ends,
+/// has nothing to lose: the queue stops at the next poll, not at the deadline.
+#[test]
+fn a_stop_at_snapshot_does_not_wait_for_a_line_that_has_just_started() {
+    let t = Tree::new("at-snapshot-next");
+    std::fs::write(&t.hold, "").expect("the hold file");
+    let mut queue = Running(t.campaign(&["-j", "1", "q.queue"]).spawn().expect("starting the queue"), t.hold.clone());
+    wait_for("alpha", || t.status().contains("running  alpha-seed1"));
+    std::thread::sleep(Duration::from_millis(1100));
+    let started = Instant::now();
+    let mut stopper = t
+        .campaign(&["--stop-at-snapshot", "q.queue", "now + 40 seconds"])
+        .env("CAMPAIGN_POLL", "2")
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("the stopper");
+    std::thread::sleep(Duration::from_millis(500));
+    // alpha ends (it took no snapshot: the stopper waited for it) and beta starts.
+    std::fs::write(t.hold.with_file_name("hold.done-alpha-seed1"), "").expect("ending alpha");
+    wait_for("beta", || t.status().contains("running  beta-seed2"));
+    let out = stopper.wait_with_output().expect("the stopper");
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(text(&out).contains("has snapshotted since") && text(&out).contains("or has just started"), "{}", text(&out));
+    assert!(started.elapsed() < Duration::from_secs(20), "it waited {:?} for beta's first snapshot", started.elapsed());
+    assert_eq!(queue.exit_code(), Some(130), "a stopped queue exits 130");
+    assert!(t.path("docs/campaign/results/alpha-seed1/summary.json").exists(), "alpha, finished, was not archived");
+    let status = t.status();
+    assert!(status.contains("1 archived") && status.contains("stopped  beta-seed2"), "{status}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
