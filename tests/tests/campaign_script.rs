@@ -333,7 +333,7 @@ fn a_stop_at_snapshot_does_not_wait_for_a_line_that_has_just_started() {
     wait_for("alpha", || t.status().contains("running  alpha-seed1"));
     std::thread::sleep(Duration::from_millis(1100));
     let started = Instant::now();
-    let mut stopper = t
+    let stopper = t
         .campaign(&["--stop-at-snapshot", "q.queue", "now + 40 seconds"])
         .env("CAMPAIGN_POLL", "2")
         .stdout(std::process::Stdio::piped())
