@@ -12,7 +12,10 @@ n stated):
   * designs to R: the designs (prototypes) played up to and including that episode;
   * best evaluation return of the run, and the quality of the chosen designs (the mean best
     evaluation return of the exploitation designs);
-and, paired by seed, transfer minus scratch for each (episodes to R only where both reached it;
+and the simulator gap: `mujoco-transfer-seed<k>` (MuJoCo's cheetah through the bridge, from the
+same sources) against `mujoco-bench-fear-seed<k>` (the design benchmark's FEAR runs of it, the
+same config and seed from scratch), as the last target world. Then, paired by seed, transfer
+minus scratch for each (episodes to R only where both reached it;
 a run that did not reach R counts as its length, marked "≥"). Pure Python, no packages.
 """
 import csv
@@ -30,14 +33,31 @@ def flag(name, default):
     return default
 
 
+# The simulator gap's target world: MuJoCo's cheetah through the bridge. Its transfer arm is
+# `mujoco-transfer-seed<k>` (from `transfer-src-seed<k>`), its from-scratch arm the design
+# benchmark's `mujoco-bench-fear-seed<k>` (the same config and seed without the copied networks).
+MUJOCO = "MuJoCo"
+
+
 def runs(root):
     pat = re.compile(r"^(transfer|scratch)-f([0-9.]+)-seed(\d+)$")
+    gap = re.compile(r"^mujoco-(transfer|bench-fear)-seed(\d+)$")
     out = {}
     for name in sorted(os.listdir(root)):
+        if not os.path.isfile(os.path.join(root, name, "summary.json")):
+            continue
         m = pat.match(name)
-        if m and os.path.isfile(os.path.join(root, name, "summary.json")):
+        if m:
             out[(m.group(1), float(m.group(2)), int(m.group(3)))] = os.path.join(root, name)
+        m = gap.match(name)
+        if m:
+            arm = "transfer" if m.group(1) == "transfer" else "scratch"
+            out[(arm, MUJOCO, int(m.group(2)))] = os.path.join(root, name)
     return out
+
+
+def world(y):
+    return y if y == MUJOCO else f"{y:g}"
 
 
 def read(path, target):
@@ -71,7 +91,7 @@ def main():
         sys.exit(__doc__)
     root = sys.argv[1]
     target = float(flag("--target", "300"))
-    frictions = [float(x) for x in flag("--frictions", "0.1,0.2,0.8,1.6").split(",")]
+    frictions = [float(x) for x in flag("--frictions", "0.1,0.2,0.8,1.6").split(",")] + [MUJOCO]
     found = runs(root)
     data = {k: read(p, target) for k, p in found.items()}
     sources = sorted(n for n in os.listdir(root) if re.match(r"^transfer-src-seed\d+$", n) and os.path.isfile(os.path.join(root, n, "summary.json")))
@@ -82,26 +102,26 @@ def main():
         reached = r["reached"] or ("not reached", "-")
         print(f"| {n} | {r['designs']} | {reached[0]} | {reached[1]} | {r['best']:.1f} | {r['quality']:.1f} |")
     print()
-    print(f"| target friction | arm | seeds | reached {target:g} | episodes to {target:g} | designs to {target:g} | best eval return | quality of chosen designs |")
+    print(f"| target world (friction, or {MUJOCO}'s cheetah) | arm | seeds | reached {target:g} | episodes to {target:g} | designs to {target:g} | best eval return | quality of chosen designs |")
     print("|---|---|---|---|---|---|---|---|")
     for y in frictions:
         for arm in ("transfer", "scratch"):
-            rs = [v for (a, f, _), v in sorted(data.items()) if a == arm and f == y]
+            rs = [v for (a, f, s), v in sorted(data.items(), key=lambda kv: kv[0][2]) if a == arm and f == y]
             if not rs:
-                print(f"| {y:g} | {arm} | 0 | - | - | - | - | - |")
+                print(f"| {world(y)} | {arm} | 0 | - | - | - | - | - |")
                 continue
             hit = [r for r in rs if r["reached"]]
             print(
-                f"| {y:g} | {arm} | {len(rs)} | {len(hit)}/{len(rs)} | {spread([r['reached'][0] for r in hit])} | "
+                f"| {world(y)} | {arm} | {len(rs)} | {len(hit)}/{len(rs)} | {spread([r['reached'][0] for r in hit])} | "
                 f"{spread([r['reached'][1] for r in hit])} | {spread([r['best'] for r in rs])} | {spread([r['quality'] for r in rs])} |"
             )
     print()
-    print("| target friction | pairs (by seed) | transfer minus scratch: episodes to target | designs to target | best eval return | quality of chosen designs |")
+    print("| target world | pairs (by seed) | transfer minus scratch: episodes to target | designs to target | best eval return | quality of chosen designs |")
     print("|---|---|---|---|---|---|")
     for y in frictions:
         seeds = sorted({s for (a, f, s) in data if f == y and ("transfer", y, s) in data and ("scratch", y, s) in data})
         if not seeds:
-            print(f"| {y:g} | 0 | - | - | - | - |")
+            print(f"| {world(y)} | 0 | - | - | - | - |")
             continue
         t = [data[("transfer", y, s)] for s in seeds]
         c = [data[("scratch", y, s)] for s in seeds]
@@ -111,7 +131,7 @@ def main():
         censored = any(not (a["reached"] and b["reached"]) for a, b in zip(t, c))
         mark = " (≥: a run did not reach it)" if censored else ""
         print(
-            f"| {y:g} | {len(seeds)} | {spread(ep, '+')}{mark} | {spread(de, '+')} | "
+            f"| {world(y)} | {len(seeds)} | {spread(ep, '+')}{mark} | {spread(de, '+')} | "
             f"{spread([a['best'] - b['best'] for a, b in zip(t, c)], '+')} | {spread([a['quality'] - b['quality'] for a, b in zip(t, c)], '+')} |"
         )
 
