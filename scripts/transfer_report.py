@@ -91,7 +91,8 @@ def main():
         sys.exit(__doc__)
     root = sys.argv[1]
     target = float(flag("--target", "300"))
-    frictions = [float(x) for x in flag("--frictions", "0.1,0.2,0.8,1.6").split(",")] + [MUJOCO]
+    # Target worlds: the frictions asked for, then the simulator gap.
+    worlds = [float(x) for x in flag("--frictions", "0.1,0.2,0.8,1.6").split(",")] + [MUJOCO]
     found = runs(root)
     data = {k: read(p, target) for k, p in found.items()}
     sources = sorted(n for n in os.listdir(root) if re.match(r"^transfer-src-seed\d+$", n) and os.path.isfile(os.path.join(root, n, "summary.json")))
@@ -104,9 +105,9 @@ def main():
     print()
     print(f"| target world (friction, or {MUJOCO}'s cheetah) | arm | seeds | reached {target:g} | episodes to {target:g} | designs to {target:g} | best eval return | quality of chosen designs |")
     print("|---|---|---|---|---|---|---|---|")
-    for y in frictions:
+    for y in worlds:
         for arm in ("transfer", "scratch"):
-            rs = [v for (a, f, s), v in sorted(data.items(), key=lambda kv: kv[0][2]) if a == arm and f == y]
+            rs = [v for (a, f, _), v in sorted(data.items(), key=lambda kv: kv[0][2]) if a == arm and f == y]
             if not rs:
                 print(f"| {world(y)} | {arm} | 0 | - | - | - | - | - |")
                 continue
@@ -118,7 +119,7 @@ def main():
     print()
     print("| target world | pairs (by seed) | transfer minus scratch: episodes to target | designs to target | best eval return | quality of chosen designs |")
     print("|---|---|---|---|---|---|")
-    for y in frictions:
+    for y in worlds:
         seeds = sorted({s for (a, f, s) in data if f == y and ("transfer", y, s) in data and ("scratch", y, s) in data})
         if not seeds:
             print(f"| {world(y)} | 0 | - | - | - | - |")
