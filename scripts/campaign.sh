@@ -158,7 +158,7 @@ echo $$ > "$pidfile"
 main_pid=$$
 stopflag=${pidfile%.pid}.stopping
 # Only this shell removes the files (the lanes are subshells of it).
-trap '[ "$BASHPID" = "$main_pid" ] && rm -f "$pidfile" "$stopflag"' EXIT
+trap '[ "$BASHPID" = "$main_pid" ] && rm -f "$pidfile" "$stopflag" "$stopflag.signalled"' EXIT
 # A private copy: rebuilding the workspace during the campaign does not touch running runs.
 # BIN=path runs that binary instead of building the checkout: a queue whose runs must be made by
 # an older build (say, before a change to a robot) names it in its header. Its copy is named after
@@ -172,6 +172,40 @@ else
   cargo build --release -q -p coadapt
   cp target/release/coadapt "$bin.new.$$" && mv "$bin.new.$$" "$bin"
 fi
+
+# Whether process PID has a handler for SIGINT (bit 2 of SigCgt). Until a run has put its handler
+# in place, SIGINT has its default action there (this script traps SIGINT, so its background jobs
+# do not ignore it): the run would die at once, without a snapshot, and count as failed.
+catches_int() {
+  local mask
+  mask=$(awk '/^SigCgt:/ { print $2 }' "/proc/$1/status" 2> /dev/null) || return 1
+  [ -n "$mask" ] && (( 16#$mask & 2 ))
+}
+
+# Runs a binary ("$@", its output where the caller sends it) for a lane so that a stop reaches
+# it wherever the stop lands. Stopped before it starts, it does not start (and says so as a
+# stopped run does: "interrupted": true). Started after the queue signalled its processes (the
+# stop landed between the lane's last look at the flag and the start, as at a fork's hand-off),
+# or still without its handler when the stop came, it is not in the stop's list of processes
+# signalled: the lane sends it SIGINT itself once it has a handler, once only (a second SIGINT
+# aborts a run).
+lane_exec() {
+  if [ -e "$stopflag" ]; then echo '{"interrupted": true, "started": false}'; return 0; fi
+  "$@" &
+  local pid=$! sent=""
+  while [ -e "/proc/$pid" ] && [ "$(sed -E 's/.*\) ([A-Za-z]).*/\1/' "/proc/$pid/stat" 2> /dev/null)" != Z ]; do
+    if [ -z "$sent" ] && [ -e "$stopflag.signalled" ]; then
+      if grep -qx "$pid" "$stopflag.signalled"; then
+        sent=yes
+      elif catches_int "$pid"; then
+        kill -INT "$pid" 2> /dev/null || true
+        sent=yes
+      fi
+    fi
+    sleep 1
+  done
+  wait "$pid"
+}
 
 archive_run() {
   local dir=$1 archive=$2 t0=$3
@@ -223,7 +257,7 @@ retrain_one() {
   for k in 1 2; do
     if [ -s "$dir/train-seed$k/summary.json" ]; then continue; fi
     rm -rf "$dir/train-seed$k"
-    if RAYON_NUM_THREADS=$threads "$bin" train --env "$env" --algo sac --design "$design" "${steps[@]}" --seed "$k" --quiet \
+    if RAYON_NUM_THREADS=$threads lane_exec "$bin" train --env "$env" --algo sac --design "$design" "${steps[@]}" --seed "$k" --quiet \
         --out "$dir/train-seed$k" "$@" > "$dir/train-seed$k.summary" 2>> "$dir.log"; then
       # Stopped by Ctrl-C (exit 0, "interrupted": true): not done; trained again from the start.
       if grep -Eq '"interrupted": *true' "$dir/train-seed$k.summary"; then
@@ -282,7 +316,7 @@ regenerate_prefix() {
   local mode=(--config "$srcarch/config.toml" --seed "$seed" --designs "$k" --out "$tmp")
   if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then mode=(--resume "$tmp"); else rm -rf "$tmp"; fi
   echo "campaign: $srcdir is archived but gone: running its first $k designs again for the runs that start from it, into $tmp ($(date -u +%H:%M:%S))"
-  if ! RAYON_NUM_THREADS=$threads "$bin" run "${mode[@]}" --transport in-process > "$tmp.summary" 2>> "$tmp.log"; then
+  if ! RAYON_NUM_THREADS=$threads lane_exec "$bin" run "${mode[@]}" --transport in-process > "$tmp.summary" 2>> "$tmp.log"; then
     rm -rf "$lock"
     echo "campaign: FAILED $tmp (see $tmp.log)" >&2
     return 1
@@ -421,7 +455,7 @@ run_one() {
   if [ -n "$resume" ]; then
     echo "campaign: resume $dir ($(date -u +%H:%M:%S))"
     local t0=$SECONDS
-    if RAYON_NUM_THREADS=$threads "$bin" run --resume "$dir" --transport in-process > "$dir.summary.tmp" 2>> "$dir.log"; then
+    if RAYON_NUM_THREADS=$threads lane_exec "$bin" run --resume "$dir" --transport in-process > "$dir.summary.tmp" 2>> "$dir.log"; then
       archive_run "$dir" "$archive" "$t0"
     else
       echo "campaign: FAILED $dir after $((SECONDS - t0)) s (see $dir.log)" >&2
@@ -446,7 +480,7 @@ run_one() {
   fi
   echo "campaign: start $dir ($(date -u +%H:%M:%S))"
   local t0=$SECONDS
-  if RAYON_NUM_THREADS=$threads "$bin" run --config "$config" --seed "$seed" --out "$dir" --transport in-process "$@" \
+  if RAYON_NUM_THREADS=$threads lane_exec "$bin" run --config "$config" --seed "$seed" --out "$dir" --transport in-process "$@" \
       > "$dir.summary.tmp" 2> "$dir.log"; then
     archive_run "$dir" "$archive" "$t0"
   else
@@ -454,15 +488,25 @@ run_one() {
   fi
 }
 
-# Ctrl-C or a TERM to this script stops the queue, not only the run in hand: every process
-# below it gets SIGINT (a run snapshots and exits; the lanes' subshells, started in the
-# background, ignore it and see their run end) and no further line starts. Signal this script's
+# Ctrl-C or a TERM to this script stops the queue, not only the run in hand: every run below it
+# gets SIGINT (it snapshots and exits; the lanes' subshells see their run end), a run that starts
+# or hears it late gets it from its lane (lane_exec), and no further line starts. Signal this script's
 # pid alone: `pkill -f campaign.sh` would also hit the lanes' subshells, which share its command
 # line and die of a TERM, leaving their runs going.
 descendants() { local c; for c in $(pgrep -P "$1"); do echo "$c"; descendants "$c"; done; }
 stopping=0
-rm -f "$stopflag"
-trap 'stopping=1; touch "$stopflag"; for p in $(descendants $$); do kill -INT "$p" 2>/dev/null || true; done' INT TERM
+# The processes signalled are listed (written whole, then renamed into place) before any is
+# signalled: a lane whose run is not in the list knows the stop has not reached it (lane_exec).
+# Only processes with a handler are signalled: a run without one yet would die of it.
+stop_descendants() {
+  local p caught=()
+  for p in $(descendants $$); do catches_int "$p" && caught+=("$p"); done
+  printf '%s\n' "${caught[@]}" > "$stopflag.signalled.tmp"
+  mv "$stopflag.signalled.tmp" "$stopflag.signalled"
+  for p in "${caught[@]}"; do kill -INT "$p" 2> /dev/null || true; done
+}
+rm -f "$stopflag" "$stopflag.signalled"
+trap 'stopping=1; touch "$stopflag"; stop_descendants' INT TERM
 start_fork_watchers
 running=0
 while read -r name config seed rest; do

@@ -34,6 +34,10 @@ if "--config" in args:
         os.makedirs(snap, exist_ok=True)
         json.dump({"values": {"progress": {"design": designs, "in_design": None}}}, open(os.path.join(snap, "state.json"), "w"))
 stopped = []
+# FAKE_HANDLER_DELAY seconds without a SIGINT handler (Python's own put back to the default),
+# as a Rust run before it installs its own: a SIGINT then ends it at once, as failed.
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+time.sleep(float(os.environ.get("FAKE_HANDLER_DELAY", "0")))
 signal.signal(signal.SIGINT, lambda *_: stopped.append(1))
 hold = os.environ.get("FAKE_HOLD", "")
 # While it holds, a file FAKE_HOLD.snap makes it write a snapshot (and delete the file), and a
@@ -281,6 +285,28 @@ fn a_stop_reaches_a_lane_waiting_for_its_fork() {
     let stop = t.run(&["--stop", "q.queue"]);
     assert!(stop.status.success(), "{}", text(&stop));
     assert_eq!(first.exit_code(), Some(130), "a stopped queue exits 130");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// A stop that lands before a run has its SIGINT handler in place (as when a run starts just as
+/// the queue is stopped: at a fork's hand-off, or loading its snapshot) stops it cleanly: the stop
+/// signals only processes with a handler (SIGINT's default action would kill the run without a
+/// snapshot), and the lane, finding its run missing from the list, signals it once its handler
+/// is there. The run reports itself interrupted, is not archived, and the queue exits 130.
+#[test]
+fn a_stop_before_a_run_can_hear_it_still_stops_the_run() {
+    let t = Tree::new("late-handler");
+    std::fs::write(&t.hold, "").expect("the hold file");
+    std::fs::write(t.path("q.queue"), "alpha cfg.toml 1\n").expect("queue");
+    let mut queue = Running(t.campaign(&["q.queue"]).env("FAKE_HANDLER_DELAY", "3").spawn().expect("starting the queue"), t.hold.clone());
+    // The fake writes its files before it waits without a handler.
+    wait_for("the run to start", || t.path("runs/campaign/alpha-seed1/episodes.csv").exists());
+    let stop = t.run(&["--stop", "q.queue"]);
+    assert!(stop.status.success(), "{}", text(&stop));
+    assert_eq!(queue.exit_code(), Some(130), "a stopped queue exits 130");
+    let interrupted = std::fs::read_to_string(t.path("runs/campaign/alpha-seed1.interrupted.json")).expect("the run's interrupted summary");
+    assert!(interrupted.contains("\"interrupted\": true"), "{interrupted}");
+    assert!(!t.path("docs/campaign/results/alpha-seed1").exists(), "a stopped run was archived");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
