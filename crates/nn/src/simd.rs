@@ -60,7 +60,9 @@ pub(crate) fn interleave_lines(src: &[f32], place: (usize, usize, usize), lines:
 /// `d[i] = 0` where `h[i] <= 0` (ReLU's backward pass; a NaN `h` keeps its `d`; +0.0 where
 /// zeroed). A blend and a plain store: written in Rust as a conditional store, a select or a bit
 /// mask, it compiled to masked stores (`vmaskmovps`, `vpmaskmovd`), which AMD's Zen 4 runs so
-/// slowly that the loop took 6 % of a SAC update.
+/// slowly that the loop took 6 % of a SAC update; and, on a CPU without AVX-512 (AMD EPYC, Zen 3),
+/// to a compare and a branch per value, which mispredicts on ReLU's half-random mask: 17 % of a
+/// Hopper run's time (perf, 2026-12-02). Hence AVX-512 where the CPU has it, else AVX2.
 pub fn relu_backward(d: &mut [f32], h: &[f32]) {
     let mut done = 0;
     #[cfg(target_arch = "x86_64")]
@@ -69,6 +71,14 @@ pub fn relu_backward(d: &mut [f32], h: &[f32]) {
         // SAFETY: the CPU has avx512f; the function stays inside both slices.
         {
             done = unsafe { avx512::relu_backward(d, h) };
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    if done == 0 && std::arch::is_x86_feature_detected!("avx2") {
+        #[allow(unsafe_code)] // see the module avx2
+        // SAFETY: the CPU has avx2; the function stays inside both slices.
+        {
+            done = unsafe { avx2::relu_backward(d, h) };
         }
     }
     for (d, &h) in d.iter_mut().zip(h).skip(done) {
@@ -92,7 +102,7 @@ pub(crate) fn copy_short(src: &[f32], dst: &mut [f32]) {
     dst.copy_from_slice(src);
 }
 
-/// The intrinsics behind the helpers above. With `bf16/avx512.rs`, the workspace's only unsafe
+/// The AVX-512 intrinsics behind the helpers above. With `bf16/avx512.rs`, the workspace's only unsafe
 /// code (see there).
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
@@ -234,6 +244,32 @@ mod avx512 {
     }
 }
 
+/// ReLU's backward pass with AVX2, for CPUs without AVX-512. The same safety rules as `avx512`.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+mod avx2 {
+    use std::arch::x86_64::*;
+
+    /// `d[i] = 0` where `h[i] <= 0` over whole blocks of 8 (a compare, an AND, a plain store);
+    /// returns the values done.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn relu_backward(d: &mut [f32], h: &[f32]) -> usize {
+        let blocks = d.len().min(h.len()) / 8;
+        let zero = _mm256_setzero_ps();
+        for q in 0..blocks {
+            // SAFETY: values 8 q .. 8 q + 8 of both slices exist (blocks bounds both).
+            unsafe {
+                let hv = _mm256_loadu_ps(h.as_ptr().add(8 * q));
+                // keep where !(h <= 0) (all ones), else +0.0: a NaN h keeps its d.
+                let keep = _mm256_cmp_ps::<_CMP_NLE_UQ>(hv, zero);
+                let dv = _mm256_loadu_ps(d.as_ptr().add(8 * q));
+                _mm256_storeu_ps(d.as_mut_ptr().add(8 * q), _mm256_and_ps(keep, dv));
+            }
+        }
+        8 * blocks
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -263,7 +299,7 @@ mod tests {
 
     #[test]
     fn relu_backward_zeroes_exactly_where_the_output_was_not_positive() {
-        for n in [0usize, 5, 16, 37] {
+        for n in [0usize, 5, 8, 13, 16, 37] {
             let h: Vec<f32> = (0..n).map(|i| [1.0, 0.0, -0.0, -2.0, f32::NAN, 3e-38][i % 6]).collect();
             let mut d: Vec<f32> = (0..n).map(|i| i as f32 - 7.5).collect();
             let want: Vec<f32> = d.iter().zip(&h).map(|(&d, &h)| if h <= 0.0 { 0.0 } else { d }).collect();
