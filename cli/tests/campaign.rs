@@ -36,7 +36,7 @@ fn a_real_run_is_archived_with_its_scalars_and_forked_after_its_directory_is_gon
     let root = base.join("checkout");
     std::fs::create_dir_all(root.join("scripts")).expect("temp tree");
     std::fs::create_dir_all(root.join("configs")).expect("temp tree");
-    for s in ["campaign.sh", "fork_run.sh", "config_with.py", "tb_scalars.py"] {
+    for s in ["campaign.sh", "campaign_lines.sh", "fork_run.sh", "config_with.py", "tb_scalars.py"] {
         std::fs::copy(repo().join("scripts").join(s), root.join("scripts").join(s)).expect("copying the scripts");
     }
     std::fs::copy(repo().join("configs/half-cheetah-tiny.toml"), root.join("configs/half-cheetah-tiny.toml")).expect("the tiny config");
