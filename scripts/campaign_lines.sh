@@ -73,6 +73,37 @@ take_lock() {
   echo "$BASHPID" > "$lock/pid"
 }
 
+# A run directory here that is the same run as archived SRC-seedSEED over its first K designs,
+# with a snapshot to go on from, so that running SRC again need not start over: another line's
+# run of the same config and seed (transfer-src-seedS is hc-fear-seedS, all 260 rows equal) whose
+# archive holds the same rows over those designs, whose config runs K designs, which no lane
+# holds, and whose newest snapshot is at or before design K. Prints its path. The rows of the
+# run that results are checked against SRC's archive all the same (regenerate_prefix).
+same_run() {
+  local src=$1 seed=$2 k=$3 d
+  for d in "$root"/*-seed"$seed"; do
+    if [ ! -d "$d" ] || [ "$d" = "$root/$src-seed$seed" ] || [ -d "$d.lock" ]; then continue; fi
+    compgen -G "$d/snapshots/snap-*" > /dev/null || continue
+    if python3 - "$d" "docs/campaign/results/$(basename "$d")" "docs/campaign/results/$src-seed$seed" "$k" 2> /dev/null <<'PY'
+import csv, glob, json, sys, tomllib
+d, twin, src, k = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+cols = ("design", "episode", "return", "eval_return")
+def rows(p):
+    return [tuple(r[c] for c in cols) for r in csv.DictReader(open(p)) if int(r["design"]) < k]
+a, b = rows(f"{twin}/episodes.csv"), rows(f"{src}/episodes.csv")
+designs = tomllib.load(open(f"{d}/config.toml", "rb"))["schedule"]["designs"]
+newest = sorted(glob.glob(f"{d}/snapshots/snap-*"))[-1]
+at = json.load(open(f"{newest}/state.json"))["values"]["progress"]["design"]
+sys.exit(0 if a and a == b and designs == k and at <= k else 1)
+PY
+    then
+      echo "$d"
+      return 0
+    fi
+  done
+  return 1
+}
+
 # A fork's source that is archived but whose run directory is gone (runs/ of another machine,
 # or cleared): its first K designs are run again from the archived config into SRC.prefix, the
 # rows checked against the archive's, and only then moved to SRC's place for the watchers to
@@ -87,7 +118,17 @@ regenerate_prefix() {
   local lock=$srcdir.prefix.lock
   take_lock "$lock" || return 0
   local mode=(--config "$srcarch/config.toml" --seed "$seed" --designs "$k" --out "$tmp")
-  if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then mode=(--resume "$tmp"); else rm -rf "$tmp"; fi
+  if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then
+    mode=(--resume "$tmp")
+  else
+    rm -rf "$tmp"
+    local twin
+    if twin=$(same_run "$src" "$seed" "$k"); then
+      cp -a "$twin" "$tmp"
+      mode=(--resume "$tmp")
+      echo "campaign: $tmp starts from a copy of $twin, the same run (archived rows equal over its first $k designs), at its newest snapshot"
+    fi
+  fi
   echo "campaign: $srcdir is archived but gone: running its first $k designs again for the runs that start from it, into $tmp ($(date -u +%H:%M:%S))"
   if ! RAYON_NUM_THREADS=$threads lane_exec "$bin" run "${mode[@]}" --transport in-process > "$tmp.summary" 2>> "$tmp.log"; then
     rm -rf "$lock"

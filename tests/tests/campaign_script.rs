@@ -186,6 +186,43 @@ fn an_init_population_source_that_is_gone_is_run_again() {
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
+/// A source to run again whose twin is here (another line's run of the same config and seed, its
+/// archive the same rows, as transfer-src is hc-fear): the run goes on from a copy of the twin's
+/// newest snapshot instead of starting over, and is checked against the source's archive all the
+/// same; a directory whose archived rows differ is not taken.
+#[test]
+fn a_source_run_again_goes_on_from_the_same_run_of_another_line() {
+    let t = Tree::new("twin");
+    t.archive_source(3);
+    for (name, shift) in [("other", 1), ("twin", 0)] {
+        let rows: String = (0..3).flat_map(|d| (0..2).map(move |e| format!("{d},{e},{},{}\n", 10 * d + e + shift, 10 * d + e))).collect();
+        let rows = format!("design,episode,return,eval_return\n{rows}");
+        let arch = t.path(&format!("docs/campaign/results/{name}-seed1"));
+        std::fs::create_dir_all(&arch).expect("archive");
+        std::fs::write(arch.join("episodes.csv"), &rows).expect("rows");
+        std::fs::write(arch.join("summary.json"), "{\"interrupted\": false, \"designs\": 3}").expect("summary");
+        // Its run directory: a run of 3 designs with a snapshot at design 2.
+        let dir = t.path(&format!("runs/campaign/{name}-seed1"));
+        let snap = dir.join("snapshots/snap-00000002");
+        std::fs::create_dir_all(&snap).expect("snapshot");
+        std::fs::write(snap.join("state.json"), r#"{"values": {"progress": {"design": 2, "in_design": null}}}"#).expect("state");
+        std::fs::write(dir.join("config.toml"), "[schedule]\ndesigns = 3\n").expect("config");
+        std::fs::write(dir.join("episodes.csv"), &rows).expect("rows");
+        std::fs::write(dir.join("designs.csv"), format!("{name}'s designs\n")).expect("designs");
+    }
+    std::fs::write(t.path("q.queue"), "tgt cfg.toml 1 --init-population runs/campaign/src-seed1\n").expect("queue");
+    let done = t.run(&["-j", "1", "q.queue"]);
+    let out = text(&done);
+    assert!(done.status.success(), "{out}");
+    assert!(out.contains("starts from a copy of runs/campaign/twin-seed1"), "{out}");
+    assert!(!out.contains("copy of runs/campaign/other-seed1"), "{out}");
+    assert!(out.contains("first 3 designs again, row for row the archived ones"), "{out}");
+    let designs = std::fs::read_to_string(t.path("runs/campaign/src-seed1/designs.csv")).expect("the source again");
+    assert_eq!(designs, "twin's designs\n", "the source was run from the start, not from its twin");
+    assert!(t.path("docs/campaign/results/tgt-seed1/summary.json").exists(), "the line did not run: {out}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
 /// Two queues that share a line (as seed3.queue shares design-bench's): while one runs it, the
 /// other skips it, and once it is done, nobody runs it again; the lock goes with the lane.
 #[test]
