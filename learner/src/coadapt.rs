@@ -94,9 +94,10 @@ pub struct ScheduleConfig {
     pub reset_needs_confirmation: bool,
     /// How often a waiting run looks for the operator's answer (seconds).
     pub confirm_poll_secs: f64,
-    /// Send a design request again when no reply has come for this long (seconds): an
-    /// optimiser that died with the request is restarted and answers the copy (one that is
-    /// only slow answers the copy from its stored replies, without a second search).
+    /// Send a design request again when no reply has come for this long (seconds), then after
+    /// twice as long each time, up to 16 times this: an optimiser that died with the request is
+    /// restarted and answers the copy (one that is only slow answers the copy from its stored
+    /// replies, without a second search).
     pub design_request_resend_secs: f64,
     /// Fail the run when a design request has had no reply for this long (seconds).
     pub design_request_timeout_secs: f64,

@@ -19,10 +19,16 @@ use coadapt_transport::{DesignReply, in_process, next_or_stop};
 
 const HIDDEN: [usize; 1] = [16];
 
-#[test]
-fn out_of_box_and_row_forging_replies_are_refused_and_the_run_goes_on() {
+/// The optimiser's reply (design, method) to copy `n` of the request, given the design box's
+/// low and high corners.
+type Answer = dyn Fn(usize, &[f32], &[f32]) -> (Vec<f32>, String) + Sync;
+
+/// Runs a 2-design Pendulum co-adaptation whose design requests are answered by `answer`
+/// with `resend_secs` as the resend setting; gives the outcome, the run's directory and the
+/// copies of the request the optimiser received.
+fn run_against(name: &str, resend_secs: f64, answer: &Answer) -> (coadapt::RunOutcome, std::path::PathBuf, usize) {
     let spec = coadapt_robots::make("pendulum").unwrap().spec().clone();
-    let dir = std::env::temp_dir().join(format!("coadapt-hostile-opt-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("coadapt-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let schedule = ScheduleConfig {
         designs: 2,
@@ -31,7 +37,7 @@ fn out_of_box_and_row_forging_replies_are_refused_and_the_run_goes_on() {
         episodes_per_design: 1,
         start_state_batch: 4,
         episode_timeout_secs: 30.0,
-        design_request_resend_secs: 0.2,
+        design_request_resend_secs: resend_secs,
         design_request_timeout_secs: 30.0,
         ..ScheduleConfig::default()
     };
@@ -48,9 +54,8 @@ fn out_of_box_and_row_forging_replies_are_refused_and_the_run_goes_on() {
     let (mut learner, mut actors, mut optimizer) = in_process::fleet(1);
     let shutdown = AtomicBool::new(false);
     let requests = Mutex::new(0usize);
-    let good = vec![spec.design.low[0] + 0.1, spec.design.high[1] - 0.1];
     let outcome = std::thread::scope(|s| {
-        let (spec, shutdown, requests, good) = (&spec, &shutdown, &requests, &good);
+        let (spec, shutdown, requests) = (&spec, &shutdown, &requests);
         let mut links = actors.pop().unwrap();
         s.spawn(move || {
             let policy = networks::gaussian_policy(spec.obs_dim(), spec.act_dim(), &HIDDEN).unwrap();
@@ -58,19 +63,13 @@ fn out_of_box_and_row_forging_replies_are_refused_and_the_run_goes_on() {
             coadapt_actors::role::run(&mut actor, 0, &mut links, 50, 0, shutdown).unwrap();
         });
         s.spawn(move || {
-            // Every copy of the request gets the next reply of this list.
-            let mut outside = good.clone();
-            outside[0] = spec.design.high[0] * 10.0;
-            let replies = [
-                (outside, "pso-q".to_string()),
-                (good.clone(), "pso-q\n7,exploit,1;1,999,1e9,1e9,,0,forged,".to_string()),
-                (good.clone(), "pso-q,extra".to_string()),
-                (good.clone(), "pso-q".to_string()),
-            ];
             while let Some(req) = next_or_stop(optimizer.requests.as_mut(), shutdown).unwrap() {
-                let mut n = requests.lock().unwrap();
-                let (design, method) = replies[(*n).min(3)].clone();
-                *n += 1;
+                let n = {
+                    let mut n = requests.lock().unwrap();
+                    *n += 1;
+                    *n - 1
+                };
+                let (design, method) = answer(n, &spec.design.low, &spec.design.high);
                 optimizer
                     .replies
                     .send(DesignReply { index: req.index, design, method, predicted_objective: None, design_rollouts: 0 })
@@ -95,15 +94,60 @@ fn out_of_box_and_row_forging_replies_are_refused_and_the_run_goes_on() {
         outcome
     })
     .unwrap();
+    let n = *requests.lock().unwrap();
+    (outcome, dir, n)
+}
+
+fn good(low: &[f32], high: &[f32]) -> Vec<f32> {
+    vec![low[0] + 0.1, high[1] - 0.1]
+}
+
+#[test]
+fn out_of_box_and_row_forging_replies_are_refused_and_the_run_goes_on() {
+    // Every copy of the request gets the next reply of this list.
+    let answer = |n: usize, low: &[f32], high: &[f32]| {
+        let good = good(low, high);
+        let mut outside = good.clone();
+        outside[0] = high[0] * 10.0;
+        let replies = [
+            (outside, "pso-q".to_string()),
+            (good.clone(), "pso-q\n7,exploit,1;1,999,1e9,1e9,,0,forged,".to_string()),
+            (good.clone(), "pso-q,extra".to_string()),
+            (good, "pso-q".to_string()),
+        ];
+        replies[n.min(3)].clone()
+    };
+    let (outcome, dir, _) = run_against("hostile-opt", 0.2, &answer);
+    let spec = coadapt_robots::make("pendulum").unwrap().spec().clone();
     assert!(!outcome.interrupted);
     assert_eq!(outcome.designs.len(), 2);
-    assert_eq!(outcome.designs[1].design, good, "the run trained on the good reply");
+    assert_eq!(outcome.designs[1].design, good(&spec.design.low, &spec.design.high), "the run trained on the good reply");
     assert_eq!(outcome.designs[1].method, "pso-q");
     assert_eq!(outcome.time.design_replies_refused, 3, "{:?}", outcome.time);
     assert_eq!(outcome.time.design_requests_resent, 3, "{:?}", outcome.time);
     let csv = std::fs::read_to_string(dir.join("designs.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "header and two designs, nothing forged:\n{csv}");
     assert!(!csv.contains("forged"), "{csv}");
+}
+
+#[test]
+fn a_slow_optimiser_is_sent_few_copies_of_its_request() {
+    // The first copy takes 2.5 s to answer (a long search), answered once; the copies that came
+    // meanwhile get the stored reply, as the real optimiser's do. With a 0.1 s setting, copies
+    // every 0.1 s would be about 24; backing off (0.1, 0.2, 0.4, 0.8, then 1.6 s apart) sends 4
+    // or 5 before the reply.
+    let answer = |n: usize, low: &[f32], high: &[f32]| {
+        if n == 0 {
+            std::thread::sleep(std::time::Duration::from_millis(2500));
+        }
+        (good(low, high), "pso-q".to_string())
+    };
+    let (outcome, _, requests) = run_against("slow-opt", 0.1, &answer);
+    assert!(!outcome.interrupted);
+    assert_eq!(outcome.designs.len(), 2);
+    let resent = outcome.time.design_requests_resent;
+    assert!((2..=6).contains(&resent), "{resent} copies sent for a 2.5 s search with a 0.1 s setting: {:?}", outcome.time);
+    assert_eq!(requests as u64, 1 + resent, "every copy reached the optimiser");
 }
 
 #[test]

@@ -310,8 +310,8 @@ impl Learner<'_> {
         let req = DesignRequest { index: index as u32, kind, weights_version: version, start_states, chosen: chosen.to_vec(), rejected };
         self.links.design_requests.send(req.clone())?;
         let t = Instant::now();
-        let resend = Duration::from_secs_f64(self.cfg.design_request_resend_secs);
         let deadline = Duration::from_secs_f64(self.cfg.design_request_timeout_secs);
+        let mut resend = Resend::new(self.cfg.design_request_resend_secs);
         let mut sent = Instant::now();
         // The optimiser's end of the replies closed (it died): a restarted one never saw the
         // request, so it is sent again as soon as the new one is there, not after `resend`.
@@ -329,8 +329,13 @@ impl Learner<'_> {
                     "no design {index} from the optimiser in {deadline:?} (schedule.design-request-timeout-secs): is it running?"
                 )));
             }
-            if sent.elapsed() > resend {
-                coadapt_log::logln!("learner: no reply to design request {index} for {resend:?}; sending it again");
+            if sent.elapsed() > resend.wait {
+                let waited = resend.wait;
+                resend.back_off();
+                coadapt_log::logln!(
+                    "learner: no reply to design request {index} for {waited:?}; sending it again (the next copy after {:?})",
+                    resend.wait
+                );
                 match self.links.design_requests.send(req.clone()) {
                     Ok(()) => self.time.design_requests_resent += 1,
                     // No optimiser listening: sent when one is back (below).
@@ -353,6 +358,7 @@ impl Learner<'_> {
                             coadapt_log::logln!("learner: the optimiser is back; sent design request {index} to it again");
                             self.time.design_requests_resent += 1;
                             sent = Instant::now();
+                            resend.reset();
                             optimiser_gone = false;
                         }
                         // Not listening for requests yet: the next poll tries again.
@@ -384,6 +390,8 @@ impl Learner<'_> {
             {
                 self.time.design_replies_refused += 1;
                 coadapt_log::logln!("learner: refused the optimiser's design {index}: {e}");
+                // It answers: the copy goes after the configured wait, not a backed-off one.
+                resend.reset();
                 continue;
             }
             break Ok(Some(reply));
@@ -391,5 +399,53 @@ impl Learner<'_> {
         self.time.waiting += t.elapsed().as_secs_f64();
         self.last_request_seconds = t.elapsed().as_secs_f64();
         result
+    }
+}
+
+/// When a design request with no reply is sent again: after `schedule.design-request-resend-secs`,
+/// then after twice as long each time, up to [`Resend::MAX_FACTOR`] times the setting. A request
+/// lost on the way (a partition) is sent again soon; a search that takes many minutes (a Daisy
+/// sim-PSO choice runs about 1,000 rollouts) is not sent again every minute: each copy is
+/// answered from the optimiser's stored reply once it is done, so dozens of copies meant dozens
+/// of duplicate replies and log lines. An optimiser that died is handled apart (its request goes
+/// again as soon as a new one is there).
+#[derive(Debug, Clone, Copy)]
+struct Resend {
+    base: Duration,
+    wait: Duration,
+}
+
+impl Resend {
+    const MAX_FACTOR: u32 = 16;
+
+    fn new(secs: f64) -> Self {
+        let base = Duration::from_secs_f64(secs);
+        Self { base, wait: base }
+    }
+
+    fn back_off(&mut self) {
+        self.wait = (self.wait * 2).min(self.base * Self::MAX_FACTOR);
+    }
+
+    fn reset(&mut self) {
+        self.wait = self.base;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resends_back_off_to_sixteen_times_the_setting_and_reset() {
+        let mut r = Resend::new(60.0);
+        let mut waits = vec![r.wait.as_secs()];
+        for _ in 0..6 {
+            r.back_off();
+            waits.push(r.wait.as_secs());
+        }
+        assert_eq!(waits, [60, 120, 240, 480, 960, 960, 960]);
+        r.reset();
+        assert_eq!(r.wait, Duration::from_secs(60));
     }
 }
