@@ -82,7 +82,7 @@ import campaign_report as cr  # noqa: E402
 ROBOTS = [("HalfCheetah", "hc"), ("Walker", "walker-bench"), ("Hopper", "hopper-bench"), ("Daisy", "daisy-bench"),
           ("MuJoCo HalfCheetah (bridge)", "mujoco-bench")]
 # Methods in this order; others after them, by name.
-ORDER = ["fear", "random", "sim-pso", "pessimistic", "trust", "screened", "ensemble", "conservative", "conshead", "headonly"]
+ORDER = ["fear", "random", "sim-pso", "cmaes-es", "openai-es", "pessimistic", "trust", "screened", "ensemble", "conservative", "conshead", "headonly"]
 
 
 def option(name, default):
