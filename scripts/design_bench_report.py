@@ -2,7 +2,7 @@
 random one?
 
 usage: python3 scripts/design_bench_report.py [RUNS_ROOT, default docs/campaign/results]
-           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict,everywhere,edges,samebody]
+           [--robots hc,walker-bench,...] [--tables methods,random,within,trend,bodies,calibration,verdict,everywhere,brief,edges,samebody]
 
 Runs are RUNS_ROOT/PREFIX-METHOD-seedN (docs/campaign/design-bench.queue and
 design-choice.queue): PREFIX names the robot (hc = HalfCheetah, walker-bench, hopper-bench,
@@ -43,6 +43,8 @@ count. Per robot:
    robot is decided at the grid's seeds (HalfCheetah 5, the others 3): shown when the mean is
    above 0 and p <= 0.05. The answer is yes (all five shown), no (naming the robots decided and
    not shown) or open (naming the seeds missing);
+8b. brief (with --tables brief): table 8 in a line per method, for the README: per robot
+   "beats", "does not" or "open", the pooled pairs' mean ± sd, n (pairs), p and the seeds;
 9. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
    the simulation baselines ordered by the simulation they spend on choosing designs: design
    rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
@@ -348,6 +350,17 @@ GRID_SEEDS = {"hc": 5}
 ALPHA = 0.05
 
 
+def decided(r, prefix):
+    """One robot's pooled within-run pairs of a method's runs R ({seed: (facts, summary)}) and
+    the bar's state there: "shown" (mean above 0, p <= 0.05 at the grid's seeds), "not shown",
+    or "open" (fewer seeds than the grid's)."""
+    d = [x for f, _ in r.values() for x in f["next"]]
+    if len(r) < GRID_SEEDS.get(prefix, 3):
+        return d, "open"
+    # Decided on the p itself, not on its printed rounding.
+    return d, "shown" if d and statistics.mean(d) > 0 and sign_flip(d)[0] <= ALPHA else "not shown"
+
+
 def everywhere(root):
     """Does a method's chosen design beat the random one after it on every robot (table 8)?"""
     runs = {prefix: runs_of(root, prefix) for _, prefix in ROBOTS}
@@ -361,13 +374,11 @@ def everywhere(root):
         cells, failed, open_ = [], [], []
         for title, prefix in ROBOTS:
             r = runs[prefix].get(m, {})
-            d = [x for f, _ in r.values() for x in f["next"]]
+            d, state = decided(r, prefix)
             cells.append(f"{cr.signed_sd(d)} ({len(r)}, {len(d)}, {sign_flip_p(d)})" if d else "-")
-            need = GRID_SEEDS.get(prefix, 3)
-            if len(r) < need:
-                open_.append(f"{title} {len(r)}/{need}")
-            # Decided on the p itself, not on its printed rounding.
-            elif not (d and statistics.mean(d) > 0 and sign_flip(d)[0] <= ALPHA):
+            if state == "open":
+                open_.append(f"{title} {len(r)}/{GRID_SEEDS.get(prefix, 3)}")
+            elif state == "not shown":
                 failed.append(title)
         if failed:
             v = "no (not shown on " + ", ".join(failed) + ")"
@@ -376,6 +387,31 @@ def everywhere(root):
         else:
             v = "yes"
         print(f"| {m} | " + " | ".join(cells) + f" | {v} |")
+    print()
+
+
+def brief(root):
+    """Table 8 in brief, for the README: per method and robot whether its chosen designs beat
+    the random design after them (pooled over seeds, p <= 0.05), with the seeds behind it."""
+    runs = {prefix: runs_of(root, prefix) for _, prefix in ROBOTS}
+    methods = ordered({m for r in runs.values() for m in r if m != "random"})
+    if not methods:
+        return
+    names = {"MuJoCo HalfCheetah (bridge)": "MuJoCo cheetah"}
+    print("| method | " + " | ".join(names.get(t, t) for t, _ in ROBOTS) + " |")
+    print("|---|" + "---|" * len(ROBOTS))
+    for m in methods:
+        cells = []
+        for _, prefix in ROBOTS:
+            r = runs[prefix].get(m, {})
+            d, state = decided(r, prefix)
+            if not d:
+                cells.append("-")
+                continue
+            p = sign_flip_p(d)
+            word = {"shown": "**beats**", "not shown": "does not", "open": "open"}[state]
+            cells.append(f"{word}: {cr.signed_sd(d)}, n = {len(d)}, p {p} ({len(r)}/{GRID_SEEDS.get(prefix, 3)} seeds)")
+        print(f"| {m} | " + " | ".join(cells) + " |")
     print()
 
 
@@ -475,13 +511,15 @@ def main():
     keep = option("--robots", None)
     tables = option("--tables", "methods,random,within,trend,bodies,calibration").split(",")
     robots = [r for r in ROBOTS if keep is None or r[1] in keep.split(",")]
-    per_robot = [t for t in tables if t not in ("verdict", "everywhere", "edges", "samebody")]
+    per_robot = [t for t in tables if t not in ("verdict", "everywhere", "brief", "edges", "samebody")]
     if per_robot and not any([report(root, title, prefix, per_robot) for title, prefix in robots]):
         sys.exit(f"design_bench_report: no finished benchmark run under {root}")
     if "verdict" in tables:
         verdict(root)
     if "everywhere" in tables:
         everywhere(root)
+    if "brief" in tables:
+        brief(root)
     if "edges" in tables:
         for title, prefix in robots:
             edges(root, title, prefix)
