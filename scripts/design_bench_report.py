@@ -44,7 +44,8 @@ count. Per robot:
    above 0 and p <= 0.05. The answer is yes (all five shown), no (naming the robots decided and
    not shown) or open (naming the seeds missing);
 8b. brief (with --tables brief): table 8 in a line per method, for the README: per robot
-   "beats", "does not" or "open", the pooled pairs' mean ± sd, n (pairs), p and the seeds;
+   "beats", "not shown", "loses" (below the random body after it, p <= 0.05) or "open" (fewer
+   seeds than the grid's), the pooled pairs' mean ± sd, n (pairs), p and the seeds;
 9. dial (not in the default tables): FEAR, the screened variants (`screened`, `screened-MxR`) and
    the simulation baselines ordered by the simulation they spend on choosing designs: design
    rollouts and simulated steps per run (rollouts x the screen's steps, or x 1,000 for whole
@@ -409,7 +410,9 @@ def brief(root):
                 cells.append("-")
                 continue
             p = sign_flip_p(d)
-            word = {"shown": "**beats**", "not shown": "does not", "open": "open"}[state]
+            word = {"shown": "**beats**", "not shown": "not shown", "open": "open"}[state]
+            if state == "not shown" and statistics.mean(d) < 0 and sign_flip(d)[0] <= ALPHA:
+                word = "loses"  # the random body after it is shown to be better
             cells.append(f"{word}: {cr.signed_sd(d)}, n = {len(d)}, p {p} ({len(r)}/{GRID_SEEDS.get(prefix, 3)} seeds)")
         print(f"| {m} | " + " | ".join(cells) + " |")
     print()

@@ -211,9 +211,8 @@ fn the_everywhere_table_asks_for_every_robot_at_the_grids_seeds() {
     let beats = "**beats**: +10.0 ± 0.0, n = 6, p 0.03 (3/3 seeds)";
     let good = format!("| good | **beats**: +10.0 ± 0.0, n = 10, p 0.002 (5/5 seeds) | {beats} | {beats} | {beats} | {beats} |");
     assert!(brief.contains(&good), "brief good row:\n{brief}");
-    let weak = format!(
-        "| weak | **beats**: +10.0 ± 0.0, n = 10, p 0.002 (5/5 seeds) | does not: -10.0 ± 0.0, n = 6, p 0.03 (3/3 seeds) | {beats} |"
-    );
+    let weak =
+        format!("| weak | **beats**: +10.0 ± 0.0, n = 10, p 0.002 (5/5 seeds) | loses: -10.0 ± 0.0, n = 6, p 0.03 (3/3 seeds) | {beats} |");
     assert!(brief.contains(&weak), "brief weak row:\n{brief}");
     assert!(brief.contains("| thin | open: +10.0 ± 0.0, n = 2, p 0.50 (1/5 seeds) | - | - | - | - |"), "brief thin row:\n{brief}");
     let good = "| good | +10.0 ± 0.0 (5, 10, 0.002) | +10.0 ± 0.0 (3, 6, 0.03) | +10.0 ± 0.0 (3, 6, 0.03) | \
