@@ -424,7 +424,8 @@ impl Resend {
     }
 
     fn back_off(&mut self) {
-        self.wait = (self.wait * 2).min(self.base * Self::MAX_FACTOR);
+        // Saturating: a setting of years (a test's, an operator's "never") must not overflow.
+        self.wait = self.wait.saturating_mul(2).min(self.base.saturating_mul(Self::MAX_FACTOR));
     }
 
     fn reset(&mut self) {
@@ -447,5 +448,8 @@ mod tests {
         assert_eq!(waits, [60, 120, 240, 480, 960, 960, 960]);
         r.reset();
         assert_eq!(r.wait, Duration::from_secs(60));
+        let mut huge = Resend::new(1.5e19);
+        huge.back_off();
+        assert_eq!(huge.wait, Duration::MAX, "saturates instead of overflowing");
     }
 }
