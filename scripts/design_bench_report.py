@@ -353,13 +353,17 @@ ALPHA = 0.05
 
 def decided(r, prefix):
     """One robot's pooled within-run pairs of a method's runs R ({seed: (facts, summary)}) and
-    the bar's state there: "shown" (mean above 0, p <= 0.05 at the grid's seeds), "not shown",
-    or "open" (fewer seeds than the grid's)."""
+    the bar's state there: "open" (fewer seeds than the grid's), else "shown" (mean above 0,
+    p <= 0.05), "loses" (mean below 0, p <= 0.05: the random body after it is shown better) or
+    "not shown" (neither)."""
     d = [x for f, _ in r.values() for x in f["next"]]
     if len(r) < GRID_SEEDS.get(prefix, 3):
         return d, "open"
     # Decided on the p itself, not on its printed rounding.
-    return d, "shown" if d and statistics.mean(d) > 0 and sign_flip(d)[0] <= ALPHA else "not shown"
+    if not d or sign_flip(d)[0] > ALPHA:
+        return d, "not shown"
+    mean = statistics.mean(d)
+    return d, "shown" if mean > 0 else "loses" if mean < 0 else "not shown"
 
 
 def everywhere(root):
@@ -379,7 +383,7 @@ def everywhere(root):
             cells.append(f"{cr.signed_sd(d)} ({len(r)}, {len(d)}, {sign_flip_p(d)})" if d else "-")
             if state == "open":
                 open_.append(f"{title} {len(r)}/{GRID_SEEDS.get(prefix, 3)}")
-            elif state == "not shown":
+            elif state != "shown":
                 failed.append(title)
         if failed:
             v = "no (not shown on " + ", ".join(failed) + ")"
@@ -409,11 +413,8 @@ def brief(root):
             if not d:
                 cells.append("-")
                 continue
-            p = sign_flip_p(d)
-            word = {"shown": "**beats**", "not shown": "not shown", "open": "open"}[state]
-            if state == "not shown" and statistics.mean(d) < 0 and sign_flip(d)[0] <= ALPHA:
-                word = "loses"  # the random body after it is shown to be better
-            cells.append(f"{word}: {cr.signed_sd(d)}, n = {len(d)}, p {p} ({len(r)}/{GRID_SEEDS.get(prefix, 3)} seeds)")
+            word = "**beats**" if state == "shown" else state
+            cells.append(f"{word}: {cr.signed_sd(d)}, n = {len(d)}, p {sign_flip_p(d)} ({len(r)}/{GRID_SEEDS.get(prefix, 3)} seeds)")
         print(f"| {m} | " + " | ".join(cells) + " |")
     print()
 
