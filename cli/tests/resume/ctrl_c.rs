@@ -1,7 +1,7 @@
 //! Ctrl-C: mid-design it stops the run with a snapshot to resume from, before the first
 //! periodic snapshot too; while the learner trains it stops the run cleanly.
 
-use crate::support::*;
+use super::support::*;
 
 /// Ctrl-C in the middle of a design stops the run at once with a snapshot of where it stood;
 /// `--resume` continues from it to the rows of a run never stopped.

@@ -1,7 +1,7 @@
 //! Fleets killed with SIGKILL at random points, role by role or whole, resume to the rows of a
 //! run never stopped; a restarted optimiser gets the pending request at once.
 
-use crate::support::*;
+use super::support::*;
 
 #[test]
 fn a_shared_memory_fleet_killed_at_random_points_resumes_to_the_rows_of_a_run_never_stopped() {

@@ -2,7 +2,7 @@
 //! the run learns is refused naming the key, periodic ones wait while they would take more than
 //! their share of the time.
 
-use crate::support::*;
+use super::support::*;
 
 #[test]
 fn a_damaged_newest_snapshot_falls_back_to_the_one_before() {
