@@ -7,7 +7,7 @@
 //! says at each stage which lines run, stopped, wait, are copied or are archived, and the episodes left.
 //! The other ways to stop a queue: campaign_stop.rs.
 
-mod campaign_tree;
+use crate::campaign_tree;
 
 use campaign_tree::*;
 use std::process::Command;

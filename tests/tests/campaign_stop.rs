@@ -3,7 +3,7 @@
 //! yet; `--stop-at-snapshot` waits for a snapshot newer than the call, or the deadline, but not
 //! for a line that has just started.
 
-mod campaign_tree;
+use crate::campaign_tree;
 
 use campaign_tree::*;
 use std::time::{Duration, Instant};

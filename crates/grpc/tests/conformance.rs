@@ -1,7 +1,7 @@
 //! The transport conformance suite over gRPC: experience from an actor to the learner's
 //! queue, weights from the learner's topic to actors.
 
-mod common;
+use crate::common;
 
 use coadapt_grpc::actor_links;
 use coadapt_transport::conformance as c;

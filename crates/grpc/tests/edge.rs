@@ -1,7 +1,7 @@
 //! The service's edge: what a raw gRPC client sees for malformed and oversized messages, the
 //! size limits on weights, health and reflection, and loopback throughput.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

@@ -1,7 +1,7 @@
 //! The queues from the learner (assignments, design requests), design replies, how clients
 //! end (a learner that finishes vs one that crashes), reconnection, and the actors' status.
 
-mod common;
+use crate::common;
 
 use std::collections::HashSet;
 use std::time::{Duration, Instant};

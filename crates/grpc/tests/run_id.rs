@@ -3,7 +3,7 @@
 //! restart must not mix the two starts: the old start's cached weights, unacknowledged frames
 //! and long-poll acknowledgements never reach the new one, whatever its version numbers.
 
-mod common;
+use crate::common;
 
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};

@@ -39,7 +39,7 @@
 //! HalfCheetah's setting (multibody joints, 2 physics steps of 8.25 ms per control step, 4 solver
 //! iterations) with walker2d's own armature lets joints overshoot their limits by 0.2-0.3 rad:
 //! every joint gets 90 N m, and a foot of 2-4 kg swings fast. `cargo test --release -p
-//! coadapt-robots --test planar_robots measure_limit_violations -- --ignored --nocapture` gives,
+//! coadapt-robots --test all planar_robots::measure_limit_violations -- --ignored --nocapture` gives,
 //! as HalfCheetah's sweep does, the worst violation over 10,000 steps of random full-torque
 //! actions (each held for 1-20 steps, new episode every 1000) for the designs `[0.5]*6`, `[1]*6`
 //! and `[1.5]*6`, and the deepest any part went into the ground over the three:

@@ -325,7 +325,7 @@ fn speed(cfg: SimConfig, seconds: f64) -> (f64, f64) {
 }
 
 /// The measurement table of the module documentation:
-/// `cargo test --release -p coadapt-robots --test daisy -- --ignored --nocapture`
+/// `cargo test --release -p coadapt-robots --test all daisy:: -- --ignored --nocapture`
 /// (`DAISY_STEPS=N` changes the 10,000 abuse steps per design).
 #[test]
 #[ignore = "a measurement that takes minutes"]
@@ -377,7 +377,7 @@ fn measure_settings() {
 }
 
 /// Env steps per second of the default Daisy against HalfCheetah, alternated three times in one
-/// run (medians): `cargo test --release -p coadapt-robots --test daisy speed -- --ignored --nocapture`.
+/// run (medians): `cargo test --release -p coadapt-robots --test all daisy::speed -- --ignored --nocapture`.
 #[test]
 #[ignore = "a measurement"]
 fn speed_against_half_cheetah() {

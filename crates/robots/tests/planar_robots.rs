@@ -326,7 +326,7 @@ fn bad_designs_and_actions_are_rejected() {
     Hopper::new().reset(0, &[4.0, 2.0, 0.5, 2.0, 0.5]).unwrap();
 }
 
-/// `cargo test --release -p coadapt-robots --test planar_robots -- --ignored --nocapture`: each
+/// `cargo test --release -p coadapt-robots --test all planar_robots:: -- --ignored --nocapture`: each
 /// physics setting's worst joint-limit violation (radians) for the low, original and high designs,
 /// and the deepest any part went into the ground, over 10,000 held random full-torque steps per
 /// design (the tables in the `walker` and `hopper` module docs).

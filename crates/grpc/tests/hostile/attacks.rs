@@ -1,7 +1,7 @@
 //! Attacks 1-10: others' work, invented sessions, poisoned sequence numbers, a flooded queue,
 //! empty chunks, lying episode lengths; and an optimiser that crashed mid-search.
 
-use crate::support::*;
+use super::support::*;
 
 /// Attack 1: Experience for an assignment is accepted only from the session it was handed to.
 #[test]

@@ -1,6 +1,6 @@
 //! Attack 13: connections per peer and in all are limited.
 
-use crate::support::*;
+use super::support::*;
 
 /// Attack 13: One host opens connections until the learner runs out of descriptors (tonic has
 /// no limit of its own): beyond `max_connections_per_peer` from one address, and beyond

@@ -1,7 +1,7 @@
 //! What honest actors do passes every check, a refused chunk does not end an honest sender, and
 //! our clients register again with a restarted learner.
 
-use crate::support::*;
+use super::support::*;
 
 /// What honest actors do (our client, as `actors::role` drives it) passes every check: a
 /// training episode restarted from its first step, and an evaluation episode that sends empty

@@ -9,9 +9,6 @@
 //! - `honest.rs`: what our own clients do passes every check, and survives a restarted learner;
 //! - `connections.rs`: attack 13, connections per peer and in all.
 
-#[path = "../common/mod.rs"]
-mod common;
-
 mod attacks;
 mod connections;
 mod honest;

@@ -54,7 +54,7 @@
 //! observation 36..39: turning, rolling or pitching away from the start all cost alike.
 //!
 //! # Simulation setting, from measurements
-//! `cargo test --release -p coadapt-robots --test daisy measure -- --ignored --nocapture` measures
+//! `cargo test --release -p coadapt-robots --test all daisy::measure -- --ignored --nocapture` measures
 //! each setting: env steps/s under uniform random actions (original design, resets included;
 //! wall clock, on a machine shared with a training run, so +-20 %) and, over 10,000 steps of
 //! random full-torque actions (each held for 1-20 steps, new episode every 1000), the worst
