@@ -1,7 +1,8 @@
 //! docs/ARCHITECTURE.md says which crate may import which; this test holds every crate's
 //! `Cargo.toml` to it (a crate imports only crates on lower floors, and on its own floor only
 //! those its row names), checks that every workspace member has a row, and that no file of
-//! `cli/src` imports another in a loop (issue 30: the binary only parses and dispatches).
+//! `cli/src` imports another in a loop (issue 30: the binary only parses and dispatches), and
+//! that no test file is left out of a package's one test binary.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -188,4 +189,91 @@ fn no_file_of_the_binary_imports_another_in_a_loop() {
     looped.entry("a".into()).or_default().insert("b".into());
     looped.entry("b".into()).or_default().insert("a".into());
     assert!(find_cycle(&looped).is_some());
+}
+
+/// The files of `tests/` a test target reaches through `mod` declarations, from `entry`.
+/// `#[path = "x.rs"]` is relative to the declaring file's directory; a plain `mod m;` in a crate
+/// root, a `main.rs`, `mod.rs` or `#[path]` file is `m.rs` or `m/mod.rs` beside it.
+fn reached(entry: &Path) -> BTreeSet<PathBuf> {
+    let mut seen = BTreeSet::new();
+    let mut todo = vec![entry.to_path_buf()];
+    while let Some(file) = todo.pop() {
+        let Ok(text) = std::fs::read_to_string(&file) else { continue };
+        if !seen.insert(file.clone()) {
+            continue;
+        }
+        let dir = file.parent().expect("a file's directory").to_path_buf();
+        let mut path_attr: Option<String> = None;
+        for line in text.lines().map(str::trim) {
+            if let Some(p) = line.strip_prefix("#[path = \"").and_then(|r| r.strip_suffix("\"]")) {
+                path_attr = Some(p.to_string());
+            } else if let Some(m) = line.strip_prefix("mod ").or_else(|| line.strip_prefix("pub mod ")).and_then(|r| r.strip_suffix(';')) {
+                match path_attr.take() {
+                    Some(p) => todo.push(dir.join(p)),
+                    None => {
+                        todo.push(dir.join(format!("{m}.rs")));
+                        todo.push(dir.join(m).join("mod.rs"));
+                    }
+                }
+            } else if !line.starts_with("//") && !line.is_empty() {
+                path_attr = None;
+            }
+        }
+    }
+    seen
+}
+
+/// The files directly under `tests/` (and `tests/*/main.rs`) of a package that its `[[test]]`
+/// targets do not reach. With `autotests = false` (one test binary per package) such a file
+/// would compile into nothing and its tests would silently never run.
+fn unreached(package: &Path, targets: &[PathBuf]) -> Vec<PathBuf> {
+    let mut seen = BTreeSet::new();
+    for t in targets {
+        seen.extend(reached(&package.join(t)));
+    }
+    let mut out = Vec::new();
+    let Ok(entries) = std::fs::read_dir(package.join("tests")) else { return out };
+    for e in entries.flatten() {
+        let p = e.path();
+        let candidate = if p.is_dir() { p.join("main.rs") } else { p };
+        if candidate.extension().is_some_and(|x| x == "rs") && candidate.exists() && !seen.contains(&candidate) {
+            out.push(candidate);
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn every_test_file_is_in_its_packages_test_binary() {
+    let root = root();
+    let workspace: toml::Table = toml::from_str(&read(&root.join("Cargo.toml"))).expect("the workspace manifest");
+    let mut checked = 0;
+    let mut problems = Vec::new();
+    for m in workspace["workspace"]["members"].as_array().expect("workspace.members") {
+        let dir = root.join(m.as_str().expect("a member path"));
+        let manifest: toml::Table = toml::from_str(&read(&dir.join("Cargo.toml"))).expect("a member manifest");
+        if manifest["package"].get("autotests").and_then(toml::Value::as_bool) != Some(false) {
+            continue;
+        }
+        let targets: Vec<PathBuf> = manifest
+            .get("test")
+            .and_then(|t| t.as_array())
+            .map(|a| a.iter().filter_map(|t| t.get("path").and_then(|p| p.as_str()).map(PathBuf::from)).collect())
+            .unwrap_or_default();
+        assert!(!targets.is_empty(), "{}: autotests = false and no [[test]] target", dir.display());
+        checked += 1;
+        problems.extend(unreached(&dir, &targets).into_iter().map(|p| p.display().to_string()));
+    }
+    assert!(checked >= 5, "only {checked} packages with one test binary were found");
+    assert!(problems.is_empty(), "test files no test target declares (add a `mod` line to tests/all.rs):\n{}", problems.join("\n"));
+    // The checker can fail: a file beside the entry that nobody declares.
+    let t = std::env::temp_dir().join(format!("coadapt-arch-tests-{}", std::process::id()));
+    std::fs::create_dir_all(t.join("tests/sub")).expect("a scratch package");
+    std::fs::write(t.join("tests/all.rs"), "mod a;\n#[path = \"sub/main.rs\"]\nmod sub;\n").expect("writing");
+    for f in ["tests/a.rs", "tests/sub/main.rs", "tests/orphan.rs"] {
+        std::fs::write(t.join(f), "").expect("writing");
+    }
+    assert_eq!(unreached(&t, &[PathBuf::from("tests/all.rs")]), vec![t.join("tests/orphan.rs")]);
+    let _ = std::fs::remove_dir_all(&t);
 }
