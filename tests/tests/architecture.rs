@@ -192,8 +192,10 @@ fn no_file_of_the_binary_imports_another_in_a_loop() {
 }
 
 /// The files of `tests/` a test target reaches through `mod` declarations, from `entry`.
-/// `#[path = "x.rs"]` is relative to the declaring file's directory; a plain `mod m;` in a crate
-/// root, a `main.rs`, `mod.rs` or `#[path]` file is `m.rs` or `m/mod.rs` beside it.
+/// `#[path = "x.rs"]` is relative to the declaring file's directory; a plain `mod m;` is taken
+/// as `m.rs` or `m/mod.rs` beside it, which is where rustc looks from a crate root, `main.rs` or
+/// `mod.rs` (from any other file rustc looks one directory deeper, so a file this counts wrongly
+/// as reached fails to build rather than being skipped).
 fn reached(entry: &Path) -> BTreeSet<PathBuf> {
     let mut seen = BTreeSet::new();
     let mut todo = vec![entry.to_path_buf()];

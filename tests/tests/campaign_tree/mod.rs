@@ -2,8 +2,6 @@
 //! temporary checkout with the scripts and a fake `coadapt` (a Python script that writes a run's
 //! files and waits for a hold file to vanish, or for SIGINT, as the real binary snapshots and
 //! exits), and the waits and checks around it.
-// Each test file uses part of it.
-#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -1,5 +1,4 @@
 //! What the gRPC tests share: a fast-failing configuration and a learner on a free port.
-#![allow(dead_code)]
 
 use std::net::SocketAddr;
 use std::time::Duration;
