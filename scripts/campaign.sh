@@ -4,7 +4,13 @@
 # reference protocol: the same rows, tested by learner/tests/two_cores.rs), in-process (the same
 # results as a fleet of processes, tested byte for byte; fewer processes competing for two cores).
 #
-#   usage: [BIN=coadapt-binary] [THREADS=1] scripts/campaign.sh [-j N] QUEUE_FILE
+#   usage: [BIN=coadapt-binary] [THREADS=1] scripts/campaign.sh [-j N] [--until TIME] QUEUE_FILE
+#   --until TIME (what `date -d` reads: 05:30, 'now + 2 hours'): a line starts (or resumes) only if
+#          it will end by then, by `scripts/campaign_status.py QUEUE --seconds NAME SEED` and a
+#          tenth more; one without an estimate does not start. A skipped line stays for the next
+#          start of the queue; the lanes go on down the queue for lines that fit (a retrain). For a
+#          session whose machine may not be kept: a run stopped at the session's end resumes only
+#          where its snapshots survive.
 #   stop:  scripts/campaign.sh --stop QUEUE_FILE (or Ctrl-C in its terminal): the runs snapshot
 #          and stop; the queue started again resumes them. While a queue runs, its pid is in
 #          runs/campaign/QUEUE.pid, and a second start of the same queue is refused (two
@@ -52,14 +58,22 @@ cd "$(dirname "$0")/.."
 jobs=2
 threads=${THREADS:-1}
 stop=""
-case ${1:-} in
-  -j) [[ ${2:-} =~ ^[1-9][0-9]*$ ]] || { echo "campaign: -j takes a number of lanes, not '${2:-}'" >&2; exit 2; }
-      jobs=$2; shift 2 ;;
-  --stop) stop=yes; shift ;;
-  --stop-at-snapshot) stop=at-snapshot; shift ;;
-  -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
-esac
-queue=${1:?usage: scripts/campaign.sh [-j N] QUEUE_FILE, or --stop QUEUE_FILE, or --stop-at-snapshot QUEUE_FILE [DEADLINE]}
+until_s=""
+while [ $# -gt 0 ]; do
+  case $1 in
+    -j) [[ ${2:-} =~ ^[1-9][0-9]*$ ]] || { echo "campaign: -j takes a number of lanes, not '${2:-}'" >&2; exit 2; }
+        jobs=$2; shift 2 ;;
+    --until)
+      until_s=$(date -d "${2:-}" +%s 2> /dev/null) || { echo "campaign: --until takes a time date -d reads (say 07:05), not '${2:-}'" >&2; exit 2; }
+      [ "$until_s" -gt "$(date +%s)" ] || { echo "campaign: --until '${2:-}' is $(date -d "@$until_s" '+%F %H:%M'), already past (say 'tomorrow 01:00')" >&2; exit 2; }
+      shift 2 ;;
+    --stop) stop=yes; shift; break ;;
+    --stop-at-snapshot) stop=at-snapshot; shift; break ;;
+    -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    *) break ;;
+  esac
+done
+queue=${1:?usage: scripts/campaign.sh [-j N] [--until TIME] QUEUE_FILE, or --stop QUEUE_FILE, or --stop-at-snapshot QUEUE_FILE [DEADLINE]}
 [ -f "$queue" ] || { echo "campaign: no queue file $queue" >&2; exit 2; }
 pidfile=runs/campaign/$(basename "$queue" .queue).pid
 # The live campaign of this queue, if any: the pid in its file, still a campaign.sh.
@@ -266,6 +280,24 @@ start_fork_watchers() {
   done < "$queue"
 }
 
+# Whether line NAME SEED ($1 $2) ends before --until, by its estimate and a tenth more (paces
+# vary with what shares the machine); says why not.
+fits_until() {
+  local need left
+  need=$(python3 scripts/campaign_status.py "$queue" --seconds "$1" "$2" 2> /dev/null) || need=""
+  left=$((until_s - $(date +%s)))
+  if [[ ! $need =~ ^[0-9]+$ ]]; then
+    echo "campaign: $1-seed$2 skipped: nothing to size it by before --until (no pace, or its source is not finished); the queue started again runs it"
+    return 1
+  fi
+  need=$((need + need / 10))
+  if [ "$need" -gt "$left" ]; then
+    echo "campaign: $1-seed$2 skipped: it needs about $((need / 60)) min, $((left / 60)) min are left before --until; the queue started again runs it"
+    return 1
+  fi
+  echo "campaign: $1-seed$2 fits before --until: about $((need / 60)) min of $((left / 60))"
+}
+
 run_one() {
   local name=$1 config=$2 seed=$3; shift 3
   local dir=$root/$name-seed$seed
@@ -282,6 +314,7 @@ run_one() {
   # The lane is a subshell that ends with this line: its exit frees the lock.
   # shellcheck disable=SC2064 # the path now: $lock is local and gone when the trap runs
   trap "rm -rf $(printf %q "$lock")" EXIT
+  if [ -n "$until_s" ] && ! fits_until "$name" "$seed"; then return 0; fi
   local resume=""
   case $config in
     retrain:*) retrain_one "$name" "$config" "$seed" "$@"; return 0 ;;

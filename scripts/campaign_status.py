@@ -2,6 +2,7 @@
 """Where queues of scripts/campaign.sh stand: each line's state and the episodes left.
 
 usage: python3 scripts/campaign_status.py QUEUE_FILE [QUEUE_FILE ...] [--all]
+       python3 scripts/campaign_status.py QUEUE_FILE --seconds NAME SEED
 
 A line is `archived` (docs/campaign/results/NAME-seedS/summary.json), `done` (finished in
 runs/campaign, not archived yet), `running` (a live process names its run directory),
@@ -14,6 +15,16 @@ with the hours they take at the pace of the queue's finished co-adaptation runs,
 some: episodes per hour of one lane, from the learner's clock in the last rows of episodes.csv
 (every start of a resumed run; a fork's own rows only; summary.json's seconds count the last
 start alone). --all lists the finished lines too.
+
+--seconds NAME SEED prints the seconds of one lane the line NAME SEED of QUEUE_FILE needs from
+where it stands (what `scripts/campaign.sh --until` asks before it starts a line), or exits 3
+when no finished run gives a pace. It counts what the line would run first: a fork source's
+prefix run again (its directory gone), an --init-population source run again; a retrain line
+whose source is not finished has no estimate. The pace is, in order: the line's own rows (a run
+under way or stopped: ten rows at least after its initial designs and a fork's prefix), the
+archived runs of the same NAME (other seeds), of the same robot (config's `env`), the queue's
+finished runs; a retrain line's, the archived retrains' seconds per training seed (same NAME,
+then same robot).
 """
 import csv
 import os
@@ -135,7 +146,161 @@ def plan(name, spec, seed, flags, queue_lines):
         return None, 0
 
 
+def median(xs):
+    xs = sorted(xs)
+    return xs[len(xs) // 2] if xs else None
+
+
+def env_of(path):
+    try:
+        return load(path).get("env")
+    except (OSError, tomllib.TOMLDecodeError):
+        return None
+
+
+def fork_k(run_dir):
+    """A fork's K (its forked-from.txt: `... at the start of design K ...`), else 0."""
+    try:
+        m = re.search(r"at the start of design (\d+)", open(f"{run_dir}/forked-from.txt").read())
+    except OSError:
+        return 0
+    if not m:
+        return 0
+    k = int(m.group(1))
+    try:
+        return sum(episodes_per_design(load(f"{run_dir}/config.toml"))[:k])
+    except (OSError, tomllib.TOMLDecodeError):
+        return 0
+
+
+def archived(name_of_run):
+    """(name, env, run dir) of every archived run."""
+    try:
+        runs = sorted(os.listdir(RESULTS))
+    except OSError:
+        return []
+    out = []
+    for run in runs:
+        m = re.fullmatch(r"(.+)-seed\d+", run)
+        d = f"{RESULTS}/{run}"
+        if m and os.path.exists(f"{d}/summary.json"):
+            out.append((m.group(1), name_of_run(d), d))
+    return out
+
+
+def coadapt_pace(name, env, queue_pace):
+    """Episodes per hour for a co-adaptation line: see --seconds."""
+    runs = [(n, e, d) for n, e, d in archived(lambda d: env_of(f"{d}/config.toml")) if os.path.exists(f"{d}/episodes.csv")]
+    for pick in (lambda n, e: n == name, lambda n, e: env is not None and e == env):
+        p = median([x for x in (pace_of(d, fork_k(d)) for n, e, d in runs if pick(n, e)) if x])
+        if p:
+            return p
+    return queue_pace
+
+
+def seconds_per_train_seed(name, env):
+    """Median seconds of one training seed of a retrain line (episodes.csv's wall_s at its end)."""
+    def secs(d):
+        out = []
+        for k in (1, 2):
+            try:
+                with open(f"{d}/train-seed{k}/episodes.csv") as f:
+                    last = list(csv.DictReader(f))[-1]
+                out.append(float(last["wall_s"]))
+            except (OSError, IndexError, KeyError, ValueError):
+                pass
+        return out
+    runs = archived(lambda d: env_of(f"{d}/train-seed1/config.toml"))
+    for pick in (lambda n, e: n == name, lambda n, e: env is not None and e == env):
+        s = median([x for n, e, d in runs if pick(n, e) for x in secs(d)])
+        if s:
+            return s
+    return None
+
+
+def line_seconds(queue, name, seed):
+    """Seconds of one lane the line NAME SEED of QUEUE needs from where it stands, or None."""
+    lines = parse(queue)
+    line = next((l for l in lines if l[0] == name and l[2] == seed), None)
+    if line is None:
+        sys.exit(f"campaign_status: {queue} has no line {name} {seed}")
+    _, spec, _, flags = line
+    d = f"{RUNS}/{name}-seed{seed}"
+    if spec.startswith("retrain:"):
+        src = spec[len("retrain:"):].split(":")[0]
+        src_dirs = [f"{RESULTS}/{src}-seed{seed}", f"{RUNS}/{src}-seed{seed}"]
+        src_dir = next((x for x in src_dirs if os.path.exists(f"{x}/summary.json")), None)
+        if src_dir is None:
+            return None
+        per_seed = seconds_per_train_seed(name, env_of(f"{src_dir}/config.toml"))
+        left = sum(1 for k in (1, 2) if not os.path.exists(f"{d}/train-seed{k}/summary.json"))
+        return None if per_seed is None else left * per_seed
+    # The queue's own pace, as main() prints it.
+    paces = []
+    for n2, s2, seed2, f2 in lines:
+        a = f"{RESULTS}/{n2}-seed{seed2}"
+        if not s2.startswith("retrain:") and os.path.exists(f"{a}/summary.json"):
+            p = pace_of(a, fork_k(a))
+            if p:
+                paces.append(p)
+    eps, k = plan(name, spec, seed, flags, lines)
+    if not eps:
+        return None
+    episodes = max(0, sum(eps[k:]) - max(0, rows(f"{d}/episodes.csv") - sum(eps[:k])))
+    seconds = 0.0
+    env = None
+    if spec.startswith("fork:"):
+        src = spec[len("fork:"):].split(":")[0]
+        src_dir, src_arch = f"{RUNS}/{src}-seed{seed}", f"{RESULTS}/{src}-seed{seed}"
+        env = env_of(f"{src_arch}/config.toml") or env_of(f"{src_dir}/config.toml")
+        if not os.path.exists(d) and not os.path.exists(src_dir) and os.path.exists(f"{src_arch}/summary.json"):
+            # The prefix is run again (its partial run's rows count as done).
+            prefix = max(0, sum(eps[:k]) - rows(f"{src_dir}.prefix/episodes.csv"))
+            p = coadapt_pace(src, env, median(paces))
+            if not p:
+                return None
+            seconds += prefix / p * 3600
+    else:
+        base = spec[len("random-only:"):] if spec.startswith("random-only:") else spec
+        try:
+            env = config_of(base).get("env")
+        except (OSError, ValueError, tomllib.TOMLDecodeError):
+            env = None
+    if "--init-population" in flags:
+        src = flags[flags.index("--init-population") + 1].rstrip("/")
+        run = os.path.basename(src)
+        arch = f"{RESULTS}/{run}"
+        if not os.path.exists(src) and os.path.exists(f"{arch}/summary.json"):
+            m = re.fullmatch(r"(.+)-seed\d+", run)
+            p = coadapt_pace(m.group(1) if m else run, env_of(f"{arch}/config.toml"), median(paces))
+            if not p:
+                return None
+            seconds += rows(f"{arch}/episodes.csv") / p * 3600
+    # A line already under way goes at its own pace, over its rows after the initial designs
+    # (ten at least; before them the networks train less per episode) and a fork's prefix.
+    try:
+        s = load(f"{d}/config.toml").get("schedule", {})
+        skip = max(sum(eps[:k]), sum(eps[: len(s.get("initial-designs", [])) or 1]))
+    except (OSError, tomllib.TOMLDecodeError):
+        skip = None
+    p = pace_of(d, skip) if skip is not None and rows(f"{d}/episodes.csv") - skip >= 10 else None
+    p = p or coadapt_pace(name, env, median(paces))
+    if not p:
+        return None
+    return seconds + episodes / p * 3600
+
+
 def main():
+    if "--seconds" in sys.argv:
+        i = sys.argv.index("--seconds")
+        if i != 2 or len(sys.argv) != 5:
+            sys.exit("usage: campaign_status.py QUEUE_FILE --seconds NAME SEED")
+        s = line_seconds(sys.argv[1], sys.argv[3], sys.argv[4])
+        if s is None:
+            print("unknown")
+            sys.exit(3)
+        print(round(s))
+        return
     args = [a for a in sys.argv[1:] if a != "--all"]
     if not args or "-h" in args or "--help" in args:
         print(__doc__.strip())

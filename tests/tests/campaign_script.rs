@@ -315,3 +315,58 @@ fn hours_left_follow_the_learners_clock_of_finished_runs() {
     assert!(status.contains("(10 episodes/h)"), "{status}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// `--until`: a line starts only if its estimate (`campaign_status.py --seconds`, from the pace
+/// of finished runs) and a tenth more end before the time given; a line too long for it, or with
+/// nothing to size it by, is skipped and stays pending, and the lanes go on down the queue.
+#[test]
+fn until_starts_only_the_lines_that_end_in_time() {
+    let t = Tree::new("until");
+    // One episode per second (3,600 an hour) for alpha, the queue's only finished run.
+    let arch = t.path("docs/campaign/results/alpha-seed1");
+    std::fs::create_dir_all(&arch).expect("archive");
+    let rows: String = (0..5).map(|i| format!("{},{},1.0,1.0,{}\n", i / 3, i % 3, i + 1)).collect();
+    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false}").expect("summary");
+    // long: a million episodes (a million seconds at that pace); gamma: cfg.toml's 5 (5 s).
+    std::fs::write(t.path("long.toml"), "[schedule]\ndesigns = 1\ninitial-designs = [[1.0]]\ninitial-episodes = 1000000\n").expect("long");
+    std::fs::write(t.path("q.queue"), "alpha cfg.toml 1\nlong long.toml 1\ngamma cfg.toml 2\n").expect("queue");
+    // Another queue without a finished run: nothing gives its line a pace.
+    std::fs::write(t.path("p.queue"), "delta cfg.toml 3\n").expect("queue");
+
+    let seconds = |queue: &str, name: &str, seed: &str| {
+        Command::new("python3")
+            .args(["scripts/campaign_status.py", queue, "--seconds", name, seed])
+            .current_dir(&t.root)
+            .output()
+            .expect("campaign_status.py --seconds")
+    };
+    let gamma = seconds("q.queue", "gamma", "2");
+    assert!(gamma.status.success(), "{}", text(&gamma));
+    assert_eq!(String::from_utf8_lossy(&gamma.stdout).trim(), "5");
+    assert_eq!(String::from_utf8_lossy(&seconds("q.queue", "long", "1").stdout).trim(), "1000000");
+    let delta = seconds("p.queue", "delta", "3");
+    assert_eq!(delta.status.code(), Some(3), "{}", text(&delta));
+
+    let past = t.run(&["--until", "now - 1 hour", "q.queue"]);
+    assert_eq!(past.status.code(), Some(2), "{}", text(&past));
+    assert!(text(&past).contains("already past"), "{}", text(&past));
+    let garbled = t.run(&["--until", "half past never", "q.queue"]);
+    assert_eq!(garbled.status.code(), Some(2), "{}", text(&garbled));
+
+    let out = t.run(&["-j", "1", "--until", "now + 1 hour", "q.queue"]);
+    assert!(out.status.success(), "{}", text(&out));
+    let log = text(&out);
+    // 60 or 59 min left, by when the line is looked at.
+    assert!(log.contains("long-seed1 skipped: it needs about 18333 min, ") && log.contains(" min are left before --until"), "{log}");
+    assert!(log.contains("gamma-seed2 fits before --until"), "{log}");
+    assert!(!t.path("runs/campaign/long-seed1").exists(), "{log}");
+    assert!(t.path("docs/campaign/results/gamma-seed2/summary.json").exists(), "{log}");
+    let status = t.status();
+    assert!(status.contains("pending  long-seed1"), "{status}");
+
+    let out = t.run(&["--until", "now + 1 hour", "p.queue"]);
+    assert!(text(&out).contains("delta-seed3 skipped: nothing to size it by"), "{}", text(&out));
+    assert!(!t.path("runs/campaign/delta-seed3").exists());
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
