@@ -9,8 +9,8 @@ runs/campaign, not archived yet), `running` (a live process names its run direct
 `stopped` (a run directory without a summary: started again it resumes or starts over),
 `copied` (a fork's directory made from its source at design K, its own episodes not begun) or
 `pending`. Episodes left: the run's schedule (its config.toml, or the queue's CONFIG with its
-overrides and `--designs`) minus the rows of its episodes.csv; a fork line counts from its
-design K; a retrain line counts two trainings of 30 episodes. The last line per queue sums them
+overrides and `--designs`) minus the rows of its episodes.csv, and the minutes of one lane
+they take (--seconds below); a fork line counts from its design K; a retrain line counts two trainings of 30 episodes. The last line per queue sums them
 with the hours they take at the pace of the queue's finished co-adaptation runs, when there are
 some: episodes per hour of one lane, from the learner's clock in the last rows of episodes.csv
 (every start of a resumed run; a fork's own rows only; summary.json's seconds count the last
@@ -22,11 +22,12 @@ when no finished run gives a pace. It counts what the line would run first: a fo
 prefix run again (its directory gone), an --init-population source run again; a retrain line
 whose source is not finished has no estimate. The pace is, in order: the line's own rows (a run
 under way or stopped: ten rows at least after its initial designs and a fork's prefix), the
-archived runs of the same NAME (other seeds), of the same robot (config's `env`), the queue's
-finished runs; a retrain line's, the archived retrains' seconds per training seed (same NAME,
-then same robot).
+archived runs of the same NAME (other seeds), else the same robot's (config's `env`) times the
+method's pace relative to FEAR's on the other robots (at most 1), else the queue's finished runs; a retrain line's,
+the same robot's archived retrains' seconds per training seed.
 """
 import csv
+import functools
 import os
 import re
 import sys
@@ -173,8 +174,10 @@ def fork_k(run_dir):
         return 0
 
 
-def archived(name_of_run):
-    """(name, env, run dir) of every archived run."""
+@functools.lru_cache(maxsize=None)
+def archived(config):
+    """(name, env, run dir) of every archived run, the env read from the run's CONFIG (a path
+    inside it)."""
     try:
         runs = sorted(os.listdir(RESULTS))
     except OSError:
@@ -184,21 +187,45 @@ def archived(name_of_run):
         m = re.fullmatch(r"(.+)-seed\d+", run)
         d = f"{RESULTS}/{run}"
         if m and os.path.exists(f"{d}/summary.json"):
-            out.append((m.group(1), name_of_run(d), d))
+            out.append((m.group(1), env_of(f"{d}/{config}"), d))
     return out
 
 
+@functools.lru_cache(maxsize=None)
 def coadapt_pace(name, env, queue_pace):
     """Episodes per hour for a co-adaptation line: see --seconds."""
-    runs = [(n, e, d) for n, e, d in archived(lambda d: env_of(f"{d}/config.toml")) if os.path.exists(f"{d}/episodes.csv")]
-    for pick in (lambda n, e: n == name, lambda n, e: env is not None and e == env):
-        p = median([x for x in (pace_of(d, fork_k(d)) for n, e, d in runs if pick(n, e)) if x])
-        if p:
-            return p
-    return queue_pace
+    runs = [(n, e, d) for n, e, d in archived("config.toml") if os.path.exists(f"{d}/episodes.csv")]
+
+    def pace(pick):
+        return median([x for x in (pace_of(d, fork_k(d)) for n, e, d in runs if pick(n, e)) if x])
+
+    same_name = pace(lambda n, e: n == name)
+    if same_name:
+        return same_name
+    # The same robot's pace times the method's cost relative to FEAR on the other robots (its
+    # name without the robot's prefix: `daisy-bench-sim-pso` is `sim-pso`, 0.7 of FEAR's pace on
+    # HalfCheetah, Walker and Hopper): a method's own work (the simulation baseline's rollouts)
+    # can cost more than the robot's episodes.
+    robot = pace(lambda n, e: env is not None and e == env)
+    if not robot:
+        return queue_pace
+    method = method_of(name)
+    ratios = []
+    for n2 in {n for n, e, d in runs if method_of(n) == method and n != name}:
+        fear = n2[: len(n2) - len(method)] + "fear"
+        a, b = pace(lambda n, e: n == n2), pace(lambda n, e: n == fear)
+        if a and b and fear != n2:
+            ratios.append(a / b)
+    return robot * min(1.0, median(ratios) or 1.0)
 
 
-def seconds_per_train_seed(name, env):
+def method_of(name):
+    """A line's method: its name without the robot's prefix (`hc-`, `walker-bench-`, ...)."""
+    return re.sub(r"^[a-z]+-bench-|^hc-", "", name)
+
+
+@functools.lru_cache(maxsize=None)
+def seconds_per_train_seed(env):
     """Median seconds of one training seed of a retrain line (episodes.csv's wall_s at its end)."""
     def secs(d):
         out = []
@@ -210,12 +237,8 @@ def seconds_per_train_seed(name, env):
             except (OSError, IndexError, KeyError, ValueError):
                 pass
         return out
-    runs = archived(lambda d: env_of(f"{d}/train-seed1/config.toml"))
-    for pick in (lambda n, e: n == name, lambda n, e: env is not None and e == env):
-        s = median([x for n, e, d in runs if pick(n, e) for x in secs(d)])
-        if s:
-            return s
-    return None
+    # The same work for every method (plain SAC on one body): the robot's retrains.
+    return median([x for n, e, d in archived("train-seed1/config.toml") if env is not None and e == env for x in secs(d)])
 
 
 def line_seconds(queue, name, seed):
@@ -232,7 +255,7 @@ def line_seconds(queue, name, seed):
         src_dir = next((x for x in src_dirs if os.path.exists(f"{x}/summary.json")), None)
         if src_dir is None:
             return None
-        per_seed = seconds_per_train_seed(name, env_of(f"{src_dir}/config.toml"))
+        per_seed = seconds_per_train_seed(env_of(f"{src_dir}/config.toml"))
         left = sum(1 for k in (1, 2) if not os.path.exists(f"{d}/train-seed{k}/summary.json"))
         return None if per_seed is None else left * per_seed
     # The queue's own pace, as main() prints it.
@@ -253,6 +276,13 @@ def line_seconds(queue, name, seed):
         src = spec[len("fork:"):].split(":")[0]
         src_dir, src_arch = f"{RUNS}/{src}-seed{seed}", f"{RESULTS}/{src}-seed{seed}"
         env = env_of(f"{src_arch}/config.toml") or env_of(f"{src_dir}/config.toml")
+        # A source that is a line of the queue and has not run yet: its config's robot.
+        for n2, s2, seed2, _ in lines:
+            if env is None and n2 == src and seed2 == seed and not s2.startswith(("fork:", "retrain:")):
+                try:
+                    env = config_of(s2[len("random-only:"):] if s2.startswith("random-only:") else s2).get("env")
+                except (OSError, ValueError, tomllib.TOMLDecodeError):
+                    pass
         if not os.path.exists(d) and not os.path.exists(src_dir) and os.path.exists(f"{src_arch}/summary.json"):
             # The prefix is run again (its partial run's rows count as done).
             prefix = max(0, sum(eps[:k]) - rows(f"{src_dir}.prefix/episodes.csv"))
@@ -344,6 +374,9 @@ def main():
                 left += rest or 0
             if state not in ("archived", "done") or show_all:
                 progress = "?" if total is None else f"{min(done_rows, total)}/{total} episodes"
+                if state not in ("archived", "done"):
+                    est = line_seconds(queue, name, seed)
+                    progress += "" if est is None else f", about {est / 60:.0f} min"
                 print(f"  {state:8} {run:40} {progress}")
         pace = sorted(paces)[len(paces) // 2] if paces else None
         hours = f", about {left / pace:.1f} lane-hours at the median pace of its finished runs ({pace:.0f} episodes/h)" if pace and left else ""
