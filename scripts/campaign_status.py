@@ -5,16 +5,17 @@ usage: python3 scripts/campaign_status.py QUEUE_FILE [QUEUE_FILE ...] [--all]
        python3 scripts/campaign_status.py QUEUE_FILE --seconds NAME SEED
 
 A line is `archived` (docs/campaign/results/NAME-seedS/summary.json), `done` (finished in
-runs/campaign, not archived yet), `running` (a live process names its run directory),
-`stopped` (a run directory without a summary: started again it resumes or starts over),
-`copied` (a fork's directory made from its source at design K, its own episodes not begun) or
-`pending`. Episodes left: the run's schedule (its config.toml, or the queue's CONFIG with its
-overrides and `--designs`) minus the rows of its episodes.csv, and the minutes of one lane
-they take (--seconds below); a fork line counts from its design K; a retrain line counts two trainings of 30 episodes. The last line per queue sums them
-with the hours they take at the pace of the queue's finished co-adaptation runs, when there are
-some: episodes per hour of one lane, from the learner's clock in the last rows of episodes.csv
-(every start of a resumed run; a fork's own rows only; summary.json's seconds count the last
-start alone). --all lists the finished lines too.
+runs/campaign, not archived yet), `running` (a live process names its run directory), `stopped`
+(a run directory without a summary: started again it resumes or starts over), `copied` (a fork's
+directory made from its source at design K, its own episodes not begun), `prefix` (a fork whose
+source's first K designs are being run again, its directory gone) or `pending`. Episodes left:
+the run's schedule (its config.toml, or the queue's CONFIG with its overrides and `--designs`)
+minus the rows of its episodes.csv, and the minutes of one lane they take (--seconds below); a
+fork line counts from its design K; a retrain line counts two trainings of 30 episodes. The last
+line per queue sums them with the hours they take at the pace of the queue's finished co-
+adaptation runs, when there are some: episodes per hour of one lane, from the learner's clock in
+the last rows of episodes.csv (every start of a resumed run; a fork's own rows only;
+summary.json's seconds count the last start alone). --all lists the finished lines too.
 
 --seconds NAME SEED prints the seconds of one lane the line NAME SEED of QUEUE_FILE needs from
 where it stands (what `scripts/campaign.sh --until` asks before it starts a line), or exits 3
@@ -368,6 +369,13 @@ def main():
                 state = "copied" if k and own <= 0 else "stopped"
             else:
                 state = "pending"
+            note = ""
+            if state == "pending" and spec.startswith("fork:"):
+                # Its source's first K designs being run again (the source's directory is gone).
+                prefix = f"{RUNS}/{spec[len('fork:'):].split(':')[0]}-seed{seed}.prefix"
+                if os.path.realpath(prefix) in live and eps:
+                    state = "prefix"
+                    note = f"; its source's first {k} designs again: {min(rows(f'{prefix}/episodes.csv'), sum(eps[:k]))}/{sum(eps[:k])}"
             counts[state] = counts.get(state, 0) + 1
             rest = None if total is None else max(0, total - done_rows)
             if state not in ("archived", "done"):
@@ -377,7 +385,7 @@ def main():
                 if state not in ("archived", "done"):
                     est = line_seconds(queue, name, seed)
                     progress += "" if est is None else f", about {est / 60:.0f} min"
-                print(f"  {state:8} {run:40} {progress}")
+                print(f"  {state:8} {run:40} {progress}{note}")
         pace = sorted(paces)[len(paces) // 2] if paces else None
         hours = f", about {left / pace:.1f} lane-hours at the median pace of its finished runs ({pace:.0f} episodes/h)" if pace and left else ""
         tally = ", ".join(f"{v} {k}" for k, v in sorted(counts.items())) or "no lines"

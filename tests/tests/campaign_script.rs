@@ -118,6 +118,25 @@ fn a_fork_of_an_archived_source_runs_its_prefix_again_and_checks_it() {
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
 
+/// A fork whose archived source's first K designs are being run again (the source's directory
+/// gone) is `prefix`, with that run's progress, not `pending`.
+#[test]
+fn a_fork_waiting_for_its_sources_prefix_says_so() {
+    let t = Tree::new("prefix");
+    t.archive_source(4);
+    let cfg = "[schedule]\ndesigns = 4\ninitial-designs = [[1.0]]\ninitial-episodes = 2\nepisodes-per-design = 2\n";
+    std::fs::write(t.path("docs/campaign/results/src-seed1/config.toml"), cfg).expect("the source's config");
+    std::fs::write(t.path("q.queue"), "frk fork:src:2 1\n").expect("queue");
+    std::fs::write(&t.hold, "").expect("the hold file");
+    let _running = Running(t.campaign(&["-j", "1", "q.queue"]).spawn().expect("starting the queue"), t.hold.clone());
+    wait_for("the prefix's rows", || t.path("runs/campaign/src-seed1.prefix/episodes.csv").exists());
+    let status = t.status();
+    assert!(status.contains("prefix   frk-seed1") && status.contains("0/4 episodes"), "{status}");
+    assert!(status.contains("its source's first 2 designs again: 4/4"), "{status}");
+    drop(_running);
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
 /// A retrain line whose `coadapt train` runs (it names a seed's directory inside the line's)
 /// is `running`, not `stopped`.
 #[test]
