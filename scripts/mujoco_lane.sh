@@ -5,7 +5,8 @@
 # waits until it answers, runs docs/campaign/mujoco-bench.queue with scripts/campaign.sh (which
 # resumes where it stopped and archives each run as it ends), and stops the bridge at the end or
 # on Ctrl-C / SIGTERM, once the runs using it have stopped (at most 2 minutes).
-#   usage: [BIN=path/to/coadapt] scripts/mujoco_lane.sh [QUEUE, default docs/campaign/mujoco-bench.queue]
+#   usage: [BIN=path/to/coadapt] [UNTIL=TIME] scripts/mujoco_lane.sh [QUEUE, default docs/campaign/mujoco-bench.queue]
+#   UNTIL: passed to campaign.sh as --until (start only the lines that end by then).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 queue=${1:-docs/campaign/mujoco-bench.queue}
@@ -41,4 +42,4 @@ for _ in $(seq 1 120); do
   sleep 0.5
 done
 echo "mujoco_lane: bridge pid $bridge on 127.0.0.1:$port (log runs/mujoco-bridge.log)"
-scripts/campaign.sh -j 1 "$queue"
+scripts/campaign.sh -j 1 ${UNTIL:+--until "$UNTIL"} "$queue"
