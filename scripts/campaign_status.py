@@ -24,8 +24,9 @@ prefix run again (its directory gone), an --init-population source run again; a 
 whose source is not finished has no estimate. The pace is, in order: the line's own rows (a run
 under way or stopped: ten rows at least after its initial designs and a fork's prefix), the
 archived runs of the same NAME (other seeds), else the same robot's (config's `env`) times the
-method's pace relative to FEAR's on the other robots (at most 1), else the queue's finished runs; a retrain line's,
-the same robot's archived retrains' seconds per training seed.
+method's pace relative to FEAR's on the other robots (at most 1), else the queue's finished
+runs, each scaled by this machine's speed against the archive (its run directories' own paces);
+a retrain line's, the same robot's archived retrains' seconds per training seed.
 """
 import csv
 import functools
@@ -192,9 +193,49 @@ def archived(config):
     return out
 
 
+def own_skip(run_dir):
+    """Episodes of a run directory's rows that are not its own pace: its initial designs' (the
+    networks train less per episode there) or a fork's copied prefix, whichever is more; None
+    without a config."""
+    try:
+        cfg = load(f"{run_dir}/config.toml")
+    except (OSError, tomllib.TOMLDecodeError):
+        return None
+    initial = len(cfg.get("schedule", {}).get("initial-designs", [])) or 1
+    return max(fork_k(run_dir), sum(episodes_per_design(cfg)[:initial]))
+
+
 @functools.lru_cache(maxsize=None)
+def speed():
+    """This machine's pace against the archive's: the median, over the run directories here
+    with ten rows of their own at least, of their own pace over what the archive gives for them
+    (an AVX-512 machine ran 1.5-2x the archived paces), within [0.5, 2]; 1 without any."""
+    ratios = []
+    try:
+        runs = os.listdir(RUNS)
+    except OSError:
+        runs = []
+    for run in runs:
+        m = re.fullmatch(r"(.+)-seed\d+", run)
+        d = f"{RUNS}/{run}"
+        skip = own_skip(d) if m and os.path.isdir(d) else None
+        if skip is None or rows(f"{d}/episodes.csv") - skip < 10:
+            continue
+        own, archive = pace_of(d, skip), archive_pace(m.group(1), env_of(f"{d}/config.toml"), None)
+        if own and archive:
+            ratios.append(own / archive)
+    return min(2.0, max(0.5, median(ratios))) if ratios else 1.0
+
+
 def coadapt_pace(name, env, queue_pace):
-    """Episodes per hour for a co-adaptation line: see --seconds."""
+    """Episodes per hour for a co-adaptation line on this machine: see --seconds."""
+    p = archive_pace(name, env, queue_pace)
+    return p * speed() if p else None
+
+
+@functools.lru_cache(maxsize=None)
+def archive_pace(name, env, queue_pace):
+    """Episodes per hour for a co-adaptation line by the archive's paces."""
     runs = [(n, e, d) for n, e, d in archived("config.toml") if os.path.exists(f"{d}/episodes.csv")]
 
     def pace(pick):
@@ -257,6 +298,7 @@ def line_seconds(queue, name, seed):
         if src_dir is None:
             return None
         per_seed = seconds_per_train_seed(env_of(f"{src_dir}/config.toml"))
+        per_seed = per_seed / speed() if per_seed else None
         left = sum(1 for k in (1, 2) if not os.path.exists(f"{d}/train-seed{k}/summary.json"))
         return None if per_seed is None else left * per_seed
     # The queue's own pace, as main() prints it.
@@ -284,13 +326,23 @@ def line_seconds(queue, name, seed):
                     env = config_of(s2[len("random-only:"):] if s2.startswith("random-only:") else s2).get("env")
                 except (OSError, ValueError, tomllib.TOMLDecodeError):
                     pass
-        if not os.path.exists(d) and not os.path.exists(src_dir) and os.path.exists(f"{src_arch}/summary.json"):
+        if not os.path.exists(d) and not os.path.exists(src_dir):
+            if not os.path.exists(f"{src_arch}/summary.json"):
+                # Its source has not started (a line skipped, or a later one): nothing to wait by.
+                return None
             # The prefix is run again (its partial run's rows count as done).
             prefix = max(0, sum(eps[:k]) - rows(f"{src_dir}.prefix/episodes.csv"))
             p = coadapt_pace(src, env, median(paces))
             if not p:
                 return None
             seconds += prefix / p * 3600
+        elif not os.path.exists(d):
+            # Its source runs (another lane): the fork waits for it to reach design K.
+            behind = max(0, sum(eps[:k]) - rows(f"{src_dir}/episodes.csv"))
+            p = coadapt_pace(src, env, median(paces))
+            if behind and not p:
+                return None
+            seconds += behind / p * 3600 if behind else 0.0
     else:
         base = spec[len("random-only:"):] if spec.startswith("random-only:") else spec
         try:
@@ -309,11 +361,7 @@ def line_seconds(queue, name, seed):
             seconds += rows(f"{arch}/episodes.csv") / p * 3600
     # A line already under way goes at its own pace, over its rows after the initial designs
     # (ten at least; before them the networks train less per episode) and a fork's prefix.
-    try:
-        s = load(f"{d}/config.toml").get("schedule", {})
-        skip = max(sum(eps[:k]), sum(eps[: len(s.get("initial-designs", [])) or 1]))
-    except (OSError, tomllib.TOMLDecodeError):
-        skip = None
+    skip = own_skip(d)
     p = pace_of(d, skip) if skip is not None and rows(f"{d}/episodes.csv") - skip >= 10 else None
     p = p or coadapt_pace(name, env, median(paces))
     if not p:

@@ -349,7 +349,8 @@ fn until_starts_only_the_lines_that_end_in_time() {
     std::fs::write(arch.join("summary.json"), "{\"interrupted\": false}").expect("summary");
     // long: a million episodes (a million seconds at that pace); gamma: cfg.toml's 5 (5 s).
     std::fs::write(t.path("long.toml"), "[schedule]\ndesigns = 1\ninitial-designs = [[1.0]]\ninitial-episodes = 1000000\n").expect("long");
-    std::fs::write(t.path("q.queue"), "alpha cfg.toml 1\nlong long.toml 1\ngamma cfg.toml 2\n").expect("queue");
+    // frk forks long, which is skipped: nothing to wait by.
+    std::fs::write(t.path("q.queue"), "alpha cfg.toml 1\nlong long.toml 1\ngamma cfg.toml 2\nfrk fork:long:1 1\n").expect("queue");
     // Another queue without a finished run: nothing gives its line a pace.
     std::fs::write(t.path("p.queue"), "delta cfg.toml 3\n").expect("queue");
 
@@ -379,6 +380,7 @@ fn until_starts_only_the_lines_that_end_in_time() {
     // 60 or 59 min left, by when the line is looked at.
     assert!(log.contains("long-seed1 skipped: it needs about 20833 min, ") && log.contains(" min are left before --until"), "{log}");
     assert!(log.contains("gamma-seed2 fits before --until"), "{log}");
+    assert!(log.contains("frk-seed1 skipped: nothing to size it by"), "{log}");
     assert!(!t.path("runs/campaign/long-seed1").exists(), "{log}");
     assert!(t.path("docs/campaign/results/gamma-seed2/summary.json").exists(), "{log}");
     let status = t.status();
@@ -387,5 +389,36 @@ fn until_starts_only_the_lines_that_end_in_time() {
     let out = t.run(&["--until", "now + 1 hour", "p.queue"]);
     assert!(text(&out).contains("delta-seed3 skipped: nothing to size it by"), "{}", text(&out));
     assert!(!t.path("runs/campaign/delta-seed3").exists());
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// The estimates follow this machine: a run directory here going at twice the archived pace
+/// halves them.
+#[test]
+fn estimates_scale_with_this_machines_pace() {
+    let t = Tree::new("speed");
+    // The archive: alpha at one episode a second.
+    let arch = t.path("docs/campaign/results/alpha-seed1");
+    std::fs::create_dir_all(&arch).expect("archive");
+    let rows: String = (0..20).map(|i| format!("0,{i},1.0,1.0,{}\n", i + 1)).collect();
+    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false}").expect("summary");
+    std::fs::write(t.path("q.queue"), "alpha cfg.toml 1\nalpha cfg.toml 2\n").expect("queue");
+    let seconds = || {
+        let o = Command::new("python3")
+            .args(["scripts/campaign_status.py", "q.queue", "--seconds", "alpha", "2"])
+            .current_dir(&t.root)
+            .output()
+            .expect("campaign_status.py --seconds");
+        String::from_utf8_lossy(&o.stdout).trim().to_string()
+    };
+    assert_eq!(seconds(), "5", "cfg.toml's 5 episodes at the archive's pace");
+    // Here, alpha's seed 3 has gone on at two episodes a second past its initial design's 3.
+    let here = t.path("runs/campaign/alpha-seed3");
+    std::fs::create_dir_all(&here).expect("a run here");
+    std::fs::copy(t.path("cfg.toml"), here.join("config.toml")).expect("its config");
+    let rows: String = (0..23).map(|i| format!("0,{i},1.0,1.0,{}\n", 0.5 * f64::from(i + 1))).collect();
+    std::fs::write(here.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    assert_eq!(seconds(), "2", "the same 5 episodes at this machine's pace, twice the archive's");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
