@@ -60,13 +60,15 @@ def main():
         ax.plot(xs, [statistics.mean(q) for _, _, q in pts], "-", color="C0", lw=1.5)
         for x, (_, m, q) in zip(xs, pts):
             ax.plot([x] * len(q), q, "o", color="C0", alpha=0.5, ms=4)
-            name = "screened-4x2" if m == "screened" else m  # the screen's default, 4 candidates x 2 rollouts
+            # Screened settings by their M x R alone (short labels do not run into the next
+            # point's on the log axis); `screened` is the screen's default, 4 x 2.
+            name = "4x2" if m == "screened" else m.removeprefix("screened-")
             ax.annotate(f"{name} (n={len(q)})", (x, statistics.mean(q)), textcoords="offset points", xytext=(4, 6), fontsize=8)
         if rand:
             ax.axhline(statistics.mean(rand), color="C1", ls="--", lw=1, label=f"random designs (mean, n={len(rand)})")
             ax.legend(loc="upper left", fontsize=8)
         ax.set_xscale("log")
-        ax.set_xlabel("simulated steps spent choosing designs per run (FEAR's 0 at the left)")
+        ax.set_xlabel("simulated steps spent choosing designs per run (FEAR's 0 at the left;\nM x R: screened, M candidates x R short rollouts each)")
         ax.set_ylabel("quality of chosen designs (mean best eval return)")
         ax.set_title(TITLES.get(prefix, prefix))
         ax.grid(alpha=0.3)
