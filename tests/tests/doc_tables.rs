@@ -273,3 +273,50 @@ fn the_samebody_table_compares_one_body_trained_in_two_histories() {
     assert!(text.contains("| HalfCheetah | 1 | 2 | 1.5 | +35.0 ± 7.1 | 2/2 | 0.50 | +10.0 | +20.0 ± 0.0 | 2/2 | 0.50 |"), "row:\n{text}");
     assert!(!text.contains("| all robots |"), "one robot, no pooled row:\n{text}");
 }
+
+/// The calibration counts quoted in words where a user reads a score (`coadapt serve --help`,
+/// and the README's reading under its calibration table) are the generated table's: "A of B
+/// (times) on ROBOT" must be ROBOT's "predicted order right" for the chosen body against the next
+/// random one. The table itself is checked against the archive above.
+#[test]
+fn quoted_calibration_matches_the_table() {
+    let readme = std::fs::read_to_string(root().join("README.md")).expect("reading README.md");
+    let start = readme.find("calibration_report.py docs/campaign/results --methods").expect("the README's calibration table");
+    let end = start + readme[start..].find("<!-- end generated -->").expect("the table's end");
+    let table: std::collections::HashMap<&str, &str> = readme[start..end]
+        .lines()
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            (cells.len() > 4 && cells[1].ends_with("-fear")).then(|| (cells[1], cells[4]))
+        })
+        .collect();
+    let robots = [
+        ("HalfCheetah", "hc-fear"),
+        ("Walker", "walker-bench-fear"),
+        ("Hopper", "hopper-bench-fear"),
+        ("Daisy", "daisy-bench-fear"),
+        ("MuJoCo's cheetah", "mujoco-bench-fear"),
+    ];
+    // The paragraphs that quote it, whitespace and doc-comment markers folded.
+    let serve = std::fs::read_to_string(root().join("cli/src/serve.rs")).expect("reading cli/src/serve.rs");
+    let fold = |s: &str| s.lines().map(|l| l.trim().trim_start_matches("///").trim()).collect::<Vec<_>>().join(" ");
+    let from = serve.find("How far to trust").expect("serve's paragraph");
+    let help = fold(&serve[from..from + serve[from..].find("#[derive").expect("the paragraph's end")]);
+    let reading = fold(&readme[end..][..readme[end..].find("as a guess.").expect("the README's reading")]);
+    for (what, text) in [("coadapt serve --help", help.as_str()), ("the README's reading", reading.as_str())] {
+        for (robot, method) in robots {
+            let want = table.get(method).unwrap_or_else(|| panic!("no row {method} in the README's table"));
+            // The first "on ROBOT" with "A of B" (or "A of B times") before it.
+            let quoted = text
+                .match_indices(&format!(" on {robot}"))
+                .find_map(|(at, _)| {
+                    let words: Vec<&str> = text[..at].split_whitespace().collect();
+                    let words = words.strip_suffix(&["times"]).unwrap_or(&words);
+                    let n = words.len();
+                    (n >= 3 && words[n - 2] == "of").then(|| format!("{}/{}", words[n - 3], words[n - 1]))
+                })
+                .unwrap_or_else(|| panic!("{what} quotes no 'A of B on {robot}': {text}"));
+            assert_eq!(&quoted, want, "{what} quotes {quoted} on {robot}; the table says {want}");
+        }
+    }
+}
