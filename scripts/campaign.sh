@@ -10,7 +10,7 @@
 #          quarter more; one without an estimate does not start. A skipped line stays for the next
 #          start of the queue; the lanes go on down the queue for lines that fit (a retrain). For a
 #          session whose machine may not be kept: a run stopped at the session's end resumes only
-#          where its snapshots survive.
+#          where its snapshots survive. Several queues in turn per lane: scripts/lanes.sh.
 #   stop:  scripts/campaign.sh --stop QUEUE_FILE (or Ctrl-C in its terminal): the runs snapshot
 #          and stop; the queue started again resumes them. While a queue runs, its pid is in
 #          runs/campaign/QUEUE.pid, and a second start of the same queue is refused (two

@@ -12,5 +12,6 @@ mod architecture;
 mod campaign_script;
 mod campaign_stop;
 mod doc_tables;
+mod lanes;
 mod learning;
 mod tb_scalars;

@@ -1,0 +1,66 @@
+//! `scripts/lanes.sh`, which keeps lanes busy across queues (each lane runs its queues one after
+//! another with `campaign.sh -j 1`), driven with the fake `coadapt` of campaign_tree: a lane's
+//! second queue starts when its first has ended, the lanes run at once, and a SIGTERM stops the
+//! queue running (its run interrupted, not archived) and starts no other.
+
+use crate::campaign_tree;
+
+use campaign_tree::*;
+use std::process::Command;
+
+fn lanes(t: &Tree, args: &[&str]) -> Command {
+    let mut c = Command::new("bash");
+    c.arg(t.path("scripts/lanes.sh")).args(args).current_dir(&t.root).env("BIN", t.path("fake-coadapt")).env("FAKE_HOLD", &t.hold);
+    c
+}
+
+fn queues(t: &Tree) {
+    std::fs::write(t.path("a.queue"), "alpha cfg.toml 1\n").expect("a queue");
+    std::fs::write(t.path("b.queue"), "beta cfg.toml 2\n").expect("a queue");
+    std::fs::write(t.path("c.queue"), "gamma cfg.toml 3\n").expect("a queue");
+}
+
+#[test]
+fn each_lane_runs_its_queues_in_order() {
+    let t = Tree::new("lanes-order");
+    queues(&t);
+    let out = lanes(&t, &["a.queue b.queue", "c.queue"]).output().expect("running lanes.sh");
+    let log = text(&out);
+    assert!(out.status.success(), "{log}");
+    for run in ["alpha-seed1", "beta-seed2", "gamma-seed3"] {
+        assert!(t.path(&format!("docs/campaign/results/{run}/summary.json")).exists(), "{run} not archived: {log}");
+    }
+    let at = |s: &str| log.find(s).unwrap_or_else(|| panic!("no '{s}' in: {log}"));
+    assert!(at("lane 1: a.queue ended") < at("lane 1: b.queue from"), "{log}");
+    assert!(log.contains("lane 2: c.queue from"), "{log}");
+    let a = std::fs::read_to_string(t.path("runs/campaign-a.log")).expect("a.queue's log");
+    assert!(a.contains("done  runs/campaign/alpha-seed1"), "{a}");
+
+    let bad = lanes(&t, &["a.queue missing.queue"]).output().expect("running lanes.sh");
+    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad));
+    assert!(text(&bad).contains("no queue file missing.queue"), "{}", text(&bad));
+    let past = lanes(&t, &["--until", "now - 1 hour", "a.queue"]).output().expect("running lanes.sh");
+    assert_eq!(past.status.code(), Some(2), "{}", text(&past));
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+#[test]
+fn a_term_stops_the_queue_running_and_starts_no_other() {
+    let t = Tree::new("lanes-stop");
+    queues(&t);
+    std::fs::write(&t.hold, "").expect("the hold file");
+    // Dropped on a failed assertion: the hold goes and lanes.sh is stopped.
+    let mut running =
+        Running(lanes(&t, &["a.queue b.queue"]).stdout(std::process::Stdio::piped()).spawn().expect("starting lanes.sh"), t.hold.clone());
+    wait_for("alpha's run", || t.path("runs/campaign/alpha-seed1/episodes.csv").exists());
+    let term = Command::new("kill").arg("-TERM").arg(running.0.id().to_string()).status().expect("kill");
+    assert!(term.success());
+    let code = running.exit_code();
+    let mut out = String::new();
+    std::io::Read::read_to_string(running.0.stdout.as_mut().expect("stdout"), &mut out).expect("lanes.sh's output");
+    assert_eq!(code, Some(0), "{out}");
+    assert!(t.path("runs/campaign/alpha-seed1.interrupted.json").exists(), "alpha was not stopped: {out}");
+    assert!(!t.path("docs/campaign/results/alpha-seed1").exists(), "a stopped run was archived: {out}");
+    assert!(!t.path("runs/campaign/beta-seed2").exists() && !out.contains("b.queue from"), "b.queue started after the stop: {out}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
