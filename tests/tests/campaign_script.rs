@@ -311,15 +311,7 @@ fn a_queue_ends_only_its_own_fork_watchers() {
 fn hours_left_follow_the_learners_clock_of_finished_runs() {
     let t = Tree::new("pace");
     std::fs::write(t.root.join("q.queue"), "alpha cfg.toml 1\nfrk fork:alpha:1 1\nbeta cfg.toml 2\ngamma cfg.toml 3\n").expect("the queue");
-    // A finished run in the archive: one episode row per (design, episode, learner's seconds),
-    // and summary.json's seconds (the last start's, which the pricing must not read).
-    let archive = |run: &str, episodes: &[(u32, u32, f64)], summary_seconds: f64| {
-        let dir = t.path(&format!("docs/campaign/results/{run}"));
-        std::fs::create_dir_all(&dir).expect("archive");
-        let rows: String = episodes.iter().map(|(d, e, s)| format!("{d},{e},1.0,1.0,{s}\n")).collect();
-        std::fs::write(dir.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
-        std::fs::write(dir.join("summary.json"), format!("{{\"interrupted\": false, \"seconds\": {summary_seconds}}}")).expect("summary");
-    };
+    let archive = |run: &str, episodes: &[(u32, u32, f64)], summary_seconds: f64| t.archive_paced(run, episodes, summary_seconds);
     // alpha: 5 episodes over 3,600 s in two starts (summary.json: 60 s, the last start).
     archive("alpha-seed1", &[(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 3000.0), (1, 1, 3600.0)], 60.0);
     // frk: alpha's first design copied (3 rows), then its own 2 episodes in 720 s (10 per hour).
@@ -342,11 +334,8 @@ fn hours_left_follow_the_learners_clock_of_finished_runs() {
 fn until_starts_only_the_lines_that_end_in_time() {
     let t = Tree::new("until");
     // One episode per second (3,600 an hour) for alpha, the queue's only finished run.
-    let arch = t.path("docs/campaign/results/alpha-seed1");
-    std::fs::create_dir_all(&arch).expect("archive");
-    let rows: String = (0..5).map(|i| format!("{},{},1.0,1.0,{}\n", i / 3, i % 3, i + 1)).collect();
-    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
-    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false}").expect("summary");
+    let alpha: Vec<(u32, u32, f64)> = (0..5).map(|i| (i / 3, i % 3, f64::from(i + 1))).collect();
+    t.archive_paced("alpha-seed1", &alpha, 5.0);
     // long: a million episodes (a million seconds at that pace); gamma: cfg.toml's 5 (5 s).
     std::fs::write(t.path("long.toml"), "[schedule]\ndesigns = 1\ninitial-designs = [[1.0]]\ninitial-episodes = 1000000\n").expect("long");
     // frk forks long, which is skipped: nothing to wait by.
@@ -398,11 +387,8 @@ fn until_starts_only_the_lines_that_end_in_time() {
 fn estimates_scale_with_this_machines_pace() {
     let t = Tree::new("speed");
     // The archive: alpha at one episode a second.
-    let arch = t.path("docs/campaign/results/alpha-seed1");
-    std::fs::create_dir_all(&arch).expect("archive");
-    let rows: String = (0..20).map(|i| format!("0,{i},1.0,1.0,{}\n", i + 1)).collect();
-    std::fs::write(arch.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
-    std::fs::write(arch.join("summary.json"), "{\"interrupted\": false}").expect("summary");
+    let alpha: Vec<(u32, u32, f64)> = (0..20).map(|i| (0, i, f64::from(i + 1))).collect();
+    t.archive_paced("alpha-seed1", &alpha, 20.0);
     std::fs::write(t.path("q.queue"), "alpha cfg.toml 1\nalpha cfg.toml 2\n").expect("queue");
     let seconds = || {
         let o = Command::new("python3")
@@ -414,11 +400,9 @@ fn estimates_scale_with_this_machines_pace() {
     };
     assert_eq!(seconds(), "5", "cfg.toml's 5 episodes at the archive's pace");
     // Here, alpha's seed 3 has gone on at two episodes a second past its initial design's 3.
-    let here = t.path("runs/campaign/alpha-seed3");
-    std::fs::create_dir_all(&here).expect("a run here");
-    std::fs::copy(t.path("cfg.toml"), here.join("config.toml")).expect("its config");
-    let rows: String = (0..23).map(|i| format!("0,{i},1.0,1.0,{}\n", 0.5 * f64::from(i + 1))).collect();
-    std::fs::write(here.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    let here: Vec<(u32, u32, f64)> = (0..23).map(|i| (0, i, 0.5 * f64::from(i + 1))).collect();
+    t.write_paced("runs/campaign/alpha-seed3", &here);
+    std::fs::copy(t.path("cfg.toml"), t.path("runs/campaign/alpha-seed3/config.toml")).expect("its config");
     assert_eq!(seconds(), "2", "the same 5 episodes at this machine's pace, twice the archive's");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }

@@ -114,6 +114,22 @@ impl Tree {
         std::fs::write(arch.join("summary.json"), format!("{{\"interrupted\": false, \"designs\": {designs}}}")).expect("summary");
     }
 
+    /// A finished run in the archive (`docs/campaign/results/RUN`) with one episode row per
+    /// (design, episode, learner's seconds) and summary.json's `seconds` (the last start's).
+    pub fn archive_paced(&self, run: &str, episodes: &[(u32, u32, f64)], summary_seconds: f64) {
+        self.write_paced(&format!("docs/campaign/results/{run}"), episodes);
+        let summary = format!("{{\"interrupted\": false, \"seconds\": {summary_seconds}}}");
+        std::fs::write(self.path(&format!("docs/campaign/results/{run}/summary.json")), summary).expect("summary");
+    }
+
+    /// episodes.csv in DIR (from the root) with the rows of `archive_paced`.
+    pub fn write_paced(&self, dir: &str, episodes: &[(u32, u32, f64)]) {
+        let dir = self.path(dir);
+        std::fs::create_dir_all(&dir).expect("a run directory");
+        let rows: String = episodes.iter().map(|(d, e, s)| format!("{d},{e},1.0,1.0,{s}\n")).collect();
+        std::fs::write(dir.join("episodes.csv"), format!("design,episode,return,eval_return,seconds\n{rows}")).expect("rows");
+    }
+
     pub fn path(&self, p: &str) -> PathBuf {
         self.root.join(p)
     }
