@@ -311,15 +311,14 @@ fn a_queue_ends_only_its_own_fork_watchers() {
 fn hours_left_follow_the_learners_clock_of_finished_runs() {
     let t = Tree::new("pace");
     std::fs::write(t.root.join("q.queue"), "alpha cfg.toml 1\nfrk fork:alpha:1 1\nbeta cfg.toml 2\ngamma cfg.toml 3\n").expect("the queue");
-    let archive = |run: &str, episodes: &[(u32, u32, f64)], summary_seconds: f64| t.archive_paced(run, episodes, summary_seconds);
     // alpha: 5 episodes over 3,600 s in two starts (summary.json: 60 s, the last start).
-    archive("alpha-seed1", &[(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 3000.0), (1, 1, 3600.0)], 60.0);
+    t.archive_paced("alpha-seed1", &[(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 3000.0), (1, 1, 3600.0)], 60.0);
     // frk: alpha's first design copied (3 rows), then its own 2 episodes in 720 s (10 per hour).
-    archive("frk-seed1", &[(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 2160.0), (1, 1, 2520.0)], 1.0);
+    t.archive_paced("frk-seed1", &[(0, 0, 600.0), (0, 1, 1200.0), (0, 2, 1800.0), (1, 0, 2160.0), (1, 1, 2520.0)], 1.0);
     // beta at 20 per hour: the median of 5, 10 and 20 is 10 per hour, so gamma's 5 episodes
     // left are half a lane-hour.
     let beta: Vec<(u32, u32, f64)> = (0..5).map(|i| (0, i, 180.0 * f64::from(i + 1))).collect();
-    archive("beta-seed2", &beta, 2.0);
+    t.archive_paced("beta-seed2", &beta, 2.0);
 
     let status = t.status();
     assert!(status.contains("3 archived, 1 pending; 5 episodes left, about 0.5 lane-hours"), "{status}");
