@@ -5,12 +5,13 @@
 # results as a fleet of processes, tested byte for byte; fewer processes competing for two cores).
 #
 #   usage: [BIN=coadapt-binary] [THREADS=1] scripts/campaign.sh [-j N] [--until TIME] QUEUE_FILE
-#   --until TIME (what `date -d` reads: 05:30, 'now + 2 hours'): a line starts (or resumes) only if
-#          it will end by then, by `scripts/campaign_status.py QUEUE --seconds NAME SEED` and a
-#          quarter more; one without an estimate does not start. A skipped line stays for the next
-#          start of the queue; the lanes go on down the queue for lines that fit (a retrain). For a
-#          session whose machine may not be kept: a run stopped at the session's end resumes only
-#          where its snapshots survive. Several queues in turn per lane: scripts/lanes.sh.
+#   --until TIME (what `date -d` reads: 05:30, 'now + 2 hours'): a line starts (or resumes) only
+#          if it will end by then, by `scripts/campaign_status.py QUEUE --seconds NAME SEED
+#          --threads THREADS` and a quarter more; one without an estimate does not start. A skipped
+#          line stays for the next start of the queue; the lanes go on down the queue for lines
+#          that fit (a retrain). For a session whose machine may not be kept: a run stopped at the
+#          session's end resumes only where its snapshots survive. Several queues in turn per
+#          lane: scripts/lanes.sh.
 #   stop:  scripts/campaign.sh --stop QUEUE_FILE (or Ctrl-C in its terminal): the runs snapshot
 #          and stop; the queue started again resumes them. While a queue runs, its pid is in
 #          runs/campaign/QUEUE.pid, and a second start of the same queue is refused (two
@@ -285,7 +286,7 @@ start_fork_watchers() {
 # hour); says why not.
 fits_until() {
   local need left
-  need=$(python3 scripts/campaign_status.py "$queue" --seconds "$1" "$2" 2> /dev/null) || need=""
+  need=$(python3 scripts/campaign_status.py "$queue" --seconds "$1" "$2" --threads "$threads" 2> /dev/null) || need=""
   left=$((until_s - $(date +%s)))
   if [[ ! $need =~ ^[0-9]+$ ]]; then
     echo "campaign: $1-seed$2 skipped: nothing to size it by before --until (no pace, or its source is not finished); the queue started again runs it"

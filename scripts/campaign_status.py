@@ -2,7 +2,7 @@
 """Where queues of scripts/campaign.sh stand: each line's state and the episodes left.
 
 usage: python3 scripts/campaign_status.py QUEUE_FILE [QUEUE_FILE ...] [--all]
-       python3 scripts/campaign_status.py QUEUE_FILE --seconds NAME SEED
+       python3 scripts/campaign_status.py QUEUE_FILE --seconds NAME SEED [--threads N]
 
 A line is `archived` (docs/campaign/results/NAME-seedS/summary.json), `done` (finished in
 runs/campaign, not archived yet), `running` (a live process names its run directory), `stopped`
@@ -26,7 +26,9 @@ under way or stopped: ten rows at least after its initial designs and a fork's p
 archived runs of the same NAME (other seeds), else the same robot's (config's `env`) times the
 method's pace relative to FEAR's on the other robots (at most 1), else the queue's finished
 runs, each scaled by this machine's speed against the archive (its run directories' own paces);
-a retrain line's, the same robot's archived retrains' seconds per training seed.
+a retrain line's, the same robot's archived retrains' seconds per training seed. --threads 2 (a
+lone lane of THREADS=2) divides what the archive gives by 1.6, the measured gain of a second
+thread.
 """
 import csv
 import functools
@@ -283,8 +285,25 @@ def seconds_per_train_seed(env):
     return median([x for n, e, d in archived("train-seed1/config.toml") if env is not None and e == env for x in secs(d)])
 
 
-def line_seconds(queue, name, seed):
-    """Seconds of one lane the line NAME SEED of QUEUE needs from where it stands, or None."""
+# A run with two threads (THREADS=2, a lone lane) against one: the reference run measured 1.6x
+# (EXPERIMENTS 5.13; more threads were not measured, two cores being the machine).
+TWO_THREADS = 1.6
+
+
+def line_seconds(queue, name, seed, threads=1):
+    """Seconds of one lane the line NAME SEED of QUEUE needs from where it stands, or None, for
+    a lane of THREADS threads (the archive's paces are of one)."""
+    t = TWO_THREADS if threads >= 2 else 1.0
+    s = line_seconds_one_thread(queue, name, seed)
+    if s is None:
+        return None
+    seconds, own = s
+    # A line under way already goes at its own threads' pace.
+    return seconds if own else seconds / t
+
+
+def line_seconds_one_thread(queue, name, seed):
+    """(seconds, whether its own pace set them) for line_seconds, or None."""
     lines = parse(queue)
     line = next((l for l in lines if l[0] == name and l[2] == seed), None)
     if line is None:
@@ -300,7 +319,7 @@ def line_seconds(queue, name, seed):
         per_seed = seconds_per_train_seed(env_of(f"{src_dir}/config.toml"))
         per_seed = per_seed / speed() if per_seed else None
         left = sum(1 for k in (1, 2) if not os.path.exists(f"{d}/train-seed{k}/summary.json"))
-        return None if per_seed is None else left * per_seed
+        return None if per_seed is None else (left * per_seed, False)
     # The queue's own pace, as main() prints it.
     paces = []
     for n2, s2, seed2, f2 in lines:
@@ -362,19 +381,22 @@ def line_seconds(queue, name, seed):
     # A line already under way goes at its own pace, over its rows after the initial designs
     # (ten at least; before them the networks train less per episode) and a fork's prefix.
     skip = own_skip(d)
-    p = pace_of(d, skip) if skip is not None and rows(f"{d}/episodes.csv") - skip >= 10 else None
-    p = p or coadapt_pace(name, env, median(paces))
+    own = pace_of(d, skip) if skip is not None and rows(f"{d}/episodes.csv") - skip >= 10 else None
+    p = own or coadapt_pace(name, env, median(paces))
     if not p:
         return None
-    return seconds + episodes / p * 3600
+    return seconds + episodes / p * 3600, own is not None
 
 
 def main():
     if "--seconds" in sys.argv:
         i = sys.argv.index("--seconds")
-        if i != 2 or len(sys.argv) != 5:
-            sys.exit("usage: campaign_status.py QUEUE_FILE --seconds NAME SEED")
-        s = line_seconds(sys.argv[1], sys.argv[3], sys.argv[4])
+        threads = 1
+        if i == 2 and len(sys.argv) == 7 and sys.argv[5] == "--threads" and sys.argv[6].isdigit():
+            threads = int(sys.argv[6])
+        elif i != 2 or len(sys.argv) != 5:
+            sys.exit("usage: campaign_status.py QUEUE_FILE --seconds NAME SEED [--threads N]")
+        s = line_seconds(sys.argv[1], sys.argv[3], sys.argv[4], threads)
         if s is None:
             print("unknown")
             sys.exit(3)

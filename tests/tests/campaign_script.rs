@@ -352,6 +352,13 @@ fn until_starts_only_the_lines_that_end_in_time() {
     let gamma = seconds("q.queue", "gamma", "2");
     assert!(gamma.status.success(), "{}", text(&gamma));
     assert_eq!(String::from_utf8_lossy(&gamma.stdout).trim(), "5");
+    // A lone lane of two threads: 1.6 times the pace of one.
+    let two = Command::new("python3")
+        .args(["scripts/campaign_status.py", "q.queue", "--seconds", "gamma", "2", "--threads", "2"])
+        .current_dir(&t.root)
+        .output()
+        .expect("campaign_status.py --seconds --threads");
+    assert_eq!(String::from_utf8_lossy(&two.stdout).trim(), "3", "{}", text(&two));
     assert_eq!(String::from_utf8_lossy(&seconds("q.queue", "long", "1").stdout).trim(), "1000000");
     let delta = seconds("p.queue", "delta", "3");
     assert_eq!(delta.status.code(), Some(3), "{}", text(&delta));
