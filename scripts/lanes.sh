@@ -71,6 +71,9 @@ stop_lanes() {
   for p in "${pids[@]}"; do pkill -TERM -P "$p" 2> /dev/null || true; done
 }
 pids=()
+# Before the lanes start: a signal from their first moment on stops them (the lanes, subshells,
+# do not inherit the trap).
+trap stop_lanes INT TERM
 i=0
 for lane in "$@"; do
   i=$((i + 1))
@@ -78,7 +81,6 @@ for lane in "$@"; do
   run_lane "$i" $lane &
   pids+=($!)
 done
-trap stop_lanes INT TERM
 for p in "${pids[@]}"; do
   while kill -0 "$p" 2> /dev/null; do wait "$p" || true; done
 done
