@@ -28,7 +28,7 @@ git -C "$wt" checkout -q --detach "$base"
 git -C "$wt" checkout -q -- .
 git show "$patch" -- crates/nn/src/simd.rs | git -C "$wt" apply
 echo "campaign_bin: building $base + $patch's simd.rs in $wt" >&2
-CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-$PWD/runs/target-campaign-bin} cargo build -q --release -p coadapt --manifest-path "$wt/Cargo.toml" >&2
 target=${CARGO_TARGET_DIR:-$PWD/runs/target-campaign-bin}
+CARGO_TARGET_DIR=$target cargo build -q --release -p coadapt --manifest-path "$wt/Cargo.toml" >&2
 cp "$target/release/coadapt" "$out.tmp" && mv "$out.tmp" "$out"
 echo "$out"

@@ -290,6 +290,24 @@ def seconds_per_train_seed(env):
 TWO_THREADS = 1.6
 
 
+def queue_pace(lines):
+    """The median pace of a queue's finished co-adaptation runs (archived, or done here), their
+    own rows only (a fork's copied prefix left out), or None. Retrains (plain SAC, updates per
+    step) keep another pace: not mixed in."""
+    paces = []
+    for n2, s2, seed2, f2 in lines:
+        if s2.startswith("retrain:"):
+            continue
+        for d in (f"{RESULTS}/{n2}-seed{seed2}", f"{RUNS}/{n2}-seed{seed2}"):
+            if os.path.exists(f"{d}/summary.json"):
+                eps, k = plan(n2, s2, seed2, f2, lines)
+                p = pace_of(d, sum(eps[:k]) if eps and k else 0)
+                if p:
+                    paces.append(p)
+                break
+    return median(paces)
+
+
 def line_seconds(queue, name, seed, threads=1):
     """Seconds of one lane the line NAME SEED of QUEUE needs from where it stands, or None, for
     a lane of THREADS threads (the archive's paces are of one)."""
@@ -320,14 +338,7 @@ def line_seconds_one_thread(queue, name, seed):
         per_seed = per_seed / speed() if per_seed else None
         left = sum(1 for k in (1, 2) if not os.path.exists(f"{d}/train-seed{k}/summary.json"))
         return None if per_seed is None else (left * per_seed, False)
-    # The queue's own pace, as main() prints it.
-    paces = []
-    for n2, s2, seed2, f2 in lines:
-        a = f"{RESULTS}/{n2}-seed{seed2}"
-        if not s2.startswith("retrain:") and os.path.exists(f"{a}/summary.json"):
-            p = pace_of(a, fork_k(a))
-            if p:
-                paces.append(p)
+    q_pace = queue_pace(lines)
     eps, k = plan(name, spec, seed, flags, lines)
     if not eps:
         return None
@@ -351,14 +362,14 @@ def line_seconds_one_thread(queue, name, seed):
                 return None
             # The prefix is run again (its partial run's rows count as done).
             prefix = max(0, sum(eps[:k]) - rows(f"{src_dir}.prefix/episodes.csv"))
-            p = coadapt_pace(src, env, median(paces))
+            p = coadapt_pace(src, env, q_pace)
             if not p:
                 return None
             seconds += prefix / p * 3600
         elif not os.path.exists(d):
             # Its source runs (another lane): the fork waits for it to reach design K.
             behind = max(0, sum(eps[:k]) - rows(f"{src_dir}/episodes.csv"))
-            p = coadapt_pace(src, env, median(paces))
+            p = coadapt_pace(src, env, q_pace)
             if behind and not p:
                 return None
             seconds += behind / p * 3600 if behind else 0.0
@@ -374,7 +385,7 @@ def line_seconds_one_thread(queue, name, seed):
         arch = f"{RESULTS}/{run}"
         if not os.path.exists(src) and os.path.exists(f"{arch}/summary.json"):
             m = re.fullmatch(r"(.+)-seed\d+", run)
-            p = coadapt_pace(m.group(1) if m else run, env_of(f"{arch}/config.toml"), median(paces))
+            p = coadapt_pace(m.group(1) if m else run, env_of(f"{arch}/config.toml"), q_pace)
             if not p:
                 return None
             seconds += rows(f"{arch}/episodes.csv") / p * 3600
@@ -382,7 +393,7 @@ def line_seconds_one_thread(queue, name, seed):
     # (ten at least; before them the networks train less per episode) and a fork's prefix.
     skip = own_skip(d)
     own = pace_of(d, skip) if skip is not None and rows(f"{d}/episodes.csv") - skip >= 10 else None
-    p = own or coadapt_pace(name, env, median(paces))
+    p = own or coadapt_pace(name, env, q_pace)
     if not p:
         return None
     return seconds + episodes / p * 3600, own is not None
@@ -410,7 +421,7 @@ def main():
     live = live_dirs()
     for queue in args:
         lines = parse(queue)
-        counts, left, paces = {}, 0, []
+        counts, left = {}, 0
         print(f"== {queue}")
         for name, spec, seed, flags in lines:
             run = f"{name}-seed{seed}"
@@ -425,11 +436,6 @@ def main():
             summary = next((p for p in (f"{a}/summary.json", f"{d}/summary.json") if os.path.exists(p)), None)
             if summary:
                 state = "archived" if summary.startswith(RESULTS) else "done"
-                if not spec.startswith("retrain:"):
-                    # Retrains (plain SAC, updates per step) keep another pace: not mixed in.
-                    p = pace_of(os.path.dirname(summary), sum(eps[:k]) if eps and k else 0)
-                    if p:
-                        paces.append(p)
             elif os.path.realpath(d) in live:
                 state = "running"
             elif os.path.exists(d):
@@ -456,7 +462,7 @@ def main():
                     est = line_seconds(queue, name, seed)
                     progress += "" if est is None else f", about {est / 60:.0f} min"
                 print(f"  {state:8} {run:40} {progress}{note}")
-        pace = sorted(paces)[len(paces) // 2] if paces else None
+        pace = queue_pace(lines)
         hours = f", about {left / pace:.1f} lane-hours at the median pace of its finished runs ({pace:.0f} episodes/h)" if pace and left else ""
         tally = ", ".join(f"{v} {k}" for k, v in sorted(counts.items())) or "no lines"
         print(f"  -- {tally}; {left} episodes left{hours}")
