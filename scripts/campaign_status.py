@@ -211,7 +211,15 @@ def own_skip(run_dir):
 def speed():
     """This machine's pace against the archive's: the median, over the run directories here
     with ten rows of their own at least, of their own pace over what the archive gives for them
-    (an AVX-512 machine ran 1.5-2x the archived paces), within [0.5, 2]; 1 without any."""
+    (AVX-512 machines ran 1.5-2.75x the archived paces), within [0.5, 3]; 1 without any. The
+    archive it is set against leaves out the runs made here (their run directories are here):
+    else every run that ends here and is archived pulls the factor towards 1."""
+    return speed_detail()[0]
+
+
+@functools.lru_cache(maxsize=None)
+def speed_detail():
+    """(speed(), the unclamped median, how many run directories it is over)."""
     ratios = []
     try:
         runs = os.listdir(RUNS)
@@ -223,10 +231,13 @@ def speed():
         skip = own_skip(d) if m and os.path.isdir(d) else None
         if skip is None or rows(f"{d}/episodes.csv") - skip < 10:
             continue
-        own, archive = pace_of(d, skip), archive_pace(m.group(1), env_of(f"{d}/config.toml"), None)
+        own, archive = pace_of(d, skip), archive_pace(m.group(1), env_of(f"{d}/config.toml"), None, frozenset(runs))
         if own and archive:
             ratios.append(own / archive)
-    return min(2.0, max(0.5, median(ratios))) if ratios else 1.0
+    if not ratios:
+        return 1.0, None, 0
+    raw = median(ratios)
+    return min(3.0, max(0.5, raw)), raw, len(ratios)
 
 
 def coadapt_pace(name, env, queue_pace):
@@ -236,9 +247,11 @@ def coadapt_pace(name, env, queue_pace):
 
 
 @functools.lru_cache(maxsize=None)
-def archive_pace(name, env, queue_pace):
-    """Episodes per hour for a co-adaptation line by the archive's paces."""
-    runs = [(n, e, d) for n, e, d in archived("config.toml") if os.path.exists(f"{d}/episodes.csv")]
+def archive_pace(name, env, queue_pace, without=frozenset()):
+    """Episodes per hour for a co-adaptation line by the archive's paces (leaving out the
+    archived runs named in WITHOUT)."""
+    runs = [(n, e, d) for n, e, d in archived("config.toml")
+            if os.path.exists(f"{d}/episodes.csv") and os.path.basename(d) not in without]
 
     def pace(pick):
         return median([x for x in (pace_of(d, fork_k(d)) for n, e, d in runs if pick(n, e)) if x])
@@ -419,6 +432,11 @@ def main():
         sys.exit(0 if args else 2)
     show_all = "--all" in sys.argv
     live = live_dirs()
+    factor, raw, n = speed_detail()
+    if n:
+        clamp = "" if factor == raw else f", taken as {factor:.2f}"
+        dirs = "run directory" if n == 1 else "run directories"
+        print(f"this machine: {raw:.2f}x the archive's pace (median over {n} {dirs} here{clamp}); the estimates are scaled by it")
     for queue in args:
         lines = parse(queue)
         counts, left = {}, 0

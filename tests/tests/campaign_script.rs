@@ -388,7 +388,8 @@ fn until_starts_only_the_lines_that_end_in_time() {
 }
 
 /// The estimates follow this machine: a run directory here going at twice the archived pace
-/// halves them.
+/// halves them; its run, once archived, is not part of the pace it is set against; the factor
+/// stops at 3.
 #[test]
 fn estimates_scale_with_this_machines_pace() {
     let t = Tree::new("speed");
@@ -410,5 +411,18 @@ fn estimates_scale_with_this_machines_pace() {
     t.write_paced("runs/campaign/alpha-seed3", &here);
     std::fs::copy(t.path("cfg.toml"), t.path("runs/campaign/alpha-seed3/config.toml")).expect("its config");
     assert_eq!(seconds(), "2", "the same 5 episodes at this machine's pace, twice the archive's");
+    // Once alpha-seed3 ends it is archived too; its run directory here is still set against the
+    // archive's other runs, not against itself (which would pull the factor to 1.33).
+    t.write_paced("docs/campaign/results/alpha-seed3", &here);
+    std::fs::write(t.path("docs/campaign/results/alpha-seed3/summary.json"), "{\"interrupted\": false}").expect("summary");
+    let status = t.status();
+    assert!(status.contains("this machine: 2.00x the archive's pace (median over 1 run directory here)"), "{status}");
+    // With a second run at eight times the archive's pace the median (of two, the upper one) is
+    // 8, taken as 3.
+    let fast: Vec<(u32, u32, f64)> = (0..23).map(|i| (0, i, 0.125 * f64::from(i + 1))).collect();
+    t.write_paced("runs/campaign/alpha-seed4", &fast);
+    std::fs::copy(t.path("cfg.toml"), t.path("runs/campaign/alpha-seed4/config.toml")).expect("its config");
+    let status = t.status();
+    assert!(status.contains("this machine: 8.00x the archive's pace (median over 2 run directories here, taken as 3.00)"), "{status}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
