@@ -242,19 +242,37 @@ def speed_detail():
 
 def coadapt_pace(name, env, queue_pace):
     """Episodes per hour for a co-adaptation line on this machine: see --seconds."""
-    p = archive_pace(name, env, queue_pace)
-    return p * speed() if p else None
+    return archive_pace(name, env, queue_pace, scaled=True)
 
 
 @functools.lru_cache(maxsize=None)
-def archive_pace(name, env, queue_pace, without=frozenset()):
+def here_runs():
+    """The names of the run directories here: the archived runs made on this machine."""
+    try:
+        return frozenset(os.listdir(RUNS))
+    except OSError:
+        return frozenset()
+
+
+def on_this_machine(d, x):
+    """A pace (or a rate) X measured by the archived run D, in this machine's terms: as it is
+    for a run made here, times speed() for one made elsewhere."""
+    return x if os.path.basename(d) in here_runs() else x * speed()
+
+
+@functools.lru_cache(maxsize=None)
+def archive_pace(name, env, queue_pace, without=frozenset(), scaled=False):
     """Episodes per hour for a co-adaptation line by the archive's paces (leaving out the
-    archived runs named in WITHOUT)."""
+    archived runs named in WITHOUT); SCALED: each in this machine's terms (on_this_machine)."""
     runs = [(n, e, d) for n, e, d in archived("config.toml")
             if os.path.exists(f"{d}/episodes.csv") and os.path.basename(d) not in without]
 
+    def one(d):
+        x = pace_of(d, fork_k(d))
+        return on_this_machine(d, x) if x and scaled else x
+
     def pace(pick):
-        return median([x for x in (pace_of(d, fork_k(d)) for n, e, d in runs if pick(n, e)) if x])
+        return median([x for x in (one(d) for n, e, d in runs if pick(n, e)) if x])
 
     same_name = pace(lambda n, e: n == name)
     if same_name:
@@ -265,7 +283,7 @@ def archive_pace(name, env, queue_pace, without=frozenset()):
     # can cost more than the robot's episodes.
     robot = pace(lambda n, e: env is not None and e == env)
     if not robot:
-        return queue_pace
+        return queue_pace * speed() if queue_pace and scaled else queue_pace
     method = method_of(name)
     ratios = []
     for n2 in {n for n, e, d in runs if method_of(n) == method and n != name}:
@@ -283,7 +301,8 @@ def method_of(name):
 
 @functools.lru_cache(maxsize=None)
 def seconds_per_train_seed(env):
-    """Median seconds of one training seed of a retrain line (episodes.csv's wall_s at its end)."""
+    """Median seconds of one training seed of a retrain line (episodes.csv's wall_s at its end), on
+    this machine."""
     def secs(d):
         out = []
         for k in (1, 2):
@@ -295,7 +314,9 @@ def seconds_per_train_seed(env):
                 pass
         return out
     # The same work for every method (plain SAC on one body): the robot's retrains.
-    return median([x for n, e, d in archived("train-seed1/config.toml") if env is not None and e == env for x in secs(d)])
+    # Each in this machine's terms: seconds shrink as paces grow.
+    return median([1 / on_this_machine(d, 1 / x) for n, e, d in archived("train-seed1/config.toml")
+                   if env is not None and e == env for x in secs(d) if x > 0])
 
 
 # A run with two threads (THREADS=2, a lone lane) against one: the reference run measured 1.6x
@@ -348,7 +369,6 @@ def line_seconds_one_thread(queue, name, seed):
         if src_dir is None:
             return None
         per_seed = seconds_per_train_seed(env_of(f"{src_dir}/config.toml"))
-        per_seed = per_seed / speed() if per_seed else None
         left = sum(1 for k in (1, 2) if not os.path.exists(f"{d}/train-seed{k}/summary.json"))
         return None if per_seed is None else (left * per_seed, False)
     q_pace = queue_pace(lines)

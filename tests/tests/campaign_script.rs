@@ -406,17 +406,19 @@ fn estimates_scale_with_this_machines_pace() {
         String::from_utf8_lossy(&o.stdout).trim().to_string()
     };
     assert_eq!(seconds(), "5", "cfg.toml's 5 episodes at the archive's pace");
-    // Here, alpha's seed 3 has gone on at two episodes a second past its initial design's 3.
-    let here: Vec<(u32, u32, f64)> = (0..23).map(|i| (0, i, 0.5 * f64::from(i + 1))).collect();
+    // Here, alpha's seed 3 has gone on at 2.5 episodes a second past its initial design's 3.
+    let here: Vec<(u32, u32, f64)> = (0..23).map(|i| (0, i, 0.4 * f64::from(i + 1))).collect();
     t.write_paced("runs/campaign/alpha-seed3", &here);
     std::fs::copy(t.path("cfg.toml"), t.path("runs/campaign/alpha-seed3/config.toml")).expect("its config");
-    assert_eq!(seconds(), "2", "the same 5 episodes at this machine's pace, twice the archive's");
+    assert_eq!(seconds(), "2", "the same 5 episodes at this machine's pace, 2.5 times the archive's");
     // Once alpha-seed3 ends it is archived too; its run directory here is still set against the
-    // archive's other runs, not against itself (which would pull the factor to 1.33).
+    // archive's other runs, not against itself (which would pull the factor to 1), and its own
+    // pace, made here, is not scaled again (which would give 6.25 episodes a second).
     t.write_paced("docs/campaign/results/alpha-seed3", &here);
     std::fs::write(t.path("docs/campaign/results/alpha-seed3/summary.json"), "{\"interrupted\": false}").expect("summary");
     let status = t.status();
-    assert!(status.contains("this machine: 2.00x the archive's pace (median over 1 run directory here)"), "{status}");
+    assert!(status.contains("this machine: 2.50x the archive's pace (median over 1 run directory here)"), "{status}");
+    assert_eq!(seconds(), "2", "alpha-seed1's pace scaled and alpha-seed3's as it is: 2.5 a second");
     // With a second run at eight times the archive's pace the median (of two, the upper one) is
     // 8, taken as 3.
     let fast: Vec<(u32, u32, f64)> = (0..23).map(|i| (0, i, 0.125 * f64::from(i + 1))).collect();
