@@ -231,7 +231,7 @@ def speed_detail():
         skip = own_skip(d) if m and os.path.isdir(d) else None
         if skip is None or rows(f"{d}/episodes.csv") - skip < 10:
             continue
-        own, archive = pace_of(d, skip), archive_pace(m.group(1), env_of(f"{d}/config.toml"), None, frozenset(runs))
+        own, archive = pace_of(d, skip), archive_pace(m.group(1), env_of(f"{d}/config.toml"), None, here_runs())
         if own and archive:
             ratios.append(own / archive)
     if not ratios:
