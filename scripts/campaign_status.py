@@ -115,7 +115,11 @@ def live_dirs():
 
 def parse(queue):
     lines = []
-    with open(queue) as f:
+    try:
+        f = open(queue)
+    except OSError as e:
+        sys.exit(f"campaign_status: cannot read queue file {queue}: {e.strerror}")
+    with f:
         for n, line in enumerate(f, 1):
             words = line.split()
             if not words or words[0].startswith("#"):
@@ -451,14 +455,15 @@ def main():
         print(__doc__.strip())
         sys.exit(0 if args else 2)
     show_all = "--all" in sys.argv
+    # Every queue is read before anything is printed: a mistyped name fails alone.
+    parsed = [(queue, parse(queue)) for queue in args]
     live = live_dirs()
     factor, raw, n = speed_detail()
     if n:
         clamp = "" if factor == raw else f", taken as {factor:.2f}"
         dirs = "run directory" if n == 1 else "run directories"
         print(f"this machine: {raw:.2f}x the archive's pace (median over {n} {dirs} here{clamp}); the estimates are scaled by it")
-    for queue in args:
-        lines = parse(queue)
+    for queue, lines in parsed:
         counts, left = {}, 0
         print(f"== {queue}")
         for name, spec, seed, flags in lines:

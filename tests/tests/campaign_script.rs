@@ -428,3 +428,21 @@ fn estimates_scale_with_this_machines_pace() {
     assert!(status.contains("this machine: 8.00x the archive's pace (median over 2 run directories here, taken as 3.00)"), "{status}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// A queue file that is not there (a mistyped name among several) stops the status listing with
+/// its name and nothing printed for the others, not a Python traceback.
+#[test]
+fn a_missing_queue_file_is_named_before_anything_is_listed() {
+    let t = Tree::new("noqueue");
+    std::fs::write(t.root.join("q.queue"), "alpha cfg.toml 1\n").expect("the queue");
+    let o = Command::new("python3")
+        .args(["scripts/campaign_status.py", "q.queue", "nope.queue"])
+        .current_dir(&t.root)
+        .output()
+        .expect("running campaign_status.py");
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let out = text(&o);
+    assert!(out.contains("cannot read queue file nope.queue"), "{out}");
+    assert!(!out.contains("Traceback") && !out.contains("== q.queue"), "{out}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
