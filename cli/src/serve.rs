@@ -28,9 +28,9 @@ use coadapt_design_service::ServeConfig;
 /// critic's calibration on the design benchmark per robot (how often the body it preferred
 /// reached the higher return once trained, and what a difference of 1 was worth in return),
 /// generated from docs/campaign/results. On 2026-12-03 (FEAR's runs: 5 seeds on HalfCheetah, 3
-/// on Walker and Hopper, 1 on Daisy and on MuJoCo's cheetah) its preference for a chosen body over
-/// bodies the run had trained held 75-90 % of the time; over the untried random body proposed
-/// next it held 16 of 25 times on HalfCheetah, 4 of 15 on Walker, 2 of 15 on Hopper, 2 of 3 on
+/// on Walker, Hopper and Daisy, 1 on MuJoCo's cheetah) its preference for a chosen body over
+/// bodies the run had trained held 75-94 % of the time; over the untried random body proposed
+/// next it held 16 of 25 times on HalfCheetah, 4 of 15 on Walker, 2 of 15 on Hopper, 6 of 9 on
 /// Daisy and 4 of 5 on MuJoCo's cheetah: use scores to decide which bodies to try, not as their
 /// returns, and check the robot's row before trusting a preference for an untried body.
 #[derive(Debug, Args)]
