@@ -225,11 +225,7 @@ def speed():
 def speed_detail():
     """(speed(), the unclamped median, how many run directories it is over)."""
     ratios = []
-    try:
-        runs = os.listdir(RUNS)
-    except OSError:
-        runs = []
-    for run in runs:
+    for run in sorted(here_runs()):
         m = re.fullmatch(r"(.+)-seed\d+", run)
         d = f"{RUNS}/{run}"
         skip = own_skip(d) if m and os.path.isdir(d) else None
@@ -258,22 +254,22 @@ def here_runs():
         return frozenset()
 
 
-def on_this_machine(d, x):
-    """A pace (or a rate) X measured by the archived run D, in this machine's terms: as it is
-    for a run made here, times speed() for one made elsewhere."""
-    return x if os.path.basename(d) in here_runs() else x * speed()
+def machine_factor(d):
+    """How much faster this machine runs than the one that made the archived run D: 1 for a run
+    made here, speed() for one made elsewhere (paces are multiplied by it, seconds divided)."""
+    return 1.0 if os.path.basename(d) in here_runs() else speed()
 
 
 @functools.lru_cache(maxsize=None)
 def archive_pace(name, env, queue_pace, without=frozenset(), scaled=False):
     """Episodes per hour for a co-adaptation line by the archive's paces (leaving out the
-    archived runs named in WITHOUT); SCALED: each in this machine's terms (on_this_machine)."""
+    archived runs named in WITHOUT); SCALED: each in this machine's terms (machine_factor)."""
     runs = [(n, e, d) for n, e, d in archived("config.toml")
             if os.path.exists(f"{d}/episodes.csv") and os.path.basename(d) not in without]
 
     def one(d):
         x = pace_of(d, fork_k(d))
-        return on_this_machine(d, x) if x and scaled else x
+        return x * machine_factor(d) if x and scaled else x
 
     def pace(pick):
         return median([x for x in (one(d) for n, e, d in runs if pick(n, e)) if x])
@@ -319,7 +315,7 @@ def seconds_per_train_seed(env):
         return out
     # The same work for every method (plain SAC on one body): the robot's retrains.
     # Each in this machine's terms: seconds shrink as paces grow.
-    return median([1 / on_this_machine(d, 1 / x) for n, e, d in archived("train-seed1/config.toml")
+    return median([x / machine_factor(d) for n, e, d in archived("train-seed1/config.toml")
                    if env is not None and e == env for x in secs(d) if x > 0])
 
 
