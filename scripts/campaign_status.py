@@ -302,7 +302,7 @@ def method_of(name):
 @functools.lru_cache(maxsize=None)
 def seconds_per_train_seed(env):
     """Median seconds of one training seed of a retrain line (episodes.csv's wall_s at its end), on
-    this machine."""
+    this machine; for a robot without retrains, sized by its co-adaptation pace."""
     def secs(d):
         out = []
         for k in (1, 2):
@@ -315,8 +315,26 @@ def seconds_per_train_seed(env):
         return out
     # The same work for every method (plain SAC on one body): the robot's retrains.
     # Each in this machine's terms: seconds shrink as paces grow.
-    return median([x / machine_factor(d) for n, e, d in archived("train-seed1/config.toml")
-                   if env is not None and e == env for x in secs(d) if x > 0])
+    retrains = [(e, x / machine_factor(d)) for n, e, d in archived("train-seed1/config.toml")
+                if e is not None for x in secs(d) if x > 0]
+    own = median([x for e, x in retrains if e == env])
+    if own or env is None:
+        return own
+    # A robot never retrained: its co-adaptation runs' pace times what a training seed costs in
+    # co-adaptation episodes on the robots that were (30 episodes of SAC on one body cost 24 to
+    # 36 of FEAR's on HalfCheetah, Walker, Hopper and Daisy): else --until never starts the line.
+    here = robot_pace(env)
+    costs = [median([x for e2, x in retrains if e2 == e]) * p / 3600
+             for e in sorted({e for e, _ in retrains}) for p in [robot_pace(e)] if p]
+    cost = median(costs)
+    return cost * 3600 / here if here and cost else None
+
+
+def robot_pace(env):
+    """Episodes per hour of the archived co-adaptation runs on ENV (median, this machine's
+    terms), or None."""
+    return median([x * machine_factor(d) for n, e, d in archived("config.toml") if e == env
+                   and os.path.exists(f"{d}/episodes.csv") for x in [pace_of(d, fork_k(d))] if x])
 
 
 # A run with two threads (THREADS=2, a lone lane) against one: the reference run measured 1.6x

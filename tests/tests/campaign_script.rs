@@ -446,3 +446,43 @@ fn a_missing_queue_file_is_named_before_anything_is_listed() {
     assert!(!out.contains("Traceback") && !out.contains("== q.queue"), "{out}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// A retrain line on a robot never retrained before is sized by its robot's co-adaptation pace
+/// times what a training seed costs in co-adaptation episodes where retrains were made; without
+/// it `--until` would never start the line.
+#[test]
+fn a_retrain_on_a_robot_never_retrained_is_sized_by_its_pace() {
+    let t = Tree::new("retrain-pace");
+    let env = |run: &str, e: &str| {
+        std::fs::write(t.path(&format!("docs/campaign/results/{run}/config.toml")), format!("env = \"{e}\"\n")).expect("config");
+    };
+    // Robot a: one episode a second; its retrain's training seeds took 60 s each (60 episodes' worth).
+    let a: Vec<(u32, u32, f64)> = (0..10).map(|i| (0, i, f64::from(i + 1))).collect();
+    t.archive_paced("a-fear-seed1", &a, 10.0);
+    env("a-fear-seed1", "a");
+    for k in [1, 2] {
+        let seed = t.path(&format!("docs/campaign/results/a-body-seed1/train-seed{k}"));
+        std::fs::create_dir_all(&seed).expect("a training seed");
+        std::fs::write(seed.join("config.toml"), "env = \"a\"\n").expect("its config");
+        std::fs::write(seed.join("episodes.csv"), "episode,return,wall_s\n0,1.0,30.0\n1,1.0,60.0\n").expect("its rows");
+    }
+    std::fs::write(t.path("docs/campaign/results/a-body-seed1/summary.json"), "{}").expect("summary");
+    // Robot b: half as fast, never retrained: two training seeds of 60 of its episodes, 240 s.
+    let b: Vec<(u32, u32, f64)> = (0..10).map(|i| (0, i, 2.0 * f64::from(i + 1))).collect();
+    t.archive_paced("b-fear-seed1", &b, 20.0);
+    env("b-fear-seed1", "b");
+    std::fs::write(t.path("q.queue"), "b-body retrain:b-fear:exploit 1\n").expect("queue");
+    let seconds = |name: &str, seed: &str| {
+        let o = Command::new("python3")
+            .args(["scripts/campaign_status.py", "q.queue", "--seconds", name, seed])
+            .current_dir(&t.root)
+            .output()
+            .expect("campaign_status.py --seconds");
+        assert!(o.status.success(), "{}", text(&o));
+        String::from_utf8_lossy(&o.stdout).trim().to_string()
+    };
+    assert_eq!(seconds("b-body", "1"), "240");
+    let status = t.status();
+    assert!(status.contains("pending  b-body-seed1") && status.contains("about 4 min"), "{status}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
