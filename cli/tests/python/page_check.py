@@ -100,8 +100,20 @@ class Browser:
             time.sleep(0.1)
 
     def text(self, css):
-        found = self.all(css)
-        return call("GET", f"{self.s}/element/{found[0]}/text") if found else ""
+        # The page replaces its panels as the run moves on (page.js): an element found just
+        # before a replacement is stale when its text is asked for (seen on a loaded machine);
+        # it is found again.
+        for _ in range(50):
+            found = self.all(css)
+            if not found:
+                return ""
+            try:
+                return call("GET", f"{self.s}/element/{found[0]}/text")
+            except RuntimeError as e:
+                if "stale element reference" not in str(e):
+                    raise
+            time.sleep(0.1)
+        raise RuntimeError(f"{css!r} went stale 50 times running")
 
     def type(self, css, text, clear=False):
         e = self.one(css)
