@@ -216,8 +216,11 @@ fn serving_fleet(extra: &[&str], dir: &Path) -> (Fleet, String, std::sync::Arc<s
 fn python_clients_query_a_running_fleet_and_watch_its_designs() {
     let dir = std::env::temp_dir().join(format!("coadapt-serve-{}-live", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
+    // The client's virtualenv first: built on a clean checkout it takes a minute or more, in
+    // which the fleet would run far into (or through) its designs before anything watched.
+    let python = venv().join("bin/python");
     let (mut fleet, addr, log) = serving_fleet(&["--transport", "grpc", "--designs", "60"], &dir);
-    let o = Command::new(venv().join("bin/python"))
+    let o = Command::new(python)
         .arg(workspace_file("clients/python/example.py"))
         .args(["--server", &addr, "--watch-rows", "12"])
         .output()

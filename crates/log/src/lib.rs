@@ -1,9 +1,10 @@
 //! Progress and log lines that never take a process down.
 //!
 //! # Layout
-//! - [`logln!`]: `eprintln!` without its panic. `eprintln!` panics when stderr cannot be written
-//!   (`2>/dev/full`, a log file on a full disk, a closed pipe), and a run must not die because
-//!   its progress could not be shown. A failed write is counted ([`failed_writes`], for
+//! - [`logln!`]: `eprintln!` without its panic, each line in one `write` (whole among the
+//!   lines of the other processes sharing stderr). `eprintln!` panics when stderr cannot be
+//!   written (`2>/dev/full`, a log file on a full disk, a closed pipe), and a run must not die
+//!   because its progress could not be shown. A failed write is counted ([`failed_writes`], for
 //!   `/metrics`) and the process carries on; the line is lost, as it would be anyway.
 //! - [`print_stdout_line`]: a result line on stdout (JSON, an address); a reader that has gone
 //!   away (`coadapt bench nn | head -1`) ends the process quietly instead of a panic.
@@ -14,10 +15,16 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 static FAILED: AtomicU64 = AtomicU64::new(0);
 
-/// Writes one line to stderr; a failure is counted, never raised.
+/// Writes one line to stderr in one `write`; a failure is counted, never raised.
+///
+/// Stderr is unbuffered: `write_fmt` straight to it makes one `write` per formatted piece, and
+/// a fleet's processes share one stderr, so their lines were cut into each other mid-line
+/// (`grpc://127.fleet 0http://...`: the address a user or test reads off the line, garbled).
+/// A line formatted first and written whole is not (a pipe keeps writes up to 4 KiB whole).
 pub fn write_line(args: std::fmt::Arguments<'_>) {
-    let mut e = std::io::stderr().lock();
-    if e.write_fmt(args).and_then(|()| e.write_all(b"\n")).is_err() {
+    let mut line = std::fmt::format(args);
+    line.push('\n');
+    if std::io::stderr().lock().write_all(line.as_bytes()).is_err() {
         FAILED.fetch_add(1, Ordering::Relaxed);
     }
 }
