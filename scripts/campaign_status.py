@@ -283,7 +283,9 @@ def archive_pace(name, env, queue_pace, without=frozenset(), scaled=False):
     # can cost more than the robot's episodes.
     robot = pace(lambda n, e: env is not None and e == env)
     if not robot:
-        return queue_pace * speed() if queue_pace and scaled else queue_pace
+        # QUEUE_PACE is in this machine's terms already (queue_pace): the runs made here were
+        # scaled again by speed() before, the archive's other runs once.
+        return queue_pace
     method = method_of(name)
     ratios = []
     for n2 in {n for n, e, d in runs if method_of(n) == method and n != name}:
@@ -344,8 +346,9 @@ TWO_THREADS = 1.6
 
 def queue_pace(lines):
     """The median pace of a queue's finished co-adaptation runs (archived, or done here), their
-    own rows only (a fork's copied prefix left out), or None. Retrains (plain SAC, updates per
-    step) keep another pace: not mixed in."""
+    own rows only (a fork's copied prefix left out), each in this machine's terms
+    (machine_factor), or None. Retrains (plain SAC, updates per step) keep another pace: not
+    mixed in."""
     paces = []
     for n2, s2, seed2, f2 in lines:
         if s2.startswith("retrain:"):
@@ -355,7 +358,7 @@ def queue_pace(lines):
                 eps, k = plan(n2, s2, seed2, f2, lines)
                 p = pace_of(d, sum(eps[:k]) if eps and k else 0)
                 if p:
-                    paces.append(p)
+                    paces.append(p * machine_factor(d))
                 break
     return median(paces)
 

@@ -411,6 +411,10 @@ fn estimates_scale_with_this_machines_pace() {
     t.write_paced("runs/campaign/alpha-seed3", &here);
     std::fs::copy(t.path("cfg.toml"), t.path("runs/campaign/alpha-seed3/config.toml")).expect("its config");
     assert_eq!(seconds(), "2", "the same 5 episodes at this machine's pace, 2.5 times the archive's");
+    // The lane-hours left too: alpha-seed1's 3,600 episodes an hour, archived elsewhere, are
+    // 9,000 here.
+    let status = t.status();
+    assert!(status.contains("at the median pace of its finished runs (9000 episodes/h)"), "{status}");
     // Once alpha-seed3 ends it is archived too; its run directory here is still set against the
     // archive's other runs, not against itself (which would pull the factor to 1), and its own
     // pace, made here, is not scaled again (which would give 6.25 episodes a second).
@@ -419,6 +423,8 @@ fn estimates_scale_with_this_machines_pace() {
     let status = t.status();
     assert!(status.contains("this machine: 2.50x the archive's pace (median over 1 run directory here)"), "{status}");
     assert_eq!(seconds(), "2", "alpha-seed1's pace scaled and alpha-seed3's as it is: 2.5 a second");
+    // alpha-seed3 is not a line of q.queue: its pace is not the queue's; alpha-seed1's still 9,000.
+    assert!(status.contains("(9000 episodes/h)"), "{status}");
     // With a second run at eight times the archive's pace the median (of two, the upper one) is
     // 8, taken as 3.
     let fast: Vec<(u32, u32, f64)> = (0..23).map(|i| (0, i, 0.125 * f64::from(i + 1))).collect();
