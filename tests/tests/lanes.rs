@@ -1,7 +1,8 @@
 //! `scripts/lanes.sh`, which keeps lanes busy across queues (each lane runs its queues one after
 //! another with `campaign.sh -j 1`), driven with the fake `coadapt` of campaign_tree: a lane's
-//! second queue starts when its first has ended, the lanes run at once, and a SIGTERM stops the
-//! queue running (its run interrupted, not archived) and starts no other.
+//! second queue starts when its first has ended, the lanes run at once, a queue running already
+//! is waited for, and a SIGTERM stops the queue running (its run interrupted, not archived) and
+//! starts no other.
 
 use crate::campaign_tree;
 
@@ -62,5 +63,33 @@ fn a_term_stops_the_queue_running_and_starts_no_other() {
     assert!(t.path("runs/campaign/alpha-seed1.interrupted.json").exists(), "alpha was not stopped: {out}");
     assert!(!t.path("docs/campaign/results/alpha-seed1").exists(), "a stopped run was archived: {out}");
     assert!(!t.path("runs/campaign/beta-seed2").exists() && !out.contains("b.queue from"), "b.queue started after the stop: {out}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// A queue already running (started by hand) is waited for, not started twice: the lane starts
+/// it only once the other campaign has ended, and then finds its lines done.
+#[test]
+fn a_queue_running_already_is_waited_for() {
+    let t = Tree::new("lanes-wait");
+    queues(&t);
+    std::fs::write(&t.hold, "").expect("the hold file");
+    let mut by_hand = Running(t.campaign(&["-j", "1", "a.queue"]).spawn().expect("starting a.queue by hand"), t.hold.clone());
+    wait_for("alpha's run", || t.path("runs/campaign/alpha-seed1/episodes.csv").exists());
+    let lane = lanes(&t, &["a.queue c.queue"]).stdout(std::process::Stdio::piped()).spawn().expect("starting lanes.sh");
+    let mut lane = Running(lane, t.hold.clone());
+    // Longer than the lane's 5 s poll: it would have started a.queue (refused: already running)
+    // and gone on to c.queue.
+    std::thread::sleep(std::time::Duration::from_secs(7));
+    assert!(lane.0.try_wait().expect("lanes.sh").is_none(), "the lane ended while a.queue ran");
+    assert!(!t.path("runs/campaign/gamma-seed3").exists(), "the lane went past a.queue while it ran");
+    std::fs::remove_file(&t.hold).expect("ending the hold");
+    assert_eq!(by_hand.exit_code(), Some(0), "a.queue started by hand");
+    assert_eq!(lane.exit_code(), Some(0), "lanes.sh");
+    let mut out = String::new();
+    std::io::Read::read_to_string(lane.0.stdout.as_mut().expect("stdout"), &mut out).expect("lanes.sh's output");
+    let a = std::fs::read_to_string(t.path("runs/campaign-a.log")).expect("the lane's a.queue log");
+    assert!(a.contains("alpha-seed1 done already, skipped"), "{a}");
+    assert!(!a.contains("already running"), "the lane started a.queue while it ran: {a}");
+    assert!(t.path("docs/campaign/results/gamma-seed3/summary.json").exists(), "{out}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
