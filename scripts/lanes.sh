@@ -11,7 +11,8 @@
 #   e.g.   scripts/lanes.sh --until 05:20 "docs/campaign/hc-forks.queue docs/campaign/design-bench.queue" \
 #              "docs/campaign/design-choice.queue docs/campaign/fidelity-ablations.queue"
 # Each queue's output goes to runs/campaign-NAME.log (NAME: the queue file's name without
-# .queue), this script's own lines to standard output.
+# .queue), this script's own lines to standard output. A mujoco-* queue runs through
+# scripts/mujoco_lane.sh, which brings up the Python bridge its robot is served by.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 until_arg=()
@@ -59,7 +60,11 @@ run_lane() {
     echo "lanes: lane $i: $q from $(date -u +%H:%M:%S)"
     local name
     name=$(basename "$q" .queue)
-    scripts/campaign.sh -j 1 "${until_arg[@]}" "$q" >> "runs/campaign-$name.log" 2>&1 < /dev/null || echo "lanes: lane $i: $q ended with an error (runs/campaign-$name.log)"
+    local cmd=(scripts/campaign.sh -j 1 "${until_arg[@]}" "$q")
+    # The MuJoCo cheetah's queues need the Python bridge: mujoco_lane.sh starts it (or uses the
+    # one another lane started) around the same campaign.sh.
+    if [[ $name == mujoco-* ]]; then cmd=(env UNTIL="${until_arg[1]:-}" scripts/mujoco_lane.sh "$q"); fi
+    "${cmd[@]}" >> "runs/campaign-$name.log" 2>&1 < /dev/null || echo "lanes: lane $i: $q ended with an error (runs/campaign-$name.log)"
     echo "lanes: lane $i: $q ended at $(date -u +%H:%M:%S)"
   done
 }

@@ -1,8 +1,8 @@
 //! `scripts/lanes.sh`, which keeps lanes busy across queues (each lane runs its queues one after
 //! another with `campaign.sh -j 1`), driven with the fake `coadapt` of campaign_tree: a lane's
 //! second queue starts when its first has ended, the lanes run at once, a queue running already
-//! is waited for, and a SIGTERM stops the queue running (its run interrupted, not archived) and
-//! starts no other.
+//! is waited for, mujoco-* queues of two lanes share one Python bridge, and a SIGTERM stops the
+//! queue running (its run interrupted, not archived) and starts no other.
 
 use crate::campaign_tree;
 
@@ -91,5 +91,52 @@ fn a_queue_running_already_is_waited_for() {
     assert!(a.contains("alpha-seed1 done already, skipped"), "{a}");
     assert!(!a.contains("already running"), "the lane started a.queue while it ran: {a}");
     assert!(t.path("docs/campaign/results/gamma-seed3/summary.json").exists(), "{out}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// Two lanes reaching mujoco-* queues (the MuJoCo cheetah, served by the Python bridge) share one
+/// bridge, started by whichever came first (scripts/mujoco_lane.sh), and it outlives its own
+/// lane's queue while the other lane still uses it; it is gone when both have ended.
+#[test]
+fn mujoco_queues_of_two_lanes_share_one_bridge() {
+    let t = Tree::new("lanes-bridge");
+    std::fs::write(t.path("mujoco-a.queue"), "mujoco-a cfg.toml 1\n").expect("a queue");
+    std::fs::write(t.path("mujoco-b.queue"), "mujoco-b cfg.toml 2\n").expect("a queue");
+    // A fake bridge where mujoco_lane.sh looks for the real one: it listens, as the bridge does.
+    let bin = t.path("runs/venv-bridge/bin");
+    std::fs::create_dir_all(&bin).expect("the bridge's venv");
+    let fake = "#!/usr/bin/env python3\nimport socket, sys\ns = socket.socket()\ns.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)\n\
+                s.bind(('127.0.0.1', int(sys.argv[sys.argv.index('--port') + 1])))\ns.listen(8)\nwhile True:\n    s.accept()[0].close()\n";
+    std::fs::write(bin.join("coadapt-gym-serve"), fake).expect("the fake bridge");
+    assert!(Command::new("chmod").arg("+x").arg(bin.join("coadapt-gym-serve")).status().expect("chmod").success());
+    // A port of its own, not the real bridge's 50061 (a lane may be using it on this machine).
+    let port = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port").local_addr().expect("its address").port().to_string();
+    std::fs::write(&t.hold, "").expect("the hold file");
+    let lane =
+        lanes(&t, &["mujoco-a.queue", "mujoco-b.queue"]).env("PORT", &port).stdout(std::process::Stdio::piped()).spawn().expect("lanes.sh");
+    let mut lane = Running(lane, t.hold.clone());
+    for run in ["mujoco-a-seed1", "mujoco-b-seed2"] {
+        wait_for(run, || t.path(&format!("runs/campaign/{run}/episodes.csv")).exists());
+    }
+    let log = |q: &str| std::fs::read_to_string(t.path(&format!("runs/campaign-{q}.log"))).unwrap_or_default();
+    let owner = if log("mujoco-a").contains("mujoco_lane: bridge pid") { "a" } else { "b" };
+    let (first, other) = if owner == "a" { ("mujoco-a-seed1", "mujoco-b") } else { ("mujoco-b-seed2", "mujoco-a") };
+    assert!(log(other).contains("using the bridge another lane started"), "{}\n{}", log("mujoco-a"), log("mujoco-b"));
+    let pid = std::fs::read_to_string(t.path("runs/mujoco-bridge.pid")).expect("the bridge's pid file").trim().to_string();
+    assert!(alive(&pid), "the bridge is not running");
+    // The owner's run ends first: its queue finishes, the bridge stays for the other lane's run.
+    std::fs::write(format!("{}.done-{first}", t.hold.display()), "").expect("ending the owner's run");
+    wait_for("the owner's queue to finish", || log(&format!("mujoco-{owner}")).contains("finished"));
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    assert!(alive(&pid), "the bridge went while the other lane used it: {}", log(other));
+    std::fs::remove_file(&t.hold).expect("ending the hold");
+    assert_eq!(lane.exit_code(), Some(0), "lanes.sh");
+    let mut out = String::new();
+    std::io::Read::read_to_string(lane.0.stdout.as_mut().expect("stdout"), &mut out).expect("lanes.sh's output");
+    wait_for("the bridge to stop", || !alive(&pid));
+    assert!(!t.path("runs/mujoco-bridge.pid").exists(), "{out}");
+    for run in ["mujoco-a-seed1", "mujoco-b-seed2"] {
+        assert!(t.path(&format!("docs/campaign/results/{run}/summary.json")).exists(), "{run} not archived: {out}");
+    }
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }

@@ -62,7 +62,9 @@ impl Tree {
         // campaign.sh works in its script's parent and keeps runs/ beside it (../runs).
         let root = base.join("checkout");
         std::fs::create_dir_all(root.join("scripts")).expect("temp tree");
-        for script in ["campaign.sh", "campaign_lines.sh", "campaign_status.py", "fork_run.sh", "config_with.py", "lanes.sh"] {
+        for script in
+            ["campaign.sh", "campaign_lines.sh", "campaign_status.py", "fork_run.sh", "config_with.py", "lanes.sh", "mujoco_lane.sh"]
+        {
             std::fs::copy(repo().join("scripts").join(script), root.join("scripts").join(script)).expect("copying the scripts");
         }
         std::fs::write(root.join("fake-coadapt"), FAKE).expect("the fake binary");
