@@ -272,6 +272,17 @@ start_fork_watchers() {
     local src=${spec%%:*} rest_k=${spec#*:}
     local k=${rest_k%%+*}
     if [[ $rest_k == *+* ]]; then IFS=+ read -r -a overrides <<< "${rest_k#*+}"; fi
+    # A source that finished here and is archived, but kept only its newest snapshots (not the
+    # one at design K): set aside, so that the line runs its first K designs again as for a
+    # source whose directory is gone (run_one), instead of a watcher failing at once.
+    local srcdir=$root/$src-seed$seed
+    if [ -s "$srcdir/summary.json" ] && [ -s "docs/campaign/results/$src-seed$seed/summary.json" ] \
+      && ! scripts/fork_run.sh --has "$srcdir" "$k"; then
+      local aside
+      aside=$srcdir.finished-$(date -u +%Y%m%dT%H%M%S)
+      mv "$srcdir" "$aside"
+      echo "campaign: $srcdir kept no snapshot at the start of design $k: set aside as $aside; its first $k designs run again for $name-seed$seed"
+    fi
     rm -f "$dir.fork.log"
     # In a subshell that returns at once: the watcher is then no child of this shell, and
     # `wait -n` below, which counts the lanes, never mistakes its end for a finished run.

@@ -3,6 +3,7 @@
 # with some config keys changed, to be continued with `coadapt run --resume NEW`.
 #
 #   usage: scripts/fork_run.sh SRC_RUN K NEW_RUN [KEY.PATH=VALUE ...]
+#          scripts/fork_run.sh --has SRC_RUN K   (exit 0 when SRC_RUN holds that snapshot now)
 #   e.g.   scripts/fork_run.sh runs/campaign/walker-fear-seed1 5 runs/campaign/walker-sim-pso-seed1 \
 #              'optimizer.exploit="sim-pso"'
 #          RAYON_NUM_THREADS=1 coadapt run --resume runs/campaign/walker-sim-pso-seed1 --transport in-process
@@ -28,12 +29,11 @@
 # draws its rollout seeds from it), and the fork is a hybrid of the two methods.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+has=""
+if [ "${1:-}" = --has ]; then has=1; shift; fi
 src=${1:?usage: scripts/fork_run.sh SRC_RUN K NEW_RUN [KEY.PATH=VALUE ...]}
 k=${2:?design index K}
-dst=${3:?new run directory}
-shift 3
 [[ $k =~ ^[1-9][0-9]*$ ]] || { echo "fork_run: K must be a design index of at least 1, not $k" >&2; exit 2; }
-[ -e "$dst" ] && { echo "fork_run: $dst exists already" >&2; exit 2; }
 
 find_snapshot() {
   python3 - "$src/snapshots" "$k" <<'PY'
@@ -58,6 +58,11 @@ for name in sorted(os.listdir(root)):
 sys.exit(1)
 PY
 }
+
+if [ -n "$has" ]; then find_snapshot > /dev/null; exit; fi
+dst=${3:?new run directory}
+shift 3
+[ -e "$dst" ] && { echo "fork_run: $dst exists already" >&2; exit 2; }
 
 [ -d "$src" ] || echo "fork_run: $src does not exist yet; waiting for it (Ctrl-C to stop)" >&2
 # Looks into the snapshots (a Python start) only when their directory listing or times have

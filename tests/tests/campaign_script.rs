@@ -492,3 +492,42 @@ fn a_retrain_on_a_robot_never_retrained_is_sized_by_its_pace() {
     assert!(status.contains("pending  b-body-seed1") && status.contains("about 4 min"), "{status}");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
+
+/// A fork whose source finished on this machine (archived, its directory here) but kept only
+/// its newest snapshots, not the one at design K: the source is set aside and its first K designs
+/// are run again, as for a source whose directory is gone, instead of the fork failing.
+#[test]
+fn a_fork_of_a_finished_source_without_its_snapshot_runs_the_prefix_again() {
+    let t = Tree::new("fork-pruned");
+    t.archive_source(4);
+    std::fs::write(t.path("q.queue"), "frk fork:src:2 1\n").expect("queue");
+    // The source's directory here: finished, the archive's rows, only its last snapshot (design 4).
+    let src = t.path("runs/campaign/src-seed1");
+    let snap = src.join("snapshots/snap-00000009");
+    std::fs::create_dir_all(&snap).expect("the source's snapshot");
+    std::fs::write(snap.join("state.json"), r#"{"values": {"progress": {"design": 4, "in_design": null}}}"#).expect("its state");
+    for f in ["episodes.csv", "config.toml", "summary.json"] {
+        std::fs::copy(t.path(&format!("docs/campaign/results/src-seed1/{f}")), src.join(f)).expect("the source's files");
+    }
+    let has = |k: &str| {
+        Command::new("bash")
+            .arg(t.path("scripts/fork_run.sh"))
+            .args(["--has", "runs/campaign/src-seed1", k])
+            .status()
+            .expect("fork_run.sh --has")
+    };
+    assert!(has("4").success() && !has("2").success(), "fork_run.sh --has");
+
+    let done = t.run(&["-j", "1", "q.queue"]);
+    let log = text(&done);
+    assert!(done.status.success(), "{log}");
+    assert!(log.contains("kept no snapshot at the start of design 2: set aside as runs/campaign/src-seed1.finished-"), "{log}");
+    assert!(log.contains("row for row the archived ones"), "{log}");
+    assert!(t.path("docs/campaign/results/frk-seed1/summary.json").exists(), "the fork was not archived: {log}");
+    let aside = std::fs::read_dir(t.path("runs/campaign"))
+        .expect("runs")
+        .filter_map(|e| e.ok())
+        .any(|e| e.file_name().to_string_lossy().starts_with("src-seed1.finished-"));
+    assert!(aside, "the finished source was not kept aside: {log}");
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
