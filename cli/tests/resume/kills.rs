@@ -160,6 +160,32 @@ fn over_shared_memory_no_process_outlives_a_killed_learner() {
     eprintln!("the fleet ended {:.1} s after its learner", t.elapsed().as_secs_f64());
 }
 
+/// The pod's role processes, killed when the test ends, passed or failed: a failed assertion
+/// left a restarted optimiser waiting for its learner for ever.
+struct Roles(Vec<Child>);
+
+impl std::ops::Deref for Roles {
+    type Target = Vec<Child>;
+    fn deref(&self) -> &Vec<Child> {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Roles {
+    fn deref_mut(&mut self) -> &mut Vec<Child> {
+        &mut self.0
+    }
+}
+
+impl Drop for Roles {
+    fn drop(&mut self) {
+        for p in &mut self.0 {
+            let _ = p.kill();
+            let _ = p.wait();
+        }
+    }
+}
+
 /// The Kubernetes shared-memory pod (deploy/k8s/examples/shm-pod): one container per role,
 /// each started again by the kubelet whenever it ends, with no supervisor of ours. The learner
 /// is killed with SIGKILL mid-run: it comes back alone with `--resume`, the actors and the
@@ -203,7 +229,7 @@ fn a_shared_memory_pod_restarted_role_by_role_resumes_to_the_rows_of_a_run_never
         coadapt(&a.iter().map(String::as_str).collect::<Vec<_>>(), &log(roles[i], starts[i]))
     };
     // The kubelet starts the containers in no particular order: the actor first here.
-    let mut procs: Vec<Child> = (0..3).map(|i| start(i, &mut starts)).collect();
+    let mut procs = Roles((0..3).map(|i| start(i, &mut starts)).collect());
     let episodes = out.join("episodes.csv");
     let total = want.1.lines().count().saturating_sub(1);
     let at = 7 + draw(&mut rng, 5);
