@@ -4,6 +4,27 @@
 # again), and a line starting from an archived run's population networks (the run again).
 # shellcheck shell=bash
 
+# The MuJoCo bridge of the campaign listened on 127.0.0.1:50061 until 2026-12-03: the port that
+# `coadapt serve` and a run's design service take by default, so a user serving a MuJoCo run's
+# designs beside its bridge got "address already in use". It listens on MUJOCO_BRIDGE now
+# (127.0.0.1:50071 unless scripts/mujoco_lane.sh says otherwise). An archived config naming the
+# old address is the same robot: what is run here from it talks to the bridge where it is now.
+old_bridge=dm-env-rpc://127.0.0.1:50061
+bridge_here() {
+  if [ "$1" = "$old_bridge" ]; then echo "dm-env-rpc://${MUJOCO_BRIDGE:-127.0.0.1:50071}"; else echo "$1"; fi
+}
+
+# CONFIG copied to OUT, its env through bridge_here.
+config_here() {
+  local config=$1 out=$2 env
+  env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb")).get("env", ""))' "$config") || return 1
+  if [ "$(bridge_here "$env")" != "$env" ]; then
+    python3 scripts/config_with.py "$config" "env=\"$(bridge_here "$env")\"" > "$out"
+  else
+    cp "$config" "$out"
+  fi
+}
+
 # `NAME retrain:SRC:WHICH SEED [coadapt train flags]`: the body apart from the controller. Waits
 # for SRC-seedSEED to finish, picks its best exploitation (WHICH = exploit), exploration
 # (explore) or any (best) design (scripts/pick_design.py), and trains plain SAC on it from
@@ -23,6 +44,7 @@ retrain_one() {
   local design env
   design=$(python3 scripts/pick_design.py "$srcdir" "$which") || { echo "campaign: FAILED $dir: no design to retrain" >&2; return 1; }
   env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb"))["env"])' "$srcdir/config.toml")
+  env=$(bridge_here "$env")
   mkdir -p "$dir"
   echo "campaign: start $dir: SAC from scratch on $env, $which design of $srcdir ($design) ($(date -u +%H:%M:%S))"
   local t0=$SECONDS k steps=(--steps 30000) a
@@ -117,7 +139,10 @@ regenerate_prefix() {
   local tmp=$srcdir.prefix
   local lock=$srcdir.prefix.lock
   take_lock "$lock" || return 0
-  local mode=(--config "$srcarch/config.toml" --seed "$seed" --designs "$k" --out "$tmp")
+  local here=$root/configs/$src-seed$seed.prefix.toml
+  mkdir -p "$root/configs"
+  config_here "$srcarch/config.toml" "$here" || { rm -rf "$lock"; return 1; }
+  local mode=(--config "$here" --seed "$seed" --designs "$k" --out "$tmp")
   if compgen -G "$tmp/snapshots/snap-*" > /dev/null; then
     mode=(--resume "$tmp")
   else
@@ -158,7 +183,7 @@ PY
     return 1
   fi
   # The archived config (its whole schedule) for the forks: schedule.designs may change on resume.
-  cp "$srcarch/config.toml" "$tmp/config.toml"
+  config_here "$srcarch/config.toml" "$tmp/config.toml" || return 1
   mv "$tmp" "$srcdir"
   echo "campaign: $srcdir: its first $k designs again, row for row the archived ones"
 }

@@ -41,9 +41,18 @@ RESULTS = "docs/campaign/results"
 RUNS = "runs/campaign"
 
 
+# The MuJoCo bridge's address before 2026-12-03 (the design service's default port), in the
+# archived MuJoCo configs; the campaign runs them against the bridge where it is now
+# (scripts/campaign_lines.sh, bridge_here), and a robot's pace is looked up by its env.
+OLD_BRIDGE = "dm-env-rpc://127.0.0.1:50061"
+
+
 def load(path):
     with open(path, "rb") as f:
-        return tomllib.load(f)
+        cfg = tomllib.load(f)
+    if cfg.get("env") == OLD_BRIDGE:
+        cfg["env"] = "dm-env-rpc://" + os.environ.get("MUJOCO_BRIDGE", "127.0.0.1:50071")
+    return cfg
 
 
 def config_of(spec):

@@ -13,7 +13,7 @@
 #   BASE=config     FEAR's base config (default configs/half-cheetah-reduced.toml); with
 #   ROBOT=robot     the robot of plain SAC (default half-cheetah), e.g. the MuJoCo cheetah
 #                   served by the bridge: BASE=configs/mujoco-half-cheetah-reduced.toml
-#                   ROBOT=dm-env-rpc://127.0.0.1:50061
+#                   ROBOT=dm-env-rpc://127.0.0.1:50071
 #   FEAR_SET="k=v ..."  config overrides for FEAR (scripts/config_with.py), e.g.
 #                   "learner.sac.auto-alpha=true" or "learner.warmup-episodes=0"
 #   SAC_FLAGS="..." extra `coadapt train` flags

@@ -1,22 +1,25 @@
 #!/usr/bin/env bash
 # The MuJoCo cheetah's lane of the design benchmark (issue 28 section 2) and of the simulator-gap
 # transfer (issue 31): makes the Python bridge's virtualenv if it is missing
-# (bridges/python/setup_venv.sh, into runs/venv-bridge), starts the bridge on 127.0.0.1:50061
+# (bridges/python/setup_venv.sh, into runs/venv-bridge), starts the bridge on 127.0.0.1:50071
 # (the address in configs/mujoco-half-cheetah-reduced.toml), waits until it answers, runs the
 # queue with scripts/campaign.sh (which resumes where it stopped and archives each run as it
 # ends), and stops the bridge at the end or on Ctrl-C / SIGTERM (which stops the queue first),
 # once no run of runs/campaign/mujoco-* is left using it. A bridge another lane started
 # (runs/mujoco-bridge.pid) is used, not started twice, and left to that lane to stop:
 # scripts/lanes.sh runs every mujoco-* queue through this script, so two lanes can share it.
-#   usage: [BIN=path/to/coadapt] [UNTIL=TIME] [PORT=50061] scripts/mujoco_lane.sh [QUEUE, default docs/campaign/mujoco-bench.queue]
+#   usage: [BIN=path/to/coadapt] [UNTIL=TIME] [PORT=50071] scripts/mujoco_lane.sh [QUEUE, default docs/campaign/mujoco-bench.queue]
 #   UNTIL: passed to campaign.sh as --until (start only the lines that end by then).
-#   PORT: the bridge's port; the configs name 50061, so another suits only configs that say so
-#   (the tests' fake bridge, beside a real lane).
+#   PORT: the bridge's port; the configs name 50071, so another suits only configs that say so
+#   (the tests' fake bridge, beside a real lane). Archived configs naming the bridge's old
+#   address, 127.0.0.1:50061 (the design service's default port), are run against this one
+#   (MUJOCO_BRIDGE, scripts/campaign_lines.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 queue=${1:-docs/campaign/mujoco-bench.queue}
 venv=runs/venv-bridge
-port=${PORT:-50061}
+port=${PORT:-50071}
+export MUJOCO_BRIDGE=127.0.0.1:$port
 pidfile=runs/mujoco-bridge.pid
 answers() {
   python3 -c 'import socket,sys; s=socket.socket(); s.settimeout(1); sys.exit(s.connect_ex(("127.0.0.1", int(sys.argv[1]))) != 0)' "$port"

@@ -9,6 +9,7 @@
 mod campaign_tree;
 
 mod architecture;
+mod campaign_bridge;
 mod campaign_script;
 mod campaign_stop;
 mod doc_tables;

@@ -109,7 +109,7 @@ fn mujoco_queues_of_two_lanes_share_one_bridge() {
                 s.bind(('127.0.0.1', int(sys.argv[sys.argv.index('--port') + 1])))\ns.listen(8)\nwhile True:\n    s.accept()[0].close()\n";
     std::fs::write(bin.join("coadapt-gym-serve"), fake).expect("the fake bridge");
     assert!(Command::new("chmod").arg("+x").arg(bin.join("coadapt-gym-serve")).status().expect("chmod").success());
-    // A port of its own, not the real bridge's 50061 (a lane may be using it on this machine).
+    // A port of its own, not the real bridge's 50071 (a lane may be using it on this machine).
     let port = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port").local_addr().expect("its address").port().to_string();
     std::fs::write(&t.hold, "").expect("the hold file");
     let lane =

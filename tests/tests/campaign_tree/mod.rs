@@ -14,12 +14,16 @@ pub fn repo() -> PathBuf {
 pub const FAKE: &str = r#"#!/usr/bin/env python3
 # `run --config C --seed S [--designs K] --out D` writes 2 episodes per design (return 10 d + e,
 # or FAKE_SHIFT more), the files a run leaves and, given --designs, a snapshot at its end;
-# `run --resume D` goes on; both wait while FAKE_HOLD exists and stop on SIGINT, as a run does.
+# `run --resume D` goes on; `train --env E ... --out D` writes the env and 12 returns; all wait while FAKE_HOLD exists and stop on SIGINT, as a run does.
 import json, os, signal, sys, time
 args = sys.argv[1:]
 out = args[args.index("--out") + 1] if "--out" in args else args[args.index("--resume") + 1]
 designs = int(args[args.index("--designs") + 1]) if "--designs" in args else 1
 os.makedirs(out, exist_ok=True)
+if args[0] == "train":
+    # `train --env E ... --out D`: the config it ran (its env) and 12 episodes' returns.
+    open(os.path.join(out, "config.toml"), "w").write(f'env = "{args[args.index("--env") + 1]}"\n')
+    open(os.path.join(out, "episodes.csv"), "w").write("episode,return\n" + "".join(f"{i},{i}\n" for i in range(12)))
 if "--config" in args:
     open(os.path.join(out, "config.toml"), "w").write(open(args[args.index("--config") + 1]).read())
     open(os.path.join(out, "designs.csv"), "w").write("designs.csv\n")
@@ -62,9 +66,16 @@ impl Tree {
         // campaign.sh works in its script's parent and keeps runs/ beside it (../runs).
         let root = base.join("checkout");
         std::fs::create_dir_all(root.join("scripts")).expect("temp tree");
-        for script in
-            ["campaign.sh", "campaign_lines.sh", "campaign_status.py", "fork_run.sh", "config_with.py", "lanes.sh", "mujoco_lane.sh"]
-        {
+        for script in [
+            "campaign.sh",
+            "campaign_lines.sh",
+            "campaign_status.py",
+            "fork_run.sh",
+            "config_with.py",
+            "lanes.sh",
+            "mujoco_lane.sh",
+            "pick_design.py",
+        ] {
             std::fs::copy(repo().join("scripts").join(script), root.join("scripts").join(script)).expect("copying the scripts");
         }
         std::fs::write(root.join("fake-coadapt"), FAKE).expect("the fake binary");
