@@ -1,7 +1,8 @@
 //! `scripts/lanes.sh`, which keeps lanes busy across queues (each lane runs its queues one after
 //! another with `campaign.sh -j 1`), driven with the fake `coadapt` of campaign_tree: a lane's
 //! second queue starts when its first has ended, the lanes run at once, a queue running already
-//! is waited for, mujoco-* queues of two lanes share one Python bridge, and a SIGTERM stops the
+//! is waited for, mujoco-* queues of two lanes share one Python bridge (kept while the other lane
+//! is between runs), and a SIGTERM stops the
 //! queue running (its run interrupted, not archived) and starts no other.
 
 use crate::campaign_tree;
@@ -102,15 +103,7 @@ fn mujoco_queues_of_two_lanes_share_one_bridge() {
     let t = Tree::new("lanes-bridge");
     std::fs::write(t.path("mujoco-a.queue"), "mujoco-a cfg.toml 1\n").expect("a queue");
     std::fs::write(t.path("mujoco-b.queue"), "mujoco-b cfg.toml 2\n").expect("a queue");
-    // A fake bridge where mujoco_lane.sh looks for the real one: it listens, as the bridge does.
-    let bin = t.path("runs/venv-bridge/bin");
-    std::fs::create_dir_all(&bin).expect("the bridge's venv");
-    let fake = "#!/usr/bin/env python3\nimport socket, sys\ns = socket.socket()\ns.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)\n\
-                s.bind(('127.0.0.1', int(sys.argv[sys.argv.index('--port') + 1])))\ns.listen(8)\nwhile True:\n    s.accept()[0].close()\n";
-    std::fs::write(bin.join("coadapt-gym-serve"), fake).expect("the fake bridge");
-    assert!(Command::new("chmod").arg("+x").arg(bin.join("coadapt-gym-serve")).status().expect("chmod").success());
-    // A port of its own, not the real bridge's 50071 (a lane may be using it on this machine).
-    let port = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port").local_addr().expect("its address").port().to_string();
+    let port = fake_bridge(&t);
     std::fs::write(&t.hold, "").expect("the hold file");
     let lane =
         lanes(&t, &["mujoco-a.queue", "mujoco-b.queue"]).env("PORT", &port).stdout(std::process::Stdio::piped()).spawn().expect("lanes.sh");
@@ -138,5 +131,77 @@ fn mujoco_queues_of_two_lanes_share_one_bridge() {
     for run in ["mujoco-a-seed1", "mujoco-b-seed2"] {
         assert!(t.path(&format!("docs/campaign/results/{run}/summary.json")).exists(), "{run} not archived: {out}");
     }
+    let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// A fake bridge where mujoco_lane.sh looks for the real one (it listens, as the bridge does), and
+/// a port of its own for it, not the real bridge's 50071 (a lane may be using it on this machine).
+fn fake_bridge(t: &Tree) -> String {
+    let bin = t.path("runs/venv-bridge/bin");
+    std::fs::create_dir_all(&bin).expect("the bridge's venv");
+    let fake = "#!/usr/bin/env python3\nimport socket, sys\ns = socket.socket()\ns.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)\n\
+                s.bind(('127.0.0.1', int(sys.argv[sys.argv.index('--port') + 1])))\ns.listen(8)\nwhile True:\n    s.accept()[0].close()\n";
+    std::fs::write(bin.join("coadapt-gym-serve"), fake).expect("the fake bridge");
+    assert!(Command::new("chmod").arg("+x").arg(bin.join("coadapt-gym-serve")).status().expect("chmod").success());
+    std::net::TcpListener::bind("127.0.0.1:0").expect("a free port").local_addr().expect("its address").port().to_string()
+}
+
+/// The bridge's owner ends while the other lane is between runs (here: a retrain line waiting for
+/// its source to finish, no run of its own alive): the bridge stays for that lane, and goes when
+/// it has ended. Without it, the other lane's next MuJoCo run would find no bridge and fail.
+#[test]
+fn the_bridge_waits_for_a_lane_between_its_runs() {
+    let t = Tree::new("lanes-bridge-gap");
+    let port = fake_bridge(&t);
+    std::fs::write(t.path("mujoco-a.queue"), "mujoco-a cfg.toml 1\n").expect("a queue");
+    std::fs::write(t.path("mujoco-w.queue"), "mujoco-w retrain:mujoco-src:exploit 1\n").expect("a queue");
+    std::fs::write(&t.hold, "").expect("the hold file");
+    let lane = |q: &str| {
+        Command::new("bash")
+            .arg(t.path("scripts/mujoco_lane.sh"))
+            .arg(q)
+            .current_dir(&t.root)
+            .env("BIN", t.path("fake-coadapt"))
+            .env("FAKE_HOLD", &t.hold)
+            .env("PORT", &port)
+            .stdout(std::fs::File::create(t.path(&format!("{q}.out"))).expect("the lane's output"))
+            .stderr(std::fs::File::create(t.path(&format!("{q}.err"))).expect("the lane's errors"))
+            .spawn()
+            .expect("mujoco_lane.sh")
+    };
+    // The owner: it starts the bridge, then its run holds.
+    let mut owner = Running(lane("mujoco-a.queue"), t.hold.clone());
+    wait_for("the owner's run", || t.path("runs/campaign/mujoco-a-seed1/episodes.csv").exists());
+    let pid = std::fs::read_to_string(t.path("runs/mujoco-bridge.pid")).expect("the bridge's pid file").trim().to_string();
+    // The other lane: its one line waits for mujoco-src-seed1, which is not there yet.
+    let mut other = Running(lane("mujoco-w.queue"), t.hold.clone());
+    // What each lane says (its own lines and its queue's).
+    let log = |q: &str| {
+        ["out", "err"].iter().map(|e| std::fs::read_to_string(t.path(&format!("{q}.queue.{e}"))).unwrap_or_default()).collect::<String>()
+            + &std::fs::read_to_string(t.path(&format!("runs/campaign-{q}.log"))).unwrap_or_default()
+    };
+    wait_for("the other lane to find the bridge", || log("mujoco-w").contains("using the bridge another lane started"));
+    std::fs::write(format!("{}.done-mujoco-a-seed1", t.hold.display()), "").expect("ending the owner's run");
+    wait_for("the owner's queue to finish", || log("mujoco-a").contains("finished"));
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    assert!(alive(&pid), "the bridge went while the other lane waited between its runs: {}", log("mujoco-a"));
+    assert_eq!(owner.0.try_wait().expect("polling the owner"), None, "the owner left with its bridge in use: {}", log("mujoco-a"));
+    // The source finishes: the other lane retrains its body (up to 30 s: the wait polls), ends,
+    // and then the owner stops the bridge and ends.
+    // (A run of this machine: the line waits on the directory it found at its start.)
+    let src = t.path("runs/campaign/mujoco-src-seed1");
+    std::fs::create_dir_all(&src).expect("the source's directory");
+    std::fs::write(src.join("config.toml"), format!("env = \"dm-env-rpc://127.0.0.1:{port}\"\n")).expect("its config");
+    std::fs::write(src.join("designs.csv"), "index,kind,design,best_eval_return\n0,exploit,1;1,5\n").expect("its designs");
+    std::fs::write(src.join("summary.json"), "{}").expect("its summary");
+    std::fs::remove_file(&t.hold).expect("ending the hold");
+    let end = std::time::Instant::now();
+    while other.0.try_wait().expect("polling the other lane").is_none() {
+        assert!(end.elapsed() < std::time::Duration::from_secs(90), "the other lane did not end: {}", log("mujoco-w"));
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    assert!(t.path("docs/campaign/results/mujoco-w-seed1/summary.json").exists(), "{}", log("mujoco-w"));
+    assert_eq!(owner.exit_code(), Some(0), "{}", log("mujoco-a"));
+    assert!(!alive(&pid) && !t.path("runs/mujoco-bridge.pid").exists(), "the bridge outlived both lanes");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
 }
