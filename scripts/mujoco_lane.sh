@@ -65,6 +65,10 @@ other_lanes() {
 }
 stop_bridge() {
   [ -n "$bridge" ] || return 0
+  # A signal while this waits (lanes.sh stopping every lane, a second Ctrl-C) must not end the
+  # script before the bridge: the INT/TERM trap's `exit` would leave it running, orphaned, with
+  # the port. The runs and lanes it waits for are being stopped by the same signal.
+  trap '' INT TERM
   local said=""
   while pgrep -f -- "(--out|--resume) runs/campaign/mujoco-|--env dm-env-rpc://127.0.0.1:$port" > /dev/null || other_lanes; do
     [ -n "$said" ] || { echo "mujoco_lane: the bridge stops once the runs and lanes using it have ended"; said=1; }

@@ -116,6 +116,7 @@ fn mujoco_queues_of_two_lanes_share_one_bridge() {
     let (first, other) = if owner == "a" { ("mujoco-a-seed1", "mujoco-b") } else { ("mujoco-b-seed2", "mujoco-a") };
     assert!(log(other).contains("using the bridge another lane started"), "{}\n{}", log("mujoco-a"), log("mujoco-b"));
     let pid = std::fs::read_to_string(t.path("runs/mujoco-bridge.pid")).expect("the bridge's pid file").trim().to_string();
+    let _bridge = KillOnDrop(pid.clone());
     assert!(alive(&pid), "the bridge is not running");
     // The owner's run ends first: its queue finishes, the bridge stays for the other lane's run.
     std::fs::write(format!("{}.done-{first}", t.hold.display()), "").expect("ending the owner's run");
@@ -173,6 +174,7 @@ fn the_bridge_waits_for_a_lane_between_its_runs() {
     let mut owner = Running(lane("mujoco-a.queue"), t.hold.clone());
     wait_for("the owner's run", || t.path("runs/campaign/mujoco-a-seed1/episodes.csv").exists());
     let pid = std::fs::read_to_string(t.path("runs/mujoco-bridge.pid")).expect("the bridge's pid file").trim().to_string();
+    let _bridge = KillOnDrop(pid.clone());
     // The other lane: its one line waits for mujoco-src-seed1, which is not there yet.
     let mut other = Running(lane("mujoco-w.queue"), t.hold.clone());
     // What each lane says (its own lines and its queue's).
@@ -186,6 +188,12 @@ fn the_bridge_waits_for_a_lane_between_its_runs() {
     std::thread::sleep(std::time::Duration::from_secs(2));
     assert!(alive(&pid), "the bridge went while the other lane waited between its runs: {}", log("mujoco-a"));
     assert_eq!(owner.0.try_wait().expect("polling the owner"), None, "the owner left with its bridge in use: {}", log("mujoco-a"));
+    // A TERM to the owner while it waits (lanes.sh stopping its lanes) neither ends it nor
+    // leaves the bridge behind it: it goes on waiting for the other lane.
+    assert!(Command::new("kill").arg("-TERM").arg(owner.0.id().to_string()).status().expect("kill").success());
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    assert!(alive(&pid), "a TERM took the bridge from the other lane: {}", log("mujoco-a"));
+    assert_eq!(owner.0.try_wait().expect("polling the owner"), None, "a TERM ended the owner before its bridge: {}", log("mujoco-a"));
     // The source finishes: the other lane retrains its body (up to 30 s: the wait polls), ends,
     // and then the owner stops the bridge and ends.
     // (A run of this machine: the line waits on the directory it found at its start.)
@@ -204,4 +212,18 @@ fn the_bridge_waits_for_a_lane_between_its_runs() {
     assert_eq!(owner.exit_code(), Some(0), "{}", log("mujoco-a"));
     assert!(!alive(&pid) && !t.path("runs/mujoco-bridge.pid").exists(), "the bridge outlived both lanes");
     let _ = std::fs::remove_dir_all(t.root.parent().expect("base"));
+}
+
+/// The fake bridge goes when its test ends, passed or failed (a failed test left one running,
+/// orphaned, with its port).
+struct KillOnDrop(String);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        // Only the fake bridge: its pid may be another process's by now.
+        let cmdline = std::fs::read(format!("/proc/{}/cmdline", self.0)).unwrap_or_default();
+        if String::from_utf8_lossy(&cmdline).contains("coadapt-gym-serve") {
+            let _ = Command::new("kill").arg("-KILL").arg(&self.0).status();
+        }
+    }
 }
