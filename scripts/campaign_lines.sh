@@ -14,10 +14,15 @@ bridge_here() {
   if [ "$1" = "$old_bridge" ]; then echo "dm-env-rpc://${MUJOCO_BRIDGE:-127.0.0.1:50071}"; else echo "$1"; fi
 }
 
+# The env of CONFIG (empty if it names none).
+env_of() {
+  python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb")).get("env", ""))' "$1"
+}
+
 # CONFIG copied to OUT, its env through bridge_here.
 config_here() {
   local config=$1 out=$2 env
-  env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb")).get("env", ""))' "$config") || return 1
+  env=$(env_of "$config") || return 1
   if [ "$(bridge_here "$env")" != "$env" ]; then
     python3 scripts/config_with.py "$config" "env=\"$(bridge_here "$env")\"" > "$out"
   else
@@ -43,7 +48,7 @@ retrain_one() {
   done
   local design env
   design=$(python3 scripts/pick_design.py "$srcdir" "$which") || { echo "campaign: FAILED $dir: no design to retrain" >&2; return 1; }
-  env=$(python3 -c 'import sys, tomllib; print(tomllib.load(open(sys.argv[1], "rb"))["env"])' "$srcdir/config.toml")
+  env=$(env_of "$srcdir/config.toml")
   env=$(bridge_here "$env")
   mkdir -p "$dir"
   echo "campaign: start $dir: SAC from scratch on $env, $which design of $srcdir ($design) ($(date -u +%H:%M:%S))"
