@@ -15,7 +15,7 @@ use crate::progress::shutdown_on_ctrl_c;
 #[derive(Debug, Args)]
 pub struct RoleArgs {
     /// The run's TOML config (the same file for every process of a fleet; default: the
-    /// embedded reference protocol).
+    /// embedded default, `configs/half-cheetah.toml`).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Override fleet.transport: shm (one machine) or grpc.

@@ -22,9 +22,13 @@ use crate::progress::shutdown_on_ctrl_c;
 /// `schedule.reset-needs-confirmation = true` before each episode until the robot is reset
 /// (`coadapt confirm RUN_DIR --reset`).
 ///
-/// Settings: the embedded reference protocol (`configs/half-cheetah-reference.toml`), replaced
-/// by `--config`, then the flags. Example configs: `configs/*.toml` (the reference, a reduced
-/// protocol of about 30 minutes, a tiny one, and each baseline).
+/// Settings: the embedded default (`configs/half-cheetah.toml`: HalfCheetah, 15 designs and 260
+/// episodes, about 30 minutes on 2 cores, designs chosen by PSO over an ensemble of 5 critics'
+/// lower confidence bound, the choice that beat the thesis's FEAR on 3 of 4 robots, EXPERIMENTS
+/// 5.13), replaced by `--config`, then the flags. Other configs: `configs/<robot>.toml` (the
+/// same default on walker, hopper, daisy), `configs/<robot>-reduced.toml` (the thesis's FEAR,
+/// same schedule), `configs/<robot>-reference.toml` (the thesis's protocol, 50 designs, hours),
+/// a tiny one, and each baseline.
 #[derive(Debug, Args)]
 pub struct RunArgs {
     /// TOML config (top-level env, seed, ... and [schedule], [learner], [learner.sac],
@@ -90,7 +94,7 @@ pub struct RunArgs {
     /// operands with f32 accumulation where the CPU has AVX-512 BF16 or AMX, f32 elsewhere;
     /// parameters, optimiser states and the rest stay f32). Learns as f32 does (EXPERIMENTS 12)
     /// and trains 1.6-1.9x faster on an AMD EPYC with AVX-512 BF16 (BENCHMARKS.md). The
-    /// embedded reference protocol uses bf16; `--precision f32` forces f32.
+    /// reference protocols (`configs/*-reference.toml`) ask for bf16; `--precision f32` forces f32.
     #[arg(long, value_name = "f32|bf16")]
     pub precision: Option<coadapt_nn::Precision>,
 }

@@ -62,9 +62,10 @@ fn precision_is_chosen_by_flag_and_recorded() {
         assert_eq!(episodes[0], episodes[1], "without the bf16 kernel the run must be the f32 run");
     }
 
-    // The embedded reference protocol (too long to run here) asks for bf16; the flag above
-    // overrides whatever a config says.
-    let reference: toml::Value = toml::from_str(coadapt_coadaptation::config::DEFAULT_CONFIG).unwrap();
+    // The reference protocol (too long to run here) asks for bf16; the flag above overrides
+    // whatever a config says.
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/half-cheetah-reference.toml")).unwrap();
+    let reference: toml::Value = toml::from_str(&text).unwrap();
     assert_eq!(reference["learner"]["sac"]["precision"].as_str(), Some("bf16"));
 
     let bad = dir.join("bad");
