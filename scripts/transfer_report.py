@@ -87,9 +87,12 @@ def spread(v, sign=""):
 
 
 def main():
-    if len(sys.argv) < 2:
-        sys.exit(__doc__)
+    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
+        print(__doc__)
+        sys.exit(0 if len(sys.argv) >= 2 else 2)
     root = sys.argv[1]
+    if not os.path.isdir(root):
+        sys.exit(f"transfer_report: {root}: not a directory (the archive, e.g. docs/campaign/results)")
     target = float(flag("--target", "300"))
     # Target worlds: the frictions asked for, then the simulator gap.
     worlds = [float(x) for x in flag("--frictions", "0.1,0.2,0.8,1.6").split(",")] + [MUJOCO]
