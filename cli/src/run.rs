@@ -23,7 +23,7 @@ use crate::progress::shutdown_on_ctrl_c;
 /// (`coadapt confirm RUN_DIR --reset`).
 ///
 /// Settings: the embedded default (`configs/half-cheetah.toml`: HalfCheetah, 15 designs and 260
-/// episodes, about 30 minutes on 2 cores, designs chosen by PSO over an ensemble of 5 critics'
+/// episodes, about 18 minutes on 2 cores, designs chosen by PSO over an ensemble of 5 critics'
 /// lower confidence bound, the choice that beat the thesis's FEAR on 3 of 4 robots, EXPERIMENTS
 /// 5.13), replaced by `--config`, then the flags. Other configs: `configs/<robot>.toml` (the
 /// same default on walker, hopper, daisy), `configs/<robot>-reduced.toml` (the thesis's FEAR,
