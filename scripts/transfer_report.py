@@ -87,9 +87,11 @@ def spread(v, sign=""):
 
 
 def main():
-    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
+    if len(sys.argv) < 2:
+        sys.exit(__doc__)
+    if sys.argv[1] in ("-h", "--help"):
         print(__doc__)
-        sys.exit(0 if len(sys.argv) >= 2 else 2)
+        return
     root = sys.argv[1]
     if not os.path.isdir(root):
         sys.exit(f"transfer_report: {root}: not a directory (the archive, e.g. docs/campaign/results)")

@@ -1,6 +1,6 @@
 //! `--precision` through the binary (issue 34): `coadapt run --precision bf16|f32` sets
-//! learner.sac.precision and records it in config.toml; the embedded reference protocol asks
-//! for bf16; a bad value is refused by name. On a CPU with the
+//! learner.sac.precision and records it in config.toml; the reference protocol
+//! (`configs/half-cheetah-reference.toml`) asks for bf16; a bad value is refused by name. On a CPU with the
 //! bf16 kernel the two precisions give different episodes (the products really changed); on
 //! one without it bf16 means f32 products, bit for bit. The summary names the kernel.
 
@@ -9,6 +9,7 @@
 use std::process::{Command, Output};
 
 const TINY: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/half-cheetah-tiny.toml");
+const REFERENCE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/half-cheetah-reference.toml");
 
 fn coadapt(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_coadapt")).args(args).output().unwrap()
@@ -64,8 +65,7 @@ fn precision_is_chosen_by_flag_and_recorded() {
 
     // The reference protocol (too long to run here) asks for bf16; the flag above overrides
     // whatever a config says.
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/half-cheetah-reference.toml")).unwrap();
-    let reference: toml::Value = toml::from_str(&text).unwrap();
+    let reference: toml::Value = toml::from_str(&std::fs::read_to_string(REFERENCE).unwrap()).unwrap();
     assert_eq!(reference["learner"]["sac"]["precision"].as_str(), Some("bf16"));
 
     let bad = dir.join("bad");
