@@ -159,21 +159,99 @@ pub(crate) fn wait(listener: &Listener, timeout: Duration) -> Result<(), Transpo
 /// how many were removed.
 pub(crate) fn cleanup_dead_nodes() -> Result<usize, TransportError> {
     quiet_logs();
+    let (cleaned, stuck) = cleanup_pass(None)?;
+    // iceoryx2 0.10 stops short on a dead node killed while it wrote a port's tag: the tag
+    // file keeps the permissions of a file being created, which iceoryx2's listing skips, so
+    // its cleanup removes the node's details, fails on the non-empty directory, and the node
+    // stays dead on the machine for good, tried (and reported) by every process after. Remove
+    // those leftover tags and try once more.
+    let mut retry = Vec::new();
+    for id in stuck {
+        match remove_orphan_port_tags(id) {
+            Ok(0) => report_stuck(id, "InternalError"),
+            Ok(_) => retry.push(id),
+            Err(e) => report_stuck(id, &format!("InternalError, then removing its leftover port tags: {e}")),
+        }
+    }
+    if retry.is_empty() {
+        return Ok(cleaned);
+    }
+    let (again, still) = cleanup_pass(Some(&retry))?;
+    for id in still {
+        report_stuck(id, "InternalError, even without its leftover port tags");
+    }
+    Ok(cleaned + again)
+}
+
+/// One pass of iceoryx2's cleanup over the dead nodes (only those in `only`, if given): how many
+/// it removed, and the ids of those it failed on with an internal error.
+fn cleanup_pass(only: Option<&[u128]>) -> Result<(usize, Vec<u128>), TransportError> {
     let mut cleaned = 0;
+    let mut stuck = Vec::new();
     Node::<Svc>::list(Config::global_config(), |state| {
         if let NodeState::Dead(view) = state {
-            let id = format!("{:?}", view.id());
+            let id = view.id().value();
+            if only.is_some_and(|ids| !ids.contains(&id)) {
+                return CallbackProgression::Continue;
+            }
             match view.try_remove_stale_resources() {
                 Ok(()) => cleaned += 1,
                 // Someone else is at it, or was first: not ours to count.
                 Err(NodeCleanupFailure::ResourcesAlreadyCleanedUp | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode) => {}
-                Err(e) => coadapt_log::logln!("coadapt-shm: could not clean up dead node {id}: {e:?}"),
+                Err(NodeCleanupFailure::InternalError) => stuck.push(id),
+                Err(e) => report_stuck(id, &format!("{e:?}")),
             }
         }
         CallbackProgression::Continue
     })
     .map_err(|e| io("listing iceoryx2 nodes", e))?;
-    Ok(cleaned)
+    Ok((cleaned, stuck))
+}
+
+/// The directory iceoryx2 keeps dead node `id`'s details and tags in.
+fn node_details_dir(id: u128) -> std::path::PathBuf {
+    std::path::PathBuf::from(Config::global_config().global.node_dir().to_string()).join(id.to_string())
+}
+
+/// Removes the port tags left in dead node `id`'s directory, but only when nothing else is left
+/// there: iceoryx2 removes a node's details last, after its ports' and services' resources, so
+/// a directory of bare tags is one whose cleanup got as far as it can. Returns how many it removed.
+fn remove_orphan_port_tags(id: u128) -> std::io::Result<usize> {
+    let suffix = Config::global_config().global.node.port_tag_suffix.to_string();
+    let dir = node_details_dir(id);
+    let entries = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries.map(|e| e.map(|e| e.path())).collect::<Result<Vec<_>, _>>()?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(e),
+    };
+    let is_tag = |p: &std::path::PathBuf| p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with(&suffix));
+    if entries.is_empty() || !entries.iter().all(is_tag) {
+        return Ok(0);
+    }
+    for path in &entries {
+        match std::fs::remove_file(path) {
+            // Another process's cleanup was first.
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+            _ => {}
+        }
+    }
+    Ok(entries.len())
+}
+
+/// Says once per process (cleanup runs every half second while a port waits) that dead node
+/// `id` could not be cleaned up, and where its files are.
+fn report_stuck(id: u128, why: &str) {
+    static REPORTED: std::sync::Mutex<Vec<u128>> = std::sync::Mutex::new(Vec::new());
+    let mut reported = REPORTED.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if reported.contains(&id) {
+        return;
+    }
+    reported.push(id);
+    let nodes = Config::global_config().global.node_dir().to_string();
+    coadapt_log::logln!(
+        "coadapt-shm: could not clean up dead node {id}: {why}; its files are {} and {nodes}/*{id}*, safe to delete by hand (its process is gone)",
+        node_details_dir(id).display()
+    );
 }
 
 /// The names of every service on this machine whose name starts with `prefix`.

@@ -36,6 +36,12 @@ fn cfg(fleet: String) -> ShmConfig {
 fn child() {
     let (Ok(role), Ok(fleet)) = (std::env::var(ROLE), std::env::var(FLEET)) else { return };
     let cfg = cfg(fleet);
+    if role == "idle" {
+        let _sub = topic_subscriber::<Weights>(&cfg, "w").expect("subscriber");
+        println!("READY");
+        std::thread::sleep(Duration::from_secs(600));
+        return;
+    }
     let mut publisher = topic_publisher::<Weights>(&cfg, "w").expect("publisher");
     let mut tx = queue_sender::<ExperienceChunk>(&cfg, "exp").expect("sender");
     match role.as_str() {
@@ -98,6 +104,71 @@ fn a_child_process_publishes_weights_and_sends_experience() {
     closes(|| sub.wait_for(4, Duration::from_millis(50)));
 }
 
+/// The ids of the nodes (alive or dead) that process `pid` created.
+fn nodes_of(pid: u32) -> Vec<u128> {
+    let mut ids = Vec::new();
+    let listed = Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
+        let (id, details) = match &state {
+            NodeState::Alive(v) => (v.id().value(), v.details()),
+            NodeState::Dead(v) => (v.id().value(), v.details()),
+            _ => return CallbackProgression::Continue,
+        };
+        if details.as_ref().is_some_and(|d| u32::try_from(d.process_id().value()) == Ok(pid)) {
+            ids.push(id);
+        }
+        CallbackProgression::Continue
+    });
+    listed.expect("listing nodes");
+    ids
+}
+
+fn ready(child: &mut std::process::Child) {
+    let stdout = child.stdout.take().expect("child stdout");
+    let ready = BufReader::new(stdout).lines().map_while(Result::ok).any(|l| l.contains("READY"));
+    assert!(ready, "the child never got ready");
+}
+
+/// The field's stuck node (seen on this project's machine): a process killed while iceoryx2
+/// 0.10 writes a port's tag leaves a tag file still owner-writable, the mark of a file being
+/// created, which iceoryx2's own listing skips; its cleanup removes the node's details, fails
+/// on the non-empty directory with `InternalError`, and the dead node stayed on the machine,
+/// reported by every run after. The child holds a subscriber; the test plants such a
+/// half-written tag in its node's directory, as the kill would, then kills it.
+#[test]
+fn a_node_killed_while_opening_a_port_is_cleaned_up_all_the_same() {
+    let _turn = one_at_a_time();
+    let fleet = format!("coadapt-test-{}-orphan-tag", std::process::id());
+    let mut child = spawn("idle", &fleet);
+    ready(&mut child);
+    let ids = nodes_of(child.id());
+    assert_eq!(ids.len(), 1, "the child should have one node: {ids:?}");
+    let nodes = std::path::PathBuf::from(Config::global_config().global.node_dir().to_string());
+    let dir = nodes.join(ids[0].to_string());
+    assert!(dir.is_dir(), "iceoryx2 keeps a node's details in {}", dir.display());
+    let tag = dir.join(format!("iox2_{}.port_tag", 3_089_898_700_627_745_393_254_066_054_041u128 + u128::from(child.id())));
+    std::fs::write(&tag, b"").expect("planting a half-written port tag");
+    // Owner read-write is how iceoryx2 creates a tag (read-only once written).
+    std::fs::set_permissions(&tag, std::os::unix::fs::PermissionsExt::from_mode(0o600)).expect("tag permissions");
+
+    child.kill().expect("SIGKILL");
+    child.wait().expect("reaped");
+    let cleaned = cleanup_stale().expect("cleanup");
+    assert!(cleaned >= 1, "the killed child's node was not cleaned up");
+    // By id: a half-cleaned node has lost its details (and with them its process id).
+    let mut listed = false;
+    Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
+        listed |= match &state {
+            NodeState::Alive(v) => v.id().value() == ids[0],
+            NodeState::Dead(v) => v.id().value() == ids[0],
+            _ => false,
+        };
+        CallbackProgression::Continue
+    })
+    .expect("listing nodes");
+    assert!(!listed, "the killed child's node is still registered");
+    assert!(!dir.exists(), "the dead node's directory is still there");
+}
+
 #[test]
 fn a_killed_child_is_cleaned_up_and_a_new_publisher_takes_over() {
     let _turn = one_at_a_time();
@@ -106,9 +177,7 @@ fn a_killed_child_is_cleaned_up_and_a_new_publisher_takes_over() {
     let mut rx = queue_receiver::<ExperienceChunk>(&cfg, "exp").expect("receiver");
     let mut sub = topic_subscriber::<Weights>(&cfg, "w").expect("subscriber");
     let mut child = spawn("hang", &fleet);
-    let stdout = child.stdout.take().expect("child stdout");
-    let ready = BufReader::new(stdout).lines().map_while(Result::ok).any(|l| l.contains("READY"));
-    assert!(ready, "the child never got ready");
+    ready(&mut child);
     assert_eq!(rx.recv_timeout(LONG).expect("receive"), Some(chunk(0)));
     assert_eq!(sub.wait_for(1, LONG).expect("wait").expect("weights").version, 1);
 
@@ -125,20 +194,7 @@ fn a_killed_child_is_cleaned_up_and_a_new_publisher_takes_over() {
     // The child had two nodes (a sender's and a publisher's). Another cleaner (the receiver's
     // janitor in `closes`, the successor's node creation) may be part-way through one of them
     // when `cleanup_stale` passes it over, so give the cleaners a moment to finish.
-    let child_nodes = || {
-        let mut left = 0;
-        let listed = Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
-            let pid = match &state {
-                NodeState::Alive(v) => v.details().as_ref().map(|d| d.process_id().value()),
-                NodeState::Dead(v) => v.details().as_ref().map(|d| d.process_id().value()),
-                _ => None,
-            };
-            left += usize::from(pid.is_some_and(|p| u32::try_from(p) == Ok(child.id())));
-            CallbackProgression::Continue
-        });
-        listed.expect("listing nodes");
-        left
-    };
+    let child_nodes = || nodes_of(child.id()).len();
     let deadline = std::time::Instant::now() + LONG;
     let mut left = child_nodes();
     while left > 0 && std::time::Instant::now() < deadline {
