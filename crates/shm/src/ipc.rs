@@ -238,8 +238,8 @@ fn remove_orphan_port_tags(id: u128) -> std::io::Result<usize> {
     Ok(entries.len())
 }
 
-/// Says once per process (cleanup runs every half second while a port waits) that dead node
-/// `id` could not be cleaned up, and where its files are.
+/// Says once per process (every role of an in-process fleet cleans up as it starts, and so may
+/// a caller's retry loop) that dead node `id` could not be cleaned up, and where its files are.
 fn report_stuck(id: u128, why: &str) {
     static REPORTED: std::sync::Mutex<Vec<u128>> = std::sync::Mutex::new(Vec::new());
     let mut reported = REPORTED.lock().unwrap_or_else(std::sync::PoisonError::into_inner);

@@ -104,22 +104,26 @@ fn a_child_process_publishes_weights_and_sends_experience() {
     closes(|| sub.wait_for(4, Duration::from_millis(50)));
 }
 
-/// The ids of the nodes (alive or dead) that process `pid` created.
-fn nodes_of(pid: u32) -> Vec<u128> {
-    let mut ids = Vec::new();
+/// Every node on the machine (alive or dead): its id and, while iceoryx2 still has its details,
+/// its process id.
+fn all_nodes() -> Vec<(u128, Option<u32>)> {
+    let mut nodes = Vec::new();
     let listed = Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
         let (id, details) = match &state {
             NodeState::Alive(v) => (v.id().value(), v.details()),
             NodeState::Dead(v) => (v.id().value(), v.details()),
             _ => return CallbackProgression::Continue,
         };
-        if details.as_ref().is_some_and(|d| u32::try_from(d.process_id().value()) == Ok(pid)) {
-            ids.push(id);
-        }
+        nodes.push((id, details.as_ref().and_then(|d| u32::try_from(d.process_id().value()).ok())));
         CallbackProgression::Continue
     });
     listed.expect("listing nodes");
-    ids
+    nodes
+}
+
+/// The ids of the nodes (alive or dead) that process `pid` created.
+fn nodes_of(pid: u32) -> Vec<u128> {
+    all_nodes().into_iter().filter(|&(_, p)| p == Some(pid)).map(|(id, _)| id).collect()
 }
 
 fn ready(child: &mut std::process::Child) {
@@ -145,7 +149,9 @@ fn a_node_killed_while_opening_a_port_is_cleaned_up_all_the_same() {
     let nodes = std::path::PathBuf::from(Config::global_config().global.node_dir().to_string());
     let dir = nodes.join(ids[0].to_string());
     assert!(dir.is_dir(), "iceoryx2 keeps a node's details in {}", dir.display());
-    let tag = dir.join(format!("iox2_{}.port_tag", 3_089_898_700_627_745_393_254_066_054_041u128 + u128::from(child.id())));
+    let global = &Config::global_config().global;
+    let port = 3_089_898_700_627_745_393_254_066_054_041u128 + u128::from(child.id());
+    let tag = dir.join(format!("{}{port}{}", global.prefix, global.node.port_tag_suffix));
     std::fs::write(&tag, b"").expect("planting a half-written port tag");
     // Owner read-write is how iceoryx2 creates a tag (read-only once written).
     std::fs::set_permissions(&tag, std::os::unix::fs::PermissionsExt::from_mode(0o600)).expect("tag permissions");
@@ -155,16 +161,7 @@ fn a_node_killed_while_opening_a_port_is_cleaned_up_all_the_same() {
     let cleaned = cleanup_stale().expect("cleanup");
     assert!(cleaned >= 1, "the killed child's node was not cleaned up");
     // By id: a half-cleaned node has lost its details (and with them its process id).
-    let mut listed = false;
-    Node::<ipc_threadsafe::Service>::list(Config::global_config(), |state| {
-        listed |= match &state {
-            NodeState::Alive(v) => v.id().value() == ids[0],
-            NodeState::Dead(v) => v.id().value() == ids[0],
-            _ => false,
-        };
-        CallbackProgression::Continue
-    })
-    .expect("listing nodes");
+    let listed = all_nodes().iter().any(|&(id, _)| id == ids[0]);
     assert!(!listed, "the killed child's node is still registered");
     assert!(!dir.exists(), "the dead node's directory is still there");
 }
